@@ -1,0 +1,77 @@
+"""The ``physmocap`` command line.
+
+Each sub-command lives in its own module in this package and exposes
+``register(subparsers)``, which adds its parser and sets ``func`` to a callable
+taking the parsed arguments and returning an exit status.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import warnings
+from typing import Sequence
+
+from ..errors import PhysmocapError, PhysmocapWarning
+
+#: Sub-command modules, in the order ``physmocap --help`` lists them.
+COMMAND_MODULES = (
+    "inspect",
+    "convert",
+    "character",
+    "retarget",
+    "report",
+    "replay",
+)
+
+
+def _format_warning(message, category, filename, lineno, line=None):  # noqa: ANN001
+    if issubclass(category, PhysmocapWarning):
+        return f"physmocap: warning: {message}\n"
+    return f"{category.__name__}: {message}\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="physmocap",
+        description="Turn solved motion capture into clean, physically valid character motion.",
+    )
+    from .. import __version__
+
+    parser.add_argument("--version", action="version", version=f"physmocap {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"{__name__}.{name}":
+                continue  # command not built yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``physmocap`` console script."""
+    warnings.formatwarning = _format_warning
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        status = args.func(args)
+    except PhysmocapError as exc:
+        print(f"physmocap: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("physmocap: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    return int(status or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,187 @@
+"""Rotation and axis conventions: the one place in physmocap that knows them.
+
+Conventions used everywhere else in the package:
+
+* Rotations are :class:`scipy.spatial.transform.Rotation` objects or quaternion
+  arrays in scipy's **x-y-z-w** (scalar-last) order.  MuJoCo stores quaternions
+  **w-x-y-z** (scalar-first); :func:`wxyz_to_xyzw` and :func:`xyzw_to_wxyz` are
+  the only conversions between the two, and only the MuJoCo boundary calls them.
+* Angles are radians inside; degrees only appear in files (BVH channels) and in
+  printed reports.
+* The world is **Z-up** (MuJoCo's convention), lengths are **metres**.  A file
+  written Y-up is converted by :func:`up_axis_matrix` when it is read and when it
+  is written; no other module rotates between up axes.
+* A rotation ``R`` maps child-frame vectors into the parent frame:
+  ``v_parent = R @ v_child``.  BVH channel orders are *intrinsic*: channels
+  ``Zrotation Xrotation Yrotation`` mean ``R = Rz(a) @ Rx(b) @ Ry(c)``, which is
+  scipy's upper-case sequence ``"ZXY"``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = [
+    "Rotation",
+    "UP_AXES",
+    "up_axis_matrix",
+    "wxyz_to_xyzw",
+    "xyzw_to_wxyz",
+    "euler_to_quat",
+    "quat_to_euler",
+    "unwrap_euler",
+    "quat_mul",
+    "quat_apply",
+    "quat_conj",
+    "quat_canonical",
+]
+
+UP_AXES = ("Y", "Z")
+
+
+def up_axis_matrix(src_up: str, dst_up: str) -> np.ndarray:
+    """Return the 3x3 rotation that maps vectors from ``src_up`` to ``dst_up`` frames.
+
+    Y-up to Z-up is +90 degrees about X: ``(x, y, z) -> (x, -z, y)``, so a Y-up
+    file's +Y becomes +Z and its +Z (usually the performer's facing) becomes -Y.
+    """
+    src_up, dst_up = src_up.upper(), dst_up.upper()
+    for axis in (src_up, dst_up):
+        if axis not in UP_AXES:
+            raise ValueError(f"up axis must be one of {UP_AXES}, got {axis!r}")
+    y_to_z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    if src_up == dst_up:
+        return np.eye(3)
+    if (src_up, dst_up) == ("Y", "Z"):
+        return y_to_z
+    return y_to_z.T
+
+
+def wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
+    """MuJoCo (w, x, y, z) quaternions to scipy (x, y, z, w); any leading shape."""
+    q = np.asarray(q, dtype=float)
+    return np.concatenate([q[..., 1:4], q[..., :1]], axis=-1)
+
+
+def xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
+    """scipy (x, y, z, w) quaternions to MuJoCo (w, x, y, z); any leading shape."""
+    q = np.asarray(q, dtype=float)
+    return np.concatenate([q[..., 3:4], q[..., :3]], axis=-1)
+
+
+def _check_order(order: str) -> str:
+    order = order.upper()
+    if len(order) != 3 or set(order) - set("XYZ") or len(set(order)) < 2:
+        raise ValueError(f"rotation order must be three of X, Y, Z, got {order!r}")
+    return order
+
+
+def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = False) -> np.ndarray:
+    """Intrinsic Euler angles ``(..., 3)`` in ``order`` to quaternions ``(..., 4)`` xyzw.
+
+    ``angles[..., i]`` is the angle about axis ``order[i]``; the rotation is
+    ``R = R_order[0] @ R_order[1] @ R_order[2]`` (BVH channel order).
+    """
+    order = _check_order(order)
+    angles = np.asarray(angles, dtype=float)
+    shape = angles.shape[:-1]
+    flat = angles.reshape(-1, 3)
+    q = Rotation.from_euler(order, flat, degrees=degrees).as_quat()
+    return q.reshape(*shape, 4)
+
+
+def quat_to_euler(q: np.ndarray, order: str, degrees: bool = False) -> np.ndarray:
+    """Quaternions ``(..., 4)`` xyzw to intrinsic Euler angles ``(..., 3)`` in ``order``.
+
+    The raw decomposition lies in scipy's principal range; pass the result of a
+    frame sequence through :func:`unwrap_euler` to make it continuous.
+    """
+    order = _check_order(order)
+    q = np.asarray(q, dtype=float)
+    shape = q.shape[:-1]
+    e = Rotation.from_quat(q.reshape(-1, 4)).as_euler(order, degrees=degrees)
+    return e.reshape(*shape, 3)
+
+
+def unwrap_euler(angles: np.ndarray, order: str, degrees: bool = False) -> np.ndarray:
+    """Make intrinsic Euler angles ``(F, ..., 3)`` continuous along axis 0.
+
+    Each Euler triple has two equivalent solutions for proper (Tait-Bryan)
+    sequences: ``(a, b, c)`` and ``(a + pi, pi - b, c + pi)``.  For every frame
+    the solution closest to the previous frame is chosen, then each angle is
+    shifted by a multiple of 2*pi to lie within pi of the previous frame's.  The
+    rotations encoded are unchanged; only their numbers move.
+    """
+    order = _check_order(order)
+    a = np.array(angles, dtype=float, copy=True)
+    if a.shape[0] == 0:
+        return a
+    full = 360.0 if degrees else 2.0 * np.pi
+    half = full / 2.0
+    tait_bryan = len(set(order)) == 3
+    for t in range(1, a.shape[0]):
+        prev = a[t - 1]
+        cand = a[t]
+        best = cand + np.round((prev - cand) / full) * full
+        if tait_bryan:
+            alt = cand.copy()
+            alt[..., 0] += half
+            alt[..., 1] = half - alt[..., 1]
+            alt[..., 2] += half
+            alt = alt + np.round((prev - alt) / full) * full
+            d_best = np.abs(best - prev).sum(axis=-1)
+            d_alt = np.abs(alt - prev).sum(axis=-1)
+            pick = (d_alt < d_best)[..., None]
+            best = np.where(pick, alt, best)
+        else:
+            alt = cand.copy()
+            alt[..., 0] += half
+            alt[..., 1] = -alt[..., 1]
+            alt[..., 2] += half
+            alt = alt + np.round((prev - alt) / full) * full
+            d_best = np.abs(best - prev).sum(axis=-1)
+            d_alt = np.abs(alt - prev).sum(axis=-1)
+            best = np.where((d_alt < d_best)[..., None], alt, best)
+        a[t] = best
+    return a
+
+
+def quat_conj(q: np.ndarray) -> np.ndarray:
+    """Conjugate (inverse for unit quaternions), xyzw."""
+    q = np.asarray(q, dtype=float)
+    return np.concatenate([-q[..., :3], q[..., 3:4]], axis=-1)
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product ``a * b`` of xyzw quaternions, broadcasting (rotation ``Ra @ Rb``)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` xyzw, broadcasting."""
+    q = np.asarray(q, dtype=float)
+    v = np.asarray(v, dtype=float)
+    u = q[..., :3]
+    w = q[..., 3:4]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_canonical(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions with a non-negative scalar part (w >= 0), xyzw."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., 3:4] < 0.0, -q, q)

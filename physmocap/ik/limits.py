@@ -1,0 +1,217 @@
+"""Hard inequality constraints of the per-frame IK that mink does not provide.
+
+Both are :class:`mink.Limit` subclasses: they return ``(G, h)`` such that the
+QP's step :math:`\\Delta q` (tangent space) satisfies :math:`G \\Delta q \\le h`.
+
+* :class:`FrameStepLimit` bounds the *frame-to-frame* joint step by the
+  joint's velocity limit times the motion's frame interval, however many IK
+  iterations the frame takes.  mink's ``VelocityLimit`` bounds each QP step by
+  ``v_max * dt`` instead, which would let several iterations add up.
+* :class:`FloorLimit` keeps the lowest point of every geom of the character
+  (and every declared contact site) above the floor plane ``z = floor``.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import mink
+import mujoco
+import numpy as np
+
+__all__ = ["FrameStepLimit", "FloorLimit", "geom_lowest_points"]
+
+
+class FrameStepLimit(mink.Limit):
+    r"""Joint step from the previous frame bounded by velocity limits in motion time.
+
+    For every velocity-limited hinge or slide joint :math:`i` with limit
+    :math:`\dot q_i^{max}` and frame interval :math:`T`:
+
+    .. math::
+
+        q_i^{prev} - \dot q_i^{max} T \;\le\; q_i + \Delta q_i
+        \;\le\; q_i^{prev} + \dot q_i^{max} T
+
+    where :math:`q_i` is the current iterate and :math:`q^{prev}` the previous
+    frame's solution.  Call :meth:`set_previous` once per frame.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        velocities: Mapping[str, float],
+        frame_interval: float,
+        shrink: float = 1e-6,
+    ) -> None:
+        """
+        Args:
+            model: The character's MuJoCo model.
+            velocities: Joint name -> velocity limit (rad/s or m/s), positive.
+            frame_interval: Seconds between two frames of the motion.
+            shrink: Margin (rad) taken off each bound so that solver round-off
+                never crosses the true limit.
+        """
+        qadr, dadr, vmax = [], [], []
+        for name, v in velocities.items():
+            jid = model.joint(name).id
+            if model.jnt_type[jid] not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+                continue
+            qadr.append(int(model.jnt_qposadr[jid]))
+            dadr.append(int(model.jnt_dofadr[jid]))
+            vmax.append(float(v))
+        self.qposadr = np.array(qadr, dtype=int)
+        self.dofadr = np.array(dadr, dtype=int)
+        self.vmax = np.array(vmax, dtype=float)
+        self.frame_interval = float(frame_interval)
+        self.shrink = float(shrink)
+        self.q_prev: np.ndarray | None = None
+        n = len(self.dofadr)
+        G = np.zeros((2 * n, model.nv))
+        G[np.arange(n), self.dofadr] = 1.0
+        G[n + np.arange(n), self.dofadr] = -1.0
+        self._G = G
+
+    def set_previous(self, q_prev: np.ndarray | None) -> None:
+        """The previous frame's solution (None disables the limit, e.g. on frame 0)."""
+        self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
+
+    def step_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Absolute bounds ``(lo, hi)`` on the limited joints' values this frame."""
+        assert self.q_prev is not None
+        step = self.vmax * self.frame_interval
+        prev = self.q_prev[self.qposadr]
+        return prev - step + self.shrink, prev + step - self.shrink
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # bounds are in motion time, not the QP's step
+        if self.q_prev is None or len(self.dofadr) == 0:
+            return mink.Constraint()
+        lo, hi = self.step_bounds()
+        q = configuration.q[self.qposadr]
+        # If an earlier relaxed step left q outside the band, allow moving back only.
+        h = np.concatenate([np.maximum(hi - q, 0.0), np.maximum(q - lo, 0.0)])
+        return mink.Constraint(G=self._G, h=h)
+
+
+def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
+    """Points in the geom's frame whose lowest one, less a radius, is the geom's lowest point.
+
+    Returns ``(k, 4)`` rows ``(x, y, z, radius)``: spheres and capsules are
+    handled exactly (centre / end-cap centres with their radius), boxes by their
+    eight corners, cylinders and ellipsoids conservatively by the corners of
+    their bounding box, meshes by their vertices.
+    """
+    t = model.geom_type[gid]
+    s = model.geom_size[gid]
+    G = mujoco.mjtGeom
+    if t == G.mjGEOM_SPHERE:
+        return np.array([[0.0, 0.0, 0.0, s[0]]])
+    if t == G.mjGEOM_CAPSULE:
+        return np.array([[0.0, 0.0, s[1], s[0]], [0.0, 0.0, -s[1], s[0]]])
+    if t in (G.mjGEOM_BOX, G.mjGEOM_ELLIPSOID, G.mjGEOM_CYLINDER):
+        hx, hy, hz = (s[0], s[1], s[2]) if t != G.mjGEOM_CYLINDER else (s[0], s[0], s[1])
+        corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return corners
+    if t == G.mjGEOM_MESH:
+        mid = model.geom_dataid[gid]
+        start, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+        v = model.mesh_vert[start : start + n].astype(float)
+        return np.hstack([v, np.zeros((len(v), 1))])
+    # planes, heightfields, SDFs: not constrained
+    return np.zeros((0, 4))
+
+
+def geom_lowest_points(
+    model: mujoco.MjModel, data: mujoco.MjData, geoms: Sequence[int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """World height of each geom's lowest point and the world point to differentiate.
+
+    Returns ``(z_low (n,), anchor (n, 3))`` where ``z_low`` is the lowest height
+    of the geom surface and ``anchor`` the candidate point (centre of the
+    lowest cap for capsules) whose vertical velocity equals that of the
+    lowest point.
+    """
+    z_low = np.empty(len(geoms))
+    anchor = np.empty((len(geoms), 3))
+    for k, gid in enumerate(geoms):
+        cand = _GEOM_CACHE.get((id(model), gid))
+        if cand is None:
+            cand = _geom_local_candidates(model, gid)
+            _GEOM_CACHE[(id(model), gid)] = cand
+        R = data.geom_xmat[gid].reshape(3, 3)
+        pts = data.geom_xpos[gid] + cand[:, :3] @ R.T
+        z = pts[:, 2] - cand[:, 3]
+        i = int(np.argmin(z))
+        z_low[k] = z[i]
+        anchor[k] = pts[i]
+    return z_low, anchor
+
+
+_GEOM_CACHE: dict[tuple[int, int], np.ndarray] = {}
+
+
+class FloorLimit(mink.Limit):
+    r"""Keep the character's geoms and contact sites above the floor.
+
+    For every geom (and site) whose lowest point :math:`z_k(q)` is within
+    ``activation`` of the floor, the linearised constraint
+
+    .. math::
+
+        z_k(q) + J_{z,k}(q) \Delta q \;\ge\; z_{floor} + m
+
+    is added, where :math:`J_{z,k}` is the vertical row of the translational
+    Jacobian of the point and :math:`m` a small margin that absorbs the
+    linearisation error.  Geoms of the world body (the floor itself) are
+    skipped.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        geoms: Sequence[int] | None = None,
+        sites: Sequence[int] = (),
+        floor: float = 0.0,
+        margin: float = 2e-4,
+        activation: float = 0.15,
+    ) -> None:
+        if geoms is None:
+            geoms = [
+                g
+                for g in range(model.ngeom)
+                if model.geom_bodyid[g] != 0 and len(_geom_local_candidates(model, g))
+            ]
+        self.model = model
+        self.geoms = np.array(list(geoms), dtype=int)
+        self.sites = np.array(list(sites), dtype=int)
+        self.floor = float(floor)
+        self.margin = float(margin)
+        self.activation = float(activation)
+        self.enabled = True
+        self._jacp = np.zeros((3, model.nv))
+
+    def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points."""
+        z_g, a_g = geom_lowest_points(self.model, data, self.geoms)
+        z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
+        a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
+        body = np.concatenate([self.model.geom_bodyid[self.geoms], self.model.site_bodyid[self.sites]])
+        return np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), body
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        if not self.enabled:
+            return mink.Constraint()
+        data = configuration.data
+        z, anchor, body = self.heights(data)
+        active = np.flatnonzero(z < self.floor + self.activation)
+        if active.size == 0:
+            return mink.Constraint()
+        G = np.empty((active.size, self.model.nv))
+        h = np.empty(active.size)
+        for row, k in enumerate(active):
+            mujoco.mj_jac(self.model, data, self._jacp, None, anchor[k], int(body[k]))
+            G[row] = -self._jacp[2]
+            h[row] = z[k] - self.floor - self.margin
+        return mink.Constraint(G=G, h=h)

@@ -1,0 +1,156 @@
+"""Offline retargeting: a whole motion onto a character, frame by frame.
+
+``retarget(motion, character, **options)`` maps the actor's joints to the
+canonical set, builds targets that fit the character
+(:mod:`physmocap.ik.targets`), then solves one IK per frame
+(:mod:`physmocap.ik.solver`), warm-started from the previous frame, and
+returns a :class:`~physmocap.trajectory.Trajectory`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from ..errors import MappingError, OptionError, warn
+from ..motion import Motion
+from ..progress import Progress
+from ..trajectory import Trajectory
+from .solver import RELAXATION_LEVELS, FrameSolver, SolverOptions
+from .targets import TargetOptions, Targets, build_targets
+
+__all__ = ["retarget", "split_options", "map_motion"]
+
+_TARGET_FIELDS = {f.name for f in dataclasses.fields(TargetOptions)}
+_SOLVER_FIELDS = {f.name for f in dataclasses.fields(SolverOptions)}
+
+
+def split_options(options: dict[str, Any]) -> tuple[TargetOptions, SolverOptions, dict[str, Any]]:
+    """Split flat keyword options into target options, solver options and the rest."""
+    t, s, rest = {}, {}, {}
+    for k, v in options.items():
+        if k in _TARGET_FIELDS:
+            t[k] = v
+        elif k in _SOLVER_FIELDS:
+            s[k] = v
+        else:
+            rest[k] = v
+    return TargetOptions(**t), SolverOptions(**s), rest
+
+
+def map_motion(motion: Motion, profile: str | None = None, mapping=None) -> dict[str, int]:
+    """Canonical joint -> source joint index, using the name-mapping profiles."""
+    from ..sources.profiles import map_skeleton
+
+    jmap = map_skeleton(motion.skeleton, profile=profile, mapping=mapping)
+    return dict(jmap.indices)
+
+
+def _frame_range(motion: Motion, start: int | None, end: int | None) -> Motion:
+    F = motion.num_frames
+    s = 0 if start is None else int(start)
+    e = F if end is None else int(end)
+    if s < 0 or e > F or s >= e:
+        raise OptionError(
+            f"frame range [{s}, {e}) is outside the clip, which has frames 0 to {F - 1} "
+            f"(--start is inclusive, --end exclusive)",
+            path=motion.source,
+        )
+    return motion if (s, e) == (0, F) else motion.slice_frames(s, e)
+
+
+def retarget(
+    motion: Motion,
+    character=None,
+    *,
+    profile: str | None = None,
+    mapping=None,
+    joint_indices: dict[str, int] | None = None,
+    start: int | None = None,
+    end: int | None = None,
+    fps: float | None = None,
+    progress: bool | None = None,
+    targets: Targets | None = None,
+    **options: Any,
+) -> Trajectory:
+    """Retarget ``motion`` onto ``character`` (default: the bundled humanoid).
+
+    Args:
+        motion: The actor's motion.
+        character: A :class:`physmocap.models.Character`, a path to an MJCF,
+            or None for the default humanoid.
+        profile: Force a source naming profile (see ``physmocap inspect``).
+        mapping: A TOML mapping file (or dict) for the source skeleton.
+        joint_indices: Canonical joint -> source joint index, bypassing the mapping.
+        start, end: Frame range ``[start, end)`` of the source to retarget.
+        fps: Resample the source to this rate first.
+        progress: Draw a progress bar on stderr (default: when it is a terminal).
+        targets: Precomputed targets (skips target building).
+        **options: Fields of :class:`~physmocap.ik.targets.TargetOptions` and
+            :class:`~physmocap.ik.solver.SolverOptions` (e.g. ``max_iterations=8``,
+            ``floor=False``, ``scale_root=False``).
+
+    Returns:
+        The character's :class:`~physmocap.trajectory.Trajectory`.
+    """
+    from ..models import load_character
+
+    if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
+        character = load_character(character)
+    target_opt, solver_opt, rest = split_options(options)
+    if rest:
+        known = sorted(_TARGET_FIELDS | _SOLVER_FIELDS)
+        raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {known}")
+    if not character.contacts:
+        raise MappingError(
+            "the character declares no foot contact points; add [contacts] to its mapping file",
+            path=getattr(character, "map_path", None) or getattr(character, "mjcf_path", None),
+        )
+    motion = _frame_range(motion, start, end)
+    if fps is not None:
+        if not (np.isfinite(fps) and fps > 0):
+            raise OptionError(f"--fps must be a positive number, got {fps}")
+        motion = motion.resample(float(fps))
+    if targets is None:
+        if joint_indices is None:
+            joint_indices = map_motion(motion, profile=profile, mapping=mapping)
+        targets = build_targets(motion, joint_indices, character, target_opt)
+    return solve_targets(targets, character, solver_opt, source=motion.source, progress=progress)
+
+
+def solve_targets(
+    targets: Targets,
+    character,
+    options: SolverOptions | None = None,
+    source: str = "<memory>",
+    progress: bool | None = None,
+) -> Trajectory:
+    """Run the per-frame IK over prepared targets."""
+    solver = FrameSolver(character, targets.names, targets.has_orientation, targets.fps, options)
+    F = targets.num_frames
+    qpos = np.empty((F, character.model.nq))
+    iterations = np.zeros(F, dtype=np.int32)
+    relaxation = np.zeros(F, dtype=np.int8)
+    with Progress(F, "retarget", enabled=progress) as bar:
+        for t in range(F):
+            solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
+            q, it, level = solver.solve_frame(first=(t == 0))
+            qpos[t] = q
+            iterations[t] = it
+            relaxation[t] = level
+            bar.update(1)
+    for level in range(1, len(RELAXATION_LEVELS)):
+        frames = np.flatnonzero(relaxation == level)
+        if frames.size:
+            shown = ", ".join(str(f) for f in frames[:10]) + (" ..." if frames.size > 10 else "")
+            warn(f"{source}: {RELAXATION_LEVELS[level]} on {frames.size} frame(s): {shown}")
+    return Trajectory(
+        character=character,
+        qpos=qpos,
+        fps=targets.fps,
+        source=source,
+        targets=targets,
+        stats={"iterations": iterations, "relaxation": relaxation},
+    )

@@ -1,0 +1,239 @@
+"""Per-frame differential IK with mink: one QP per iteration, hard limits in every QP.
+
+For each frame the solver iterates, from the previous frame's solution (or
+the rest pose on the first frame),
+
+.. math::
+
+    \\min_{\\Delta q}\\; \\sum_k \\| W_k (J_k \\Delta q + e_k) \\|^2
+      + \\| W_p (\\Delta q + q \\ominus q_{rest}) \\|^2 + \\lambda \\|\\Delta q\\|^2
+
+subject to joint limits (mink ``ConfigurationLimit``), the frame-to-frame
+velocity bound (:class:`~physmocap.ik.limits.FrameStepLimit`), the floor
+(:class:`~physmocap.ik.limits.FloorLimit`) and, when given, equality
+constraints (planted feet), then integrates :math:`q \\leftarrow q \\oplus
+\\Delta q` until the step is below ``tolerance`` or ``max_iterations`` is hit.
+The tasks :math:`k` are mink ``FrameTask``s, one per tracked site, with position
+cost per metre and orientation cost per radian; :math:`\\lambda` is the
+Levenberg-Marquardt damping.  QPs are solved with ``daqp``.
+
+**Relaxation order** when a QP is infeasible or the backend fails (each level
+is tried in turn, and the frame is reported):
+
+1. drop the equality constraints (planted contacts);
+2. drop the frame-to-frame velocity bound;
+3. drop the floor;
+4. keep only the joint limits, with extra damping;
+5. hold the previous frame's pose.
+
+Joint limits are never relaxed, and the solver never returns a non-finite
+configuration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import mink
+import mujoco
+import numpy as np
+
+from ..rotations import xyzw_to_wxyz
+from .limits import FloorLimit, FrameStepLimit
+from .targets import weight_of
+
+__all__ = ["SolverOptions", "FrameSolver", "RELAXATION_LEVELS"]
+
+RELAXATION_LEVELS = (
+    "all constraints",
+    "contact equalities dropped",
+    "velocity limits dropped",
+    "floor dropped",
+    "joint limits only",
+    "previous pose held",
+)
+
+
+@dataclass
+class SolverOptions:
+    """Options of the per-frame IK.
+
+    Attributes:
+        max_iterations: QP iterations per frame (warm-started from the previous frame).
+        first_frame_iterations: Iterations for frame 0, which starts from the rest pose.
+        tolerance: Stop iterating when the largest joint step is below this (rad or m).
+        damping: Levenberg-Marquardt damping added to the QP Hessian's diagonal.
+        task_lm_damping: mink per-task LM damping (scales with the squared error).
+        posture_cost: Cost of the PostureTask that pulls towards the rest pose.
+        velocity_limits: Bound frame-to-frame steps by the joints' velocity limits.
+        floor: Keep all geoms and contact sites above ``floor_height``.
+        floor_height: Height of the floor plane (metres).
+        floor_margin: Clearance the linearised floor constraint aims for (metres).
+        limit_gain: mink ConfigurationLimit gain in (0, 1].
+        weights: Canonical joint -> (position cost, orientation cost) overrides.
+        solver: qpsolvers backend name.
+    """
+
+    max_iterations: int = 6
+    first_frame_iterations: int = 150
+    tolerance: float = 1e-4
+    damping: float = 1e-4
+    task_lm_damping: float = 0.0
+    posture_cost: float = 0.02
+    velocity_limits: bool = True
+    floor: bool = True
+    floor_height: float = 0.0
+    floor_margin: float = 2e-4
+    limit_gain: float = 0.95
+    weights: dict[str, tuple[float, float]] = field(default_factory=dict)
+    solver: str = "daqp"
+
+
+class FrameSolver:
+    """Solves one frame at a time for a character; holds the warm start.
+
+    Args:
+        character: A :class:`physmocap.models.Character`.
+        names: Canonical joints that have targets, in target order.
+        has_orientation: ``(N,)`` which of them have orientation targets.
+        fps: Frame rate of the motion (for the velocity bound).
+        options: :class:`SolverOptions`.
+    """
+
+    def __init__(
+        self,
+        character,
+        names: Sequence[str],
+        has_orientation: np.ndarray,
+        fps: float,
+        options: SolverOptions | None = None,
+    ) -> None:
+        self.options = opt = options or SolverOptions()
+        self.character = character
+        self.model = model = character.model
+        self.names = tuple(names)
+        self.configuration = mink.Configuration(model, np.array(character.rest_qpos, dtype=float))
+        self.tasks: list[mink.FrameTask] = []
+        self.costs: list[tuple[float, float]] = []
+        for name, oriented in zip(self.names, has_orientation):
+            pc, oc = opt.weights.get(name, weight_of(name))
+            oc = oc if oriented else 0.0
+            tf = character.tracked[name]
+            task = mink.FrameTask(
+                frame_name=tf.name,
+                frame_type=tf.kind,
+                position_cost=pc,
+                orientation_cost=oc,
+                lm_damping=opt.task_lm_damping,
+            )
+            self.tasks.append(task)
+            self.costs.append((pc, oc))
+        self.posture = mink.PostureTask(model, cost=opt.posture_cost)
+        self.posture.set_target(np.array(character.rest_qpos, dtype=float))
+        self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
+        self.step_limit = FrameStepLimit(model, character.velocity_limits, 1.0 / fps)
+        contact_sites = [model.site(s).id for side in character.contacts.values() for s in side]
+        self.floor_limit = FloorLimit(
+            model, sites=contact_sites, floor=opt.floor_height, margin=opt.floor_margin
+        )
+        # hinge/slide joints with limits, for the final clamp
+        lim = (model.jnt_limited.astype(bool)) & np.isin(
+            model.jnt_type, [mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE]
+        )
+        self._lim_qadr = model.jnt_qposadr[lim]
+        self._lim_range = model.jnt_range[lim]
+        self.q_prev: np.ndarray | None = None
+        self.constraints: list[mink.Task] = []
+        self.extra_tasks: list[mink.Task] = []
+
+    # -- targets ----------------------------------------------------------------
+    def set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
+        """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
+        for k, task in enumerate(self.tasks):
+            pc, oc = self.costs[k]
+            if valid[k]:
+                wxyz_xyz = np.concatenate([xyzw_to_wxyz(orientations[k]), positions[k]])
+                task.set_target(mink.SE3(wxyz_xyz=wxyz_xyz))
+                task.set_position_cost(pc)
+                task.set_orientation_cost(oc)
+            else:
+                task.set_target_from_configuration(self.configuration)
+                task.set_position_cost(0.0)
+                task.set_orientation_cost(0.0)
+
+    def reset(self, q: np.ndarray | None = None) -> None:
+        """Start over from ``q`` (default: the rest pose) with no previous frame."""
+        q0 = self.character.rest_qpos if q is None else q
+        self.configuration.update(np.array(q0, dtype=float))
+        self.q_prev = None
+
+    # -- solving ----------------------------------------------------------------
+    def _limits(self, level: int) -> list[mink.Limit]:
+        limits: list[mink.Limit] = [self.config_limit]
+        if level <= 2 and self.options.velocity_limits and self.q_prev is not None:
+            limits.append(self.step_limit)
+        if level <= 3 and self.options.floor:
+            limits.append(self.floor_limit)
+        return limits
+
+    def _step(self, level: int) -> np.ndarray:
+        opt = self.options
+        tasks = [*self.tasks, self.posture, *self.extra_tasks]
+        constraints = self.constraints if level == 0 else []
+        damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
+        v = mink.solve_ik(
+            self.configuration,
+            tasks,
+            1.0,
+            opt.solver,
+            damping=damping,
+            limits=self._limits(level),
+            constraints=constraints or None,
+        )
+        if not np.all(np.isfinite(v)):
+            raise mink.NoSolutionFound(opt.solver)
+        return v
+
+    def solve_frame(self, first: bool = False) -> tuple[np.ndarray, int, int]:
+        """Iterate the QP for the current targets; returns ``(q, iterations, relaxation level)``.
+
+        The relaxation level is the index in :data:`RELAXATION_LEVELS` of the
+        strongest relaxation any iteration needed (0 = none).
+        """
+        opt = self.options
+        self.step_limit.set_previous(self.q_prev)
+        iters = opt.first_frame_iterations if first else opt.max_iterations
+        worst = 0
+        it = 0
+        base = 0 if self.constraints else 1
+        for it in range(1, iters + 1):
+            level = base
+            v = None
+            while level < 5:
+                try:
+                    v = self._step(level)
+                    break
+                except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                    level += 1
+            if level > base:
+                worst = max(worst, level)
+            if v is None:
+                worst = 5
+                break
+            self.configuration.integrate_inplace(v, 1.0)
+            if np.max(np.abs(v)) < opt.tolerance:
+                break
+        q = self.configuration.q.copy()
+        if worst == 5 or not np.all(np.isfinite(q)):
+            worst = 5
+            q = (self.q_prev if self.q_prev is not None else np.array(self.character.rest_qpos)).copy()
+        # remove solver round-off outside the joint ranges (the QP keeps within ~1e-9)
+        q[self._lim_qadr] = np.clip(q[self._lim_qadr], self._lim_range[:, 0], self._lim_range[:, 1])
+        if self.q_prev is not None and opt.velocity_limits and worst < 2:
+            lo, hi = self.step_limit.step_bounds()
+            qa = self.step_limit.qposadr
+            q[qa] = np.clip(q[qa], lo - self.step_limit.shrink, hi + self.step_limit.shrink)
+        self.configuration.update(q)
+        self.q_prev = q.copy()
+        return q, it, worst

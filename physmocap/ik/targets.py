@@ -1,0 +1,337 @@
+"""IK targets that fit the character: positions and orientations per tracked joint.
+
+The actor's canonical joints (from the name mapping) are turned into targets
+for the character's tracked sites without distorting the motion when the two
+have different proportions:
+
+* **Root.** The pelvis target is the actor's pelvis with its height above the
+  actor's floor and its horizontal travel (from the first frame) scaled by
+  :math:`k = h_c / h_a`, the ratio of the character's and the actor's hip
+  heights (measured as leg length, hip to knee to ankle, plus ankle height in
+  the rest pose), so stride length matches the character.
+* **Rigid torso segments.** A joint whose parent is a torso segment with an
+  orientation target (pelvis, chest, head) is placed at the parent's target
+  plus the character's own rest offset rotated by the parent's target
+  orientation: :math:`T_c = T_p + R_p(t) R_{p,0}^{-1} (x_{c,0} - x_{p,0})`.
+  The hips therefore sit where the character's pelvis puts them.
+* **Limbs.** Any other joint walks the character's chain: parent target plus
+  the character's segment length along the actor's segment direction,
+  :math:`T_c = T_p + L^{char}_{pc}\\, \\widehat{(a_c - a_p)}`.
+* **Orientations** (pelvis, chest, head, wrists, ankles by default).  For
+  rotational sources (BVH) the actor's world rotation :math:`R_a(t)` of the
+  segment is calibrated once against the character's rest pose:
+  :math:`R_c^{target}(t) = R_a(t)\\, R_{a,0}^{-1}\\, M\\, Y\\, R_{c,0}`, where
+  :math:`Y` is the yaw from the character's facing to the actor's rest
+  facing and :math:`M` the smallest rotation taking the character's rest
+  segment direction (after :math:`Y`) onto the actor's (T-pose arms versus
+  arms-down, for example).  For positional sources the same formula uses
+  frames built from positions (:mod:`physmocap.frames`) on both sides.
+
+All quantities are metres and radians, Z-up, quaternions x-y-z-w.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from ..canonical import CANONICAL_NAMES, canonical_parent
+from ..errors import MappingError
+from ..motion import Motion
+from ..rotations import Rotation, quat_apply, quat_conj, quat_mul
+
+__all__ = ["Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
+
+#: Default task weights: (position cost per metre, orientation cost per radian).
+DEFAULT_WEIGHTS: dict[str, tuple[float, float]] = {
+    "pelvis": (10.0, 3.0),
+    "spine": (1.0, 0.0),
+    "chest": (2.0, 1.0),
+    "neck": (1.0, 0.0),
+    "head": (2.0, 0.5),
+    "head_end": (0.5, 0.0),
+    "clavicle": (0.5, 0.0),
+    "shoulder": (3.0, 0.0),
+    "elbow": (5.0, 0.0),
+    "wrist": (5.0, 0.3),
+    "hand_end": (1.0, 0.0),
+    "hip": (5.0, 0.0),
+    "knee": (5.0, 0.0),
+    "ankle": (8.0, 1.0),
+    "toe": (3.0, 0.0),
+    "toe_end": (2.0, 0.0),
+}
+
+ORIENTED = ("pelvis", "chest", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+RIGID_PARENTS = ("pelvis", "chest", "head")
+
+
+def weight_of(name: str) -> tuple[float, float]:
+    stem = name.split("_", 1)[1] if name.startswith(("left_", "right_")) else name
+    return DEFAULT_WEIGHTS.get(stem, (1.0, 0.0))
+
+
+@dataclass
+class TargetOptions:
+    """How targets are built.
+
+    Attributes:
+        scale_root: Scale the root's travel and height by the hip-height ratio.
+        oriented: Canonical joints that get an orientation target where the
+            source has one.
+        source_floor: Height of the actor's floor in the source (metres); None
+            estimates it from the clip.
+    """
+
+    scale_root: bool = True
+    oriented: tuple[str, ...] = ORIENTED
+    source_floor: float | None = None
+
+
+@dataclass(eq=False)
+class Targets:
+    """Per-frame targets for the character's tracked frames.
+
+    Attributes:
+        names: Canonical joints that are tracked (mapped in source and character).
+        positions: ``(F, N, 3)`` target positions, metres, character world.
+        orientations: ``(F, N, 4)`` target orientations x-y-z-w (identity where none).
+        has_orientation: ``(N,)`` which joints have an orientation target.
+        valid: ``(F, N)`` False where the source lost the joint (task off that frame).
+        fps: Frames per second.
+        scale: Root scale factor :math:`k` used.
+        source_positions: ``(F, N, 3)`` the actor's joints in the source world.
+    """
+
+    names: tuple[str, ...]
+    positions: np.ndarray
+    orientations: np.ndarray
+    has_orientation: np.ndarray
+    valid: np.ndarray
+    fps: float
+    scale: float = 1.0
+    source_positions: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    def index(self, name: str) -> int:
+        return self.names.index(name)
+
+
+def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Canonical joint -> (rest world position, rest world quaternion xyzw) of the character."""
+    model = character.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = character.rest_qpos
+    mujoco.mj_kinematics(model, data)
+    out = {}
+    for canon, tf in character.tracked.items():
+        if tf.kind == "site":
+            sid = model.site(tf.name).id
+            pos = data.site_xpos[sid].copy()
+            mat = data.site_xmat[sid].reshape(3, 3)
+        else:
+            bid = model.body(tf.name).id
+            pos = data.xpos[bid].copy()
+            mat = data.xmat[bid].reshape(3, 3)
+        quat = Rotation.from_matrix(mat).as_quat()
+        out[canon] = (pos, quat)
+    return out
+
+
+def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.maximum(n, eps), n[..., 0]
+
+
+def _yaw_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Quaternion (xyzw) of the rotation about Z taking horizontal direction a to b."""
+    ang = np.arctan2(b[1], b[0]) - np.arctan2(a[1], a[0])
+    return Rotation.from_rotvec([0.0, 0.0, ang]).as_quat()
+
+
+def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation (xyzw) taking unit vector a onto unit vector b."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis)
+    c = float(np.dot(a, b))
+    if s < 1e-9:
+        if c > 0:
+            return np.array([0.0, 0.0, 0.0, 1.0])
+        perp = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(perp) < 1e-6:
+            perp = np.cross(a, [0.0, 1.0, 0.0])
+        return Rotation.from_rotvec(np.pi * perp / np.linalg.norm(perp)).as_quat()
+    return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_quat()
+
+
+def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
+    """Horizontal forward direction from the hip line: forward = left x up."""
+    left = left_hip - right_hip
+    fwd = np.cross(left, [0.0, 0.0, 1.0])
+    fwd[2] = 0.0
+    n = np.linalg.norm(fwd)
+    if n < 1e-9:
+        raise MappingError("cannot tell which way the skeleton faces: its hips coincide")
+    return fwd / n
+
+
+def _first_child(name: str, present: set[str]) -> str | None:
+    for c in CANONICAL_NAMES:
+        if c in present and canonical_parent(c, present) == name:
+            return c
+    return None
+
+
+def build_targets(
+    motion: Motion,
+    joint_indices: dict[str, int],
+    character,
+    options: TargetOptions | None = None,
+    source_orientations: dict[str, np.ndarray] | None = None,
+) -> Targets:
+    """Build the character's IK targets from a motion.
+
+    Args:
+        motion: The actor's motion (metres, Z-up).
+        joint_indices: Canonical joint -> joint index in ``motion.skeleton``
+            (``JointMap.indices``).
+        character: A :class:`physmocap.models.Character`.
+        options: :class:`TargetOptions`.
+        source_orientations: For positional sources, canonical joint ->
+            ``(F, 4)`` world orientations built from positions, with the same
+            construction applied to the character's rest pose under the key
+            ``"<name>@rest"`` (``(4,)``).  Rotational sources need none.
+
+    Returns:
+        :class:`Targets` for every canonical joint mapped on both sides.
+    """
+    opt = options or TargetOptions()
+    rest_c = character_rest_frames(character)
+    present = [c for c in CANONICAL_NAMES if c in joint_indices and c in rest_c]
+    if "pelvis" not in present:
+        raise MappingError("the pelvis must be mapped in both the source and the character")
+    pset = set(present)
+    idx = np.array([joint_indices[c] for c in present])
+    pos_all, rot_all = motion.forward_kinematics()
+    S = pos_all[:, idx]  # (F, N, 3) actor canonical positions
+    F, N = S.shape[:2]
+    valid = np.all(np.isfinite(S), axis=-1)
+    if motion.confidence is not None:
+        valid &= motion.confidence[:, idx] > 0.0
+    S = np.where(valid[..., None], S, 0.0)
+    col = {c: i for i, c in enumerate(present)}
+
+    # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
+    if motion.is_rotational:
+        S_rest = motion.skeleton.rest_positions()[idx]
+    else:
+        S_rest = np.array([S[np.argmax(valid[:, i]), i] for i in range(N)])
+
+    # --- root scale from the leg chains
+    def leg_len(points: dict[str, np.ndarray], side: str) -> float | None:
+        chain = [f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
+        if not all(c in points for c in chain):
+            return None
+        return float(
+            np.linalg.norm(points[chain[0]] - points[chain[1]])
+            + np.linalg.norm(points[chain[1]] - points[chain[2]])
+        )
+
+    actor_pts = {c: S_rest[col[c]] for c in present}
+    char_pts = {c: rest_c[c][0] for c in present}
+    la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
+    lc = [x for x in (leg_len(char_pts, s) for s in ("left", "right")) if x]
+    scale = float(np.mean(lc) / np.mean(la)) if (la and lc and opt.scale_root) else 1.0
+
+    floor_s = opt.source_floor if opt.source_floor is not None else motion.floor_height()
+
+    # --- orientations
+    Q = np.zeros((F, N, 4))
+    Q[..., 3] = 1.0
+    has_q = np.zeros(N, dtype=bool)
+    yaw = np.array([0.0, 0.0, 0.0, 1.0])
+    if "left_hip" in pset and "right_hip" in pset:
+        f_a = _facing(actor_pts["left_hip"], actor_pts["right_hip"])
+        f_c = _facing(char_pts["left_hip"], char_pts["right_hip"])
+        yaw = _yaw_between(f_c, f_a)
+    for c in opt.oriented:
+        if c not in pset:
+            continue
+        i = col[c]
+        q_c0 = rest_c[c][1]
+        if motion.is_rotational and rot_all is not None:
+            R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
+            M = np.array([0.0, 0.0, 0.0, 1.0])
+            child = _first_child(c, pset)
+            if child is not None and c not in RIGID_PARENTS:
+                d_a = actor_pts[child] - actor_pts[c]
+                d_c = quat_apply(yaw, char_pts[child] - char_pts[c])
+                if np.linalg.norm(d_a) > 1e-6 and np.linalg.norm(d_c) > 1e-6:
+                    M = _min_rotation(d_c, d_a)
+            offset = quat_mul(quat_mul(M, yaw), q_c0)
+            Q[:, i] = quat_mul(R_a, offset)
+            has_q[i] = True
+        elif source_orientations is not None and c in source_orientations:
+            R_a = np.asarray(source_orientations[c], dtype=float)
+            R_a0 = source_orientations.get(f"{c}@rest")
+            if R_a0 is None:
+                continue
+            Q[:, i] = quat_mul(R_a, quat_mul(quat_conj(np.asarray(R_a0)), q_c0))
+            has_q[i] = True
+    # keep quaternion signs continuous over frames (nicer for users; SE3 does not care)
+    for i in np.flatnonzero(has_q):
+        d = np.sum(Q[1:, i] * Q[:-1, i], axis=-1)
+        flip = np.cumsum(d < 0) % 2 == 1
+        Q[1:, i][flip] *= -1.0
+
+    # --- positions: root, then rigid children and limb chains in canonical order
+    T = np.zeros((F, N, 3))
+    p0 = S[:, col["pelvis"]]
+    start_xy = p0[np.argmax(valid[:, col["pelvis"]]), :2]
+    T[:, col["pelvis"], :2] = start_xy + scale * (p0[:, :2] - start_xy)
+    T[:, col["pelvis"], 2] = scale * (p0[:, 2] - floor_s)
+    for c in present:
+        if c == "pelvis":
+            continue
+        p = canonical_parent(c, pset)
+        if p is None:
+            continue
+        i, j = col[c], col[p]
+        if p in RIGID_PARENTS and has_q[j]:
+            off0 = char_pts[c] - char_pts[p]
+            rel = quat_mul(Q[:, j], quat_conj(rest_c[p][1]))
+            T[:, i] = T[:, j] + quat_apply(rel, off0)
+            continue
+        length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
+        d, n = _unit(S[:, i] - S[:, j])
+        bad = (n < 1e-6) | ~valid[:, i] | ~valid[:, j]
+        if np.any(bad):
+            # undefined direction: keep the character's rest direction, rotated like the parent
+            rest_dir = _unit(char_pts[c] - char_pts[p])[0]
+            if has_q[j]:
+                fallback = quat_apply(quat_mul(Q[:, j], quat_conj(rest_c[p][1])), rest_dir)
+            else:
+                fallback = np.broadcast_to(rest_dir, d.shape)
+            d = np.where(bad[:, None], fallback, d)
+        T[:, i] = T[:, j] + length * d
+
+    return Targets(
+        names=tuple(present),
+        positions=T,
+        orientations=Q,
+        has_orientation=has_q,
+        valid=valid,
+        fps=motion.fps,
+        scale=scale,
+        source_positions=S,
+        info={"source_floor": float(floor_s), "yaw_deg": float(np.degrees(Rotation.from_quat(yaw).magnitude()))},
+    )
+

@@ -1,0 +1,107 @@
+"""``physmocap retarget``: retarget a capture file onto a character and export it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..errors import OptionError
+from ..fileio import check_writable
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "retarget",
+        help="retarget a motion onto a character (BVH / NPZ / CSV out)",
+        description=(
+            "Retarget solved motion onto an MJCF character with differential IK under joint "
+            "limits, velocity limits and a floor. INPUT may be 'example' (the bundled CMU walk)."
+        ),
+    )
+    p.add_argument("input", metavar="INPUT", help="motion file (.bvh, ...) or 'example'")
+    p.add_argument("-o", "--output", required=True, help="output file: .bvh, .npz, .csv or .mcap")
+    p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
+    p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
+    p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
+    p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
+    p.add_argument("--profile", help="force the source skeleton's naming profile")
+    p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
+    p.add_argument("--in-units", help="override the input's length unit (m, cm, inch, cmu or metres per unit)")
+    p.add_argument("--start", type=int, help="first source frame (inclusive)")
+    p.add_argument("--end", type=int, help="last source frame (exclusive)")
+    p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
+    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
+    p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
+    p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
+
+
+def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
+    for out in outputs:
+        suffix = out.suffix.lower()
+        if suffix == ".bvh":
+            from ..export.character_bvh import write_character_bvh
+
+            write_character_bvh(traj, out, up=args.up.upper(), units=args.units)
+        elif suffix == ".npz":
+            from ..export.trajectory import write_trajectory_npz
+
+            write_trajectory_npz(traj, out)
+        elif suffix == ".csv":
+            from ..export.trajectory import write_trajectory_csv
+
+            write_trajectory_csv(traj, out)
+        elif suffix == ".mcap":
+            from ..export.mcap import write_trajectory_mcap
+
+            write_trajectory_mcap(traj, out)
+        print(f"wrote {out}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..ik.retarget import retarget
+    from ..models import load_character
+    from ..sources import load_motion
+
+    outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
+    for out in outputs:
+        if out.suffix.lower() not in WRITERS:
+            raise OptionError(
+                f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",
+                path=out,
+            )
+        check_writable(out)
+    read_opts = {}
+    if args.in_units:
+        read_opts["units"] = args.in_units
+    motion = load_motion(args.input, **read_opts)
+    character = load_character(args.character, args.map)
+    options = {}
+    if args.max_iterations is not None:
+        if args.max_iterations < 1:
+            raise OptionError("--max-iterations must be at least 1")
+        options["max_iterations"] = args.max_iterations
+    if args.no_floor:
+        options["floor"] = False
+    if args.no_velocity_limits:
+        options["velocity_limits"] = False
+    traj = retarget(
+        motion,
+        character,
+        profile=args.profile,
+        mapping=args.source_map,
+        start=args.start,
+        end=args.end,
+        fps=args.fps,
+        progress=False if args.quiet else None,
+        **options,
+    )
+    write_outputs(traj, outputs, args)
+    return 0

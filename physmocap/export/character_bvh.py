@@ -1,0 +1,200 @@
+"""BVH of the retargeted character, built from its MJCF body tree.
+
+Hierarchy: one BVH joint per body that carries degrees of freedom (bodies
+welded to their parent are merged into it), the free-joint body as ROOT, and
+an End Site at every leaf (at the farthest site or geom of the leaf's subtree).
+Offsets are the rest pose's body positions relative to the parent.
+
+Rotations: with :math:`R_b(t)` the world rotation of body :math:`b` and
+:math:`R_b^0` its rest rotation, the BVH joint's world rotation is
+:math:`D_b(t) = R_b(t) (R_b^0)^{-1}` (identity in the rest pose, as BVH
+requires), and its channel rotation is :math:`D_{p}(t)^{-1} D_b(t)`.  Forward
+kinematics of the file then gives back every body origin exactly:
+:math:`x_b = x_p + D_p (x_b^0 - x_p^0)`, provided each body's joints pivot at
+the body origin (true of the bundled characters; :func:`character_motion`
+warns otherwise).
+
+Channel order: where a body's hinges are about distinct principal axes (the
+default humanoid), the rotation channels follow the hinge order of the MJCF,
+so the channel values are the joint angles (sign flipped for an axis that the
+Y-up conversion reverses).  Other bodies use ``rotation_order``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..errors import warn
+from ..motion import Motion, Skeleton
+from ..rotations import quat_conj, quat_mul, up_axis_matrix, wxyz_to_xyzw
+from ..trajectory import Trajectory
+
+__all__ = ["character_skeleton", "character_motion", "write_character_bvh"]
+
+
+def _exported_bodies(model: mujoco.MjModel) -> list[int]:
+    """Bodies that become BVH joints: every body with joints (world excluded)."""
+    return [b for b in range(1, model.nbody) if model.body_jntnum[b] > 0]
+
+
+def _leaf_tip(model: mujoco.MjModel, data: mujoco.MjData, body: int, exported: set[int]) -> np.ndarray | None:
+    """Farthest site or geom centre in ``body``'s subtree not below another exported body."""
+    def owned(b: int) -> bool:
+        while b != body:
+            if b in exported or b == 0:
+                return False
+            b = int(model.body_parentid[b])
+        return True
+
+    pts = [data.site_xpos[s] for s in range(model.nsite) if owned(int(model.site_bodyid[s]))]
+    pts += [data.geom_xpos[g] for g in range(model.ngeom) if owned(int(model.geom_bodyid[g]))]
+    if not pts:
+        return None
+    pts = np.array(pts)
+    d = np.linalg.norm(pts - data.xpos[body], axis=1)
+    if d.max() < 1e-4:
+        return None
+    return pts[int(np.argmax(d))] - data.xpos[body]
+
+
+def character_skeleton(character) -> tuple[Skeleton, list[int], mujoco.MjData]:
+    """The BVH skeleton of a character (metres, Z-up) and the MuJoCo body of each joint."""
+    model = character.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = character.rest_qpos
+    mujoco.mj_kinematics(model, data)
+    bodies = _exported_bodies(model)
+    exported = set(bodies)
+    names, parents, offsets, end, body_of = [], [], [], [], []
+    index: dict[int, int] = {}
+    for b in bodies:
+        p = int(model.body_parentid[b])
+        while p != 0 and p not in exported:
+            p = int(model.body_parentid[p])
+        index[b] = len(names)
+        names.append(model.body(b).name or f"body{b}")
+        parents.append(-1 if p == 0 else index[p])
+        offsets.append(data.xpos[b] - (0.0 if p == 0 else data.xpos[p]))
+        end.append(False)
+        body_of.append(b)
+        # hinge anchors away from the body origin would break the BVH's pivots
+        for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
+            if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE and np.linalg.norm(model.jnt_pos[j]) > 1e-6:
+                warn(f"joint {model.joint(j).name!r} does not pivot at its body origin; the BVH pivots there")
+    # end sites for leaves
+    leaves = [b for b in bodies if not any(parents[index[c]] == index[b] for c in bodies if c != b)]
+    for b in leaves:
+        tip = _leaf_tip(model, data, b, exported)
+        if tip is None:
+            continue
+        names.append(f"{names[index[b]]}_End")
+        parents.append(index[b])
+        offsets.append(tip)
+        end.append(True)
+        body_of.append(-1)
+    # keep parents before children: end sites were appended after all bodies, which is fine
+    skel = Skeleton(tuple(names), np.array(parents), np.array(offsets), np.array(end))
+    return skel, body_of, data
+
+
+def _channel_order(model: mujoco.MjModel, body: int, up: str, default: str) -> str:
+    """Rotation channel order that makes channel values equal the body's hinge angles."""
+    C = up_axis_matrix("Z", up)
+    axes = []
+    for j in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
+            return default
+        # hinge axis in world at rest (body frames are world-aligned for the default humanoid)
+        axes.append(model.jnt_axis[j])
+    if not axes:
+        return default
+    letters = []
+    for a in axes:
+        # the body's rest orientation may not be world-aligned: then fall back
+        v = C @ a
+        k = int(np.argmax(np.abs(v)))
+        if abs(abs(v[k]) - 1.0) > 1e-6:
+            return default
+        letters.append("XYZ"[k])
+    if len(set(letters)) != len(letters):
+        return default
+    for c in default:
+        if c not in letters:
+            letters.append(c)
+    return "".join(letters[:3])
+
+
+def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY") -> Motion:
+    """The character's trajectory as a rotational :class:`Motion` (metres, Z-up).
+
+    ``meta["rotation_orders"]`` holds the per-joint channel order chosen for a
+    file written with ``up`` as its up axis.
+    """
+    character = traj.character
+    model = character.model
+    skel, body_of, rest = character_skeleton(character)
+    J = skel.num_joints
+    rest_q = wxyz_to_xyzw(rest.xquat)
+    F = traj.num_frames
+    data = mujoco.MjData(model)
+    D = np.zeros((F, J, 4))
+    D[..., 3] = 1.0
+    root_pos = np.zeros((F, 1, 3))
+    bodies = np.array([b for b in body_of if b >= 0])
+    cols = np.array([i for i, b in enumerate(body_of) if b >= 0])
+    inv_rest = quat_conj(rest_q[bodies])
+    for t in range(F):
+        data.qpos[:] = traj.qpos[t]
+        mujoco.mj_kinematics(model, data)
+        D[t, cols] = quat_mul(wxyz_to_xyzw(data.xquat[bodies]), inv_rest)
+        root_pos[t, 0] = data.xpos[body_of[0]]
+    local = D.copy()
+    for j in range(J):
+        p = int(skel.parents[j])
+        if p >= 0:
+            local[:, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
+    local[:, skel.end_site] = np.array([0.0, 0.0, 0.0, 1.0])
+    orders = {
+        skel.names[j]: _channel_order(model, body_of[j], up, rotation_order)
+        for j in range(J)
+        if body_of[j] >= 0
+    }
+    return Motion(
+        skeleton=skel,
+        fps=traj.fps,
+        rotations=local,
+        translations=root_pos,
+        translated=np.array([0]),
+        source=str(traj.source),
+        units="m",
+        unit_scale=1.0,
+        file_up=up,
+        meta={"rotation_orders": orders, "character": str(character.name)},
+    )
+
+
+def write_character_bvh(
+    traj: Trajectory,
+    path: str | os.PathLike,
+    up: str = "Y",
+    units: str | float = "m",
+    rotation_order: str = "ZXY",
+    precision: int = 6,
+) -> Path:
+    """Write the character's motion as BVH (atomically); see the module docstring."""
+    from .bvh import write_bvh
+
+    motion = character_motion(traj, up=up, rotation_order=rotation_order)
+    write_bvh(
+        motion,
+        path,
+        rotation_order=motion.meta["rotation_orders"],
+        precision=precision,
+        units=units,
+        up=up,
+    )
+    return Path(path)

@@ -1,0 +1,403 @@
+"""A character: an MJCF model plus what the retargeter needs to know about it.
+
+:func:`load_character` loads the default humanoid, a bundled character by name
+(``"humanoid"``, ``"robot"``) or any MJCF file with its mapping file, and
+computes, in the rest pose standing on the floor (z = 0):
+
+* the world position of every mapped canonical joint (:meth:`Character.rest_positions`);
+* segment lengths ``|x_child - x_parent|`` between each mapped canonical joint
+  and its nearest mapped canonical ancestor (:func:`physmocap.canonical.canonical_parent`);
+* the hip height (mean height of the two hip joint centres), the standing
+  height (top of the highest geom), the total mass;
+* joint ranges (radians / metres) and speed limits (rad/s / m/s) of every
+  hinge and slide joint.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..canonical import REQUIRED_JOINTS, canonical_parent
+from ..errors import InputError, MappingError
+from ..resources import mjcf_dir
+from ..rotations import Rotation, quat_mul, wxyz_to_xyzw, xyzw_to_wxyz
+from . import rom
+from .geometry import character_geoms, highest_z, lowest_z
+from .mapping import AXES, Mapping, TrackedFrame, implicit_mapping, read_mapping
+from .velocity import FALLBACK_DEG_S, human_velocity_limit
+
+__all__ = ["Character", "TrackedFrame", "load_character", "bundled_characters", "DEFAULT_CHARACTER"]
+
+#: Name of the default character.
+DEFAULT_CHARACTER = "humanoid"
+
+_LIMITED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+
+
+@dataclass
+class Character:
+    """An MJCF character ready for retargeting.  Units: metres, radians, kg, seconds.
+
+    Attributes:
+        name: character name (mapping ``[character] name`` or the MJCF stem).
+        mjcf_path: the MJCF file loaded.
+        map_path: the mapping file used, or None for an implicit mapping.
+        model: the compiled model; its ``jnt_range`` / ``jnt_limited`` agree
+            with :attr:`joint_limits` (mapping overrides are applied to it).
+        root_joint: name of the free joint of the floating base.
+        tracked: canonical joint -> :class:`TrackedFrame` (site or body); mapped joints only.
+        contacts: ``"left"`` / ``"right"`` -> foot contact site names, heel to toe.
+        rest_qpos: ``(nq,)`` rest pose: standing on z = 0, facing +X, Z up.
+        joint_limits: hinge/slide joint -> ``(lo, hi)`` rad (m for slides);
+            ``(-inf, inf)`` for a joint without a range.
+        velocity_limits: hinge/slide joint -> speed limit, rad/s (m/s), positive.
+        segment_lengths: ``(parent canonical, child canonical)`` -> metres in the
+            rest pose, parent = nearest mapped canonical ancestor.
+        hip_height: mean height of the hip joint centres in the rest pose, m.
+        height: standing height (top of the highest geom in the rest pose), m.
+        total_mass: kg.
+    """
+
+    name: str
+    mjcf_path: Path
+    map_path: Path | None
+    model: mujoco.MjModel
+    root_joint: str
+    tracked: dict[str, TrackedFrame]
+    contacts: dict[str, tuple[str, ...]]
+    rest_qpos: np.ndarray
+    joint_limits: dict[str, tuple[float, float]]
+    velocity_limits: dict[str, float]
+    segment_lengths: dict[tuple[str, str], float]
+    hip_height: float
+    height: float
+    total_mass: float
+    _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    def rest_positions(self) -> dict[str, np.ndarray]:
+        """Canonical joint -> world position (m) in the rest pose (copies)."""
+        return {k: v.copy() for k, v in self._rest.items()}
+
+    def frame_id(self, canonical: str) -> int:
+        """MuJoCo id of the site or body tracked for ``canonical``."""
+        tf = self.tracked[canonical]
+        obj = mujoco.mjtObj.mjOBJ_SITE if tf.kind == "site" else mujoco.mjtObj.mjOBJ_BODY
+        return mujoco.mj_name2id(self.model, obj, tf.name)
+
+    def hinge_names(self) -> list[str]:
+        """Names of the hinge and slide joints, in model order."""
+        return list(self.joint_limits)
+
+
+def bundled_characters() -> dict[str, Path]:
+    """Bundled characters: name -> MJCF path (``assets/mjcf/<name>.xml`` with a mapping file)."""
+    d = mjcf_dir()
+    return {p.name[: -len(".map.toml")]: d / (p.name[: -len(".map.toml")] + ".xml")
+            for p in sorted(d.glob("*.map.toml"))
+            if (d / (p.name[: -len(".map.toml")] + ".xml")).exists()}
+
+
+def _resolve(path: str | os.PathLike | None) -> Path:
+    if path is None:
+        return mjcf_dir() / f"{DEFAULT_CHARACTER}.xml"
+    s = os.fspath(path)
+    p = Path(s)
+    if not p.suffix and os.sep not in s and "/" not in s and not p.exists():
+        bundled = bundled_characters()
+        if s in bundled:
+            return bundled[s]
+        raise InputError(
+            f"no such character; bundled characters are {', '.join(bundled)}, or give an MJCF path",
+            path=s,
+        )
+    return p
+
+
+def _load_model(path: Path) -> mujoco.MjModel:
+    if not path.exists():
+        raise InputError("MJCF file not found", path=path)
+    if path.is_dir():
+        raise InputError("is a directory, expected an MJCF file", path=path)
+    try:
+        return mujoco.MjModel.from_xml_path(os.fspath(path))
+    except (ValueError, OSError) as exc:
+        msg = " ".join(str(exc).split())
+        raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
+
+
+def _find_map(mjcf: Path, map_path: str | os.PathLike | None) -> Path | None:
+    if map_path is not None:
+        return Path(map_path)
+    candidates = [mjcf.with_name(mjcf.stem + ".map.toml")]
+    if mjcf.stem == "scene":  # a scene that includes the bundled humanoid
+        candidates.append(mjcf.with_name("humanoid.map.toml"))
+    for c in candidates:
+        if c.exists():
+            return c
+    return None
+
+
+def _resolve_frames(mp: Mapping, model: mujoco.MjModel) -> dict[str, TrackedFrame]:
+    out = {}
+    for canon, tf in mp.joints.items():
+        site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, tf.name)
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, tf.name)
+        if tf.kind == "site" and site < 0:
+            raise mp.error(f"the model has no site {tf.name!r}", "joints", canon)
+        if tf.kind == "body" and body < 0:
+            raise mp.error(f"the model has no body {tf.name!r}", "joints", canon)
+        if tf.kind == "auto":
+            if site >= 0:
+                tf = TrackedFrame("site", tf.name)
+            elif body >= 0:
+                tf = TrackedFrame("body", tf.name)
+            else:
+                raise mp.error(f"the model has no site or body {tf.name!r}", "joints", canon)
+        if tf.kind == "body" and body == 0:
+            raise mp.error("the world body cannot be tracked", "joints", canon)
+        out[canon] = tf
+    return out
+
+
+def _joint_id(mp: Mapping, model: mujoco.MjModel, section: str, name: str) -> int:
+    j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+    if j < 0:
+        raise mp.error(f"the model has no joint {name!r}", section, name)
+    return j
+
+
+def _is_angular(model: mujoco.MjModel, j: int) -> bool:
+    return int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_HINGE)
+
+
+def _root_joint(model: mujoco.MjModel, where: Path) -> int:
+    free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
+    if len(free) != 1:
+        raise MappingError(
+            f"expected exactly one free joint (the floating base), found {len(free)}", path=where
+        )
+    return free[0]
+
+
+def _up_forward_rotation(up: str, forward: str) -> np.ndarray:
+    """Rotation (3x3) taking the model's ``up`` to +Z and its ``forward`` to +X."""
+    u = np.array(AXES[up])
+    f = np.array(AXES[forward])
+    src = np.stack([f, np.cross(u, f), u], axis=1)  # columns: forward, left, up
+    return src.T  # maps f -> X, left -> Y, u -> Z
+
+
+def load_character(
+    path: str | os.PathLike | None = None,
+    map_path: str | os.PathLike | None = None,
+    *,
+    range_policy: str | None = None,
+) -> Character:
+    """Load a character and compute its description.
+
+    Args:
+        path: ``None`` for the default humanoid, a bundled name (``"humanoid"``,
+            ``"robot"``), or an MJCF file.
+        map_path: mapping file; default ``<stem>.map.toml`` beside the MJCF.
+            A model without one maps its sites named like canonical joints.
+        range_policy: ``"default"`` or ``"strict"``: for joints in the
+            range-of-motion table (:mod:`physmocap.models.rom`), replace their
+            ranges with the table's under this policy.  Overrides the mapping's
+            ``range_policy``.
+
+    Raises:
+        InputError: the MJCF or the mapping file cannot be read.
+        MappingError: the mapping names a missing site/body/joint, leaves a
+            required canonical joint unmapped, or a joint lacks required limits.
+    """
+    mjcf = _resolve(path)
+    model = _load_model(mjcf)
+    mp_file = _find_map(mjcf, map_path)
+    if mp_file is not None:
+        mp = read_mapping(mp_file)
+    else:
+        mp = implicit_mapping(model)
+    where = mp_file if mp_file is not None else mjcf
+    tracked = _resolve_frames(mp, model)
+    missing = [j for j in REQUIRED_JOINTS if j not in tracked]
+    if missing:
+        hint = "[joints]" if mp_file is not None else "no mapping file found (give --map or write <stem>.map.toml);"
+        raise MappingError(
+            f"{hint} required canonical joint(s) not mapped: {', '.join(missing)}", path=where
+        )
+    for side, sites in mp.contacts.items():
+        for s in sites:
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0:
+                raise mp.error(f"the model has no site {s!r}", "contacts", side)
+
+    root = _root_joint(model, mjcf)
+
+    # -- joint ranges ----------------------------------------------------------
+    policy = range_policy or mp.range_policy
+    if policy is not None and policy not in rom.POLICIES:
+        raise MappingError(f"unknown range policy {policy!r}; expected one of {rom.POLICIES}", path=where)
+    hinge_ids = [j for j in range(model.njnt) if int(model.jnt_type[j]) in _LIMITED]
+    if policy is not None:
+        for j in hinge_ids:
+            try:
+                lo, hi = rom.joint_range_deg(model.joint(j).name, policy)
+            except KeyError:
+                continue
+            model.jnt_range[j] = (math.radians(lo), math.radians(hi))
+            model.jnt_limited[j] = 1
+    for jn, (lo, hi) in mp.joint_limits.items():
+        j = _joint_id(mp, model, "joint_limits", jn)
+        if int(model.jnt_type[j]) not in _LIMITED:
+            raise mp.error("only hinge and slide joints take [lo, hi] limits", "joint_limits", jn)
+        k = math.pi / 180.0 if _is_angular(model, j) else 1.0
+        model.jnt_range[j] = (lo * k, hi * k)
+        model.jnt_limited[j] = 1
+    required = mp.require_limits
+    if isinstance(required, tuple):
+        for jn in required:
+            j = _joint_id(mp, model, "character", jn)
+            if not model.jnt_limited[j]:
+                raise MappingError(
+                    f"joint {jn!r} has no range, but the mapping requires one "
+                    "(add range=\"lo hi\" in the MJCF or [joint_limits] in the mapping)",
+                    path=mjcf,
+                )
+    elif required:
+        for j in hinge_ids:
+            if not model.jnt_limited[j]:
+                raise MappingError(
+                    f"joint {model.joint(j).name!r} has no range, but the mapping "
+                    f"({where.name}) requires limits on every hinge "
+                    "(add range=\"lo hi\" in the MJCF or [joint_limits] in the mapping)",
+                    path=mjcf,
+                )
+    joint_limits: dict[str, tuple[float, float]] = {}
+    for j in hinge_ids:
+        name = model.joint(j).name
+        if model.jnt_limited[j]:
+            joint_limits[name] = (float(model.jnt_range[j][0]), float(model.jnt_range[j][1]))
+        else:
+            joint_limits[name] = (-math.inf, math.inf)
+
+    # -- speed limits ----------------------------------------------------------
+    for jn in mp.velocity_limits:
+        if jn != "default":
+            _joint_id(mp, model, "velocity_limits", jn)
+    default_speed = mp.velocity_limits.get("default", FALLBACK_DEG_S)
+    velocity_limits: dict[str, float] = {}
+    for j in hinge_ids:
+        name = model.joint(j).name
+        k = math.pi / 180.0 if _is_angular(model, j) else 1.0
+        if name in mp.velocity_limits:
+            v = mp.velocity_limits[name] * k
+        else:
+            human = human_velocity_limit(name) if _is_angular(model, j) else None
+            v = human if human is not None else default_speed * k
+        velocity_limits[name] = float(v)
+
+    # -- rest pose ---------------------------------------------------------------
+    qpos = _rest_qpos(mp, model, root, mjcf, where)
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    rest = _frame_positions(model, data, tracked)
+    # Put the pelvis above the origin and the lowest point on the floor.
+    adr = int(model.jnt_qposadr[root])
+    qpos[adr : adr + 2] -= rest["pelvis"][:2]
+    contact_sites = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s)
+                     for sites in mp.contacts.values() for s in sites]
+    floor = min(
+        [lowest_z(model, data, character_geoms(model, collision_only=True))]
+        + [float(data.site_xpos[s][2]) for s in contact_sites]
+    )
+    if not math.isfinite(floor):
+        floor = lowest_z(model, data)
+    if not math.isfinite(floor):
+        raise MappingError("the model has no geoms or contact sites to stand on", path=mjcf)
+    qpos[adr + 2] -= floor
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    rest = _frame_positions(model, data, tracked)
+
+    present = set(tracked)
+    segments = {}
+    for canon in tracked:
+        parent = canonical_parent(canon, present)
+        if parent is not None:
+            segments[(parent, canon)] = float(np.linalg.norm(rest[canon] - rest[parent]))
+    hips = [rest[h][2] for h in ("left_hip", "right_hip")]
+    height = highest_z(model, data)
+    total_mass = float(np.sum(model.body_mass))
+
+    qpos.setflags(write=False)
+    return Character(
+        name=mp.name or (mjcf.stem if mjcf.stem != "scene" else DEFAULT_CHARACTER),
+        mjcf_path=mjcf,
+        map_path=mp_file,
+        model=model,
+        root_joint=model.joint(root).name,
+        tracked=tracked,
+        contacts=dict(mp.contacts),
+        rest_qpos=qpos,
+        joint_limits=joint_limits,
+        velocity_limits=velocity_limits,
+        segment_lengths=segments,
+        hip_height=float(np.mean(hips)),
+        height=float(height),
+        total_mass=total_mass,
+        _rest=rest,
+    )
+
+
+def _rest_qpos(mp: Mapping, model: mujoco.MjModel, root: int, mjcf: Path, where: Path) -> np.ndarray:
+    qpos = model.qpos0.copy()
+    key_name = mp.rest_keyframe
+    if key_name is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "rest") >= 0:
+        key_name = "rest"
+    if key_name is not None:
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key_name)
+        if k < 0:
+            raise mp.error(f"the model has no keyframe {key_name!r}", "rest", "keyframe")
+        qpos = model.key_qpos[k].copy()
+    for jn, value in mp.rest_joints.items():
+        j = _joint_id(mp, model, "rest.joints", jn)
+        if int(model.jnt_type[j]) not in _LIMITED:
+            raise mp.error("only hinge and slide joints can be set in [rest.joints]", "rest.joints", jn)
+        qpos[model.jnt_qposadr[j]] = math.radians(value) if _is_angular(model, j) else value
+    # Stand the model up: its up axis to +Z, its forward axis to +X.
+    adr = int(model.jnt_qposadr[root])
+    R = _up_forward_rotation(mp.up, mp.forward)
+    q_fix = Rotation.from_matrix(R).as_quat()
+    q_root = wxyz_to_xyzw(qpos[adr + 3 : adr + 7])
+    q_root = q_root / np.linalg.norm(q_root)
+    qpos[adr + 3 : adr + 7] = xyzw_to_wxyz(quat_mul(q_fix, q_root))
+    qpos[adr : adr + 3] = R @ qpos[adr : adr + 3]
+    for j in range(model.njnt):
+        if int(model.jnt_type[j]) in _LIMITED and model.jnt_limited[j]:
+            a = int(model.jnt_qposadr[j])
+            lo, hi = model.jnt_range[j]
+            if not lo - 1e-9 <= qpos[a] <= hi + 1e-9:
+                raise MappingError(
+                    f"rest pose puts joint {model.joint(j).name!r} at {qpos[a]:.4g}, "
+                    f"outside its range [{lo:.4g}, {hi:.4g}]",
+                    path=where,
+                )
+    return qpos
+
+
+def _frame_positions(
+    model: mujoco.MjModel, data: mujoco.MjData, tracked: dict[str, TrackedFrame]
+) -> dict[str, np.ndarray]:
+    out = {}
+    for canon, tf in tracked.items():
+        if tf.kind == "site":
+            out[canon] = data.site_xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, tf.name)].copy()
+        else:
+            out[canon] = data.xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, tf.name)].copy()
+    return out

@@ -1,0 +1,429 @@
+"""Write BVH (Biovision Hierarchy) files.
+
+Two levels:
+
+* :func:`write_bvh` writes a rotational :class:`~physmocap.motion.Motion`.  By
+  default it restores what the source file had: its channel layout and rotation
+  orders (``motion.meta["bvh_channels"]``, recorded by the reader), its length
+  unit and its up axis, so reading a file and writing it back reproduces it to
+  the printed precision.  Options choose another rotation order, unit, up axis
+  or precision.
+* :func:`write_bvh_channels` writes a BVH from precomputed parts (names,
+  parents, offsets and channel values already in the file's units and axes),
+  for exporters that compute their own channels.
+
+The maths (the inverse of :mod:`physmocap.sources.bvh`): with ``M`` the signed
+axis permutation from the world (Z-up) to the file's up axis and ``s`` metres
+per file unit, offsets and translations are written as ``M t / s`` and a local
+rotation ``R`` as the intrinsic Euler angles, in degrees, of ``M R M^T``
+(for a quaternion: ``(M v, w)``).  Angles are made continuous from frame to
+frame with :func:`~physmocap.rotations.unwrap_euler` (no 360-degree jumps, and
+the branch of the decomposition that stays closest to the previous frame).
+
+Every number is printed with ``precision`` decimals after rounding (negative
+zero printed as ``0``), so the same motion and options give the same bytes.
+Files are written atomically (:func:`~physmocap.fileio.atomic_open`) and
+non-finite values are refused before anything is written.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import OptionError, OutputError, warn
+from ..fileio import atomic_open, check_writable
+from ..motion import Motion
+from ..rotations import quat_to_euler, unwrap_euler, up_axis_matrix
+from ..sources.bvh import CHANNEL_NAMES, axis_permutation, resolve_units
+
+__all__ = [
+    "write_bvh",
+    "write_bvh_channels",
+    "bvh_channel_layout",
+    "check_bvh_options",
+    "DEFAULT_ROTATION_ORDER",
+]
+
+#: Rotation order of joints whose layout is not known (MotionBuilder's default).
+DEFAULT_ROTATION_ORDER = "ZXY"
+
+#: Frames formatted per write call (bounds the size of the text buffer).
+_ROWS_PER_BLOCK = 2048
+
+
+def _check_order(order: str) -> str:
+    o = str(order).strip().upper()
+    if len(o) != 3 or sorted(o) != ["X", "Y", "Z"]:
+        raise OptionError(
+            f"rotation order must be a permutation of XYZ (e.g. ZXY, ZYX, XYZ), got {order!r}"
+        )
+    return o
+
+
+def _check_precision(precision: int) -> int:
+    if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or not 0 <= precision <= 15:
+        raise OptionError(f"precision must be a whole number of decimals from 0 to 15, got {precision!r}")
+    return int(precision)
+
+
+def check_bvh_options(
+    rotation_order: str | None = None,
+    precision: int = 6,
+    units: str | float | None = None,
+    up: str | None = None,
+) -> None:
+    """Raise :class:`~physmocap.errors.OptionError` for options :func:`write_bvh`
+    would refuse (so a command can fail before reading a long input)."""
+    if rotation_order is not None:
+        _check_order(rotation_order)
+    _check_precision(precision)
+    if units is not None:
+        resolve_units(units)
+    if up is not None and str(up).strip().upper() not in ("Y", "Z"):
+        raise OptionError(f"up axis must be 'Y' or 'Z', got {up!r}")
+
+
+def bvh_channel_layout(
+    motion: Motion, rotation_order: str | None = None
+) -> list[list[str]]:
+    """The channel list each joint is written with, before widening.
+
+    With ``rotation_order`` None, a joint keeps the channels the source file
+    gave it (``motion.meta["bvh_channels"]``); a joint the meta does not know
+    gets its position channels (if it is in ``motion.translated``) then three
+    rotation channels in :data:`DEFAULT_ROTATION_ORDER`.  With a
+    ``rotation_order``, every joint gets its position channels then three
+    rotation channels in that order.  End sites (leaves marked ``end_site``)
+    have none.  Position channels are only kept for joints that have animated
+    translations.
+    """
+    sk = motion.skeleton
+    known = motion.meta.get("bvh_channels") if isinstance(motion.meta, dict) else None
+    known = known if isinstance(known, dict) else {}
+    translated = set(int(k) for k in motion.translated)
+    has_children = np.zeros(sk.num_joints, dtype=bool)
+    has_children[sk.parents[sk.parents >= 0]] = True
+    layout: list[list[str]] = []
+    for j, name in enumerate(sk.names):
+        if sk.end_site[j] and not has_children[j]:
+            layout.append([])
+            continue
+        orig = known.get(name)
+        orig = [c for c in orig if c in CHANNEL_NAMES] if isinstance(orig, list) else None
+        if orig is not None:
+            pos = [c for c in orig if c.endswith("position")] if j in translated else []
+            if not pos and j in translated:
+                pos = ["Xposition", "Yposition", "Zposition"]
+        else:
+            pos = ["Xposition", "Yposition", "Zposition"] if j in translated else []
+        if rotation_order is not None:
+            rot = [f"{a}rotation" for a in _check_order(rotation_order)]
+            layout.append(pos + rot)
+        elif orig is not None:
+            kept = [c for c in orig if c.endswith("rotation") or c in pos]
+            kept += [c for c in pos if c not in kept]
+            layout.append(kept)
+        else:
+            layout.append(pos + [f"{a}rotation" for a in DEFAULT_ROTATION_ORDER])
+    return layout
+
+
+def write_bvh(
+    motion: Motion,
+    path: str | os.PathLike,
+    rotation_order: str | None = None,
+    precision: int = 6,
+    units: str | float | None = None,
+    up: str | None = None,
+) -> Path:
+    """Write a rotational motion as a BVH file.
+
+    Args:
+        motion: A rotational motion (positional motions have no joint rotations
+            to write; retarget them first).
+        path: Output ``.bvh`` path, written atomically.
+        rotation_order: Intrinsic Euler order for every joint (``"ZXY"``...);
+            None keeps each joint's order from the source file
+            (``motion.meta["bvh_rotation_orders"]``), else ``ZXY``.
+        precision: Decimals printed for every number (0-15).
+        units: Length unit of the file (name or metres per unit); None writes
+            the motion's own ``units``/``unit_scale`` (the source file's).
+        up: ``"Y"`` or ``"Z"``; None writes ``motion.file_up`` for a motion read
+            from a BVH file and ``"Y"`` (the BVH convention) otherwise.
+
+    A joint whose source layout cannot hold its motion is widened, with a
+    warning: missing rotation axes are added when the motion rotates about
+    them, missing position components when its translation leaves the offset
+    on them (e.g. after changing the up axis).
+
+    Raises:
+        OptionError: Bad options or a motion without rotations.
+        OutputError: Non-finite values, or the path cannot be written.
+    """
+    path = Path(path)
+    precision = _check_precision(precision)
+    if rotation_order is not None:
+        rotation_order = _check_order(rotation_order)
+    if not motion.is_rotational:
+        raise OptionError(
+            "a BVH file needs joint rotations but this motion has positions only "
+            "(retarget it onto a character first)",
+            path=path,
+        )
+    if units is None:
+        unit_scale = float(motion.unit_scale)
+        if not (np.isfinite(unit_scale) and unit_scale > 0):
+            raise OptionError(f"the motion's unit_scale {motion.unit_scale!r} is not a positive number", path=path)
+    else:
+        _, unit_scale = resolve_units(units, path)
+    if up is None:
+        is_bvh = isinstance(motion.meta, dict) and motion.meta.get("format") == "bvh"
+        up = motion.file_up if is_bvh and str(motion.file_up).upper() in ("Y", "Z") else "Y"
+    up = str(up).strip().upper()
+    if up not in ("Y", "Z"):
+        raise OptionError(f"up axis must be 'Y' or 'Z', got {up!r}", path=path)
+    check_writable(path)
+
+    sk = motion.skeleton
+    assert motion.rotations is not None and motion.translations is not None
+    _check_finite_motion(motion, path)
+    perm, sign = axis_permutation(up_axis_matrix("Z", up))
+    F, J = motion.num_frames, sk.num_joints
+    offsets = sk.offsets[:, perm] * sign / unit_scale
+    translated = {int(k): i for i, k in enumerate(motion.translated)}
+    tol = 0.5 * 10.0 ** (-precision)
+
+    layout = bvh_channel_layout(motion, rotation_order)
+    columns: list[np.ndarray] = []
+    widened: list[str] = []
+
+    # Euler angles for every rotating joint, grouped by (padded) order.
+    rot_orders: dict[int, str] = {}
+    for j, chans in enumerate(layout):
+        axes = [c[0] for c in chans if c.endswith("rotation")]
+        if axes:
+            rot_orders[j] = "".join(axes) + "".join(a for a in "XYZ" if a not in axes)
+    euler: dict[int, np.ndarray] = {}
+    by_order: dict[str, list[int]] = {}
+    for j, order in rot_orders.items():
+        by_order.setdefault(order, []).append(j)
+    for order, js in by_order.items():
+        q = motion.rotations[:, js]
+        q = np.concatenate([q[..., :3][..., perm] * sign, q[..., 3:]], axis=-1)
+        e = unwrap_euler(quat_to_euler(q, order, degrees=True), order, degrees=True)
+        for k, j in enumerate(js):
+            euler[j] = e[:, k]
+
+    # Joints whose layout has no rotation channels but which do rotate.
+    for j in range(J):
+        if j in rot_orders or (not layout[j] and sk.end_site[j]):
+            continue
+        q = motion.rotations[:, j]
+        angle = 2.0 * np.degrees(np.arccos(np.clip(np.abs(q[:, 3]), 0.0, 1.0))) if F else np.zeros(0)
+        if angle.size and angle.max() > tol:
+            order = rotation_order or DEFAULT_ROTATION_ORDER
+            layout[j] = layout[j] + [f"{a}rotation" for a in order]
+            rot_orders[j] = order
+            qj = np.concatenate([q[:, :3][:, perm] * sign, q[:, 3:]], axis=-1)
+            euler[j] = unwrap_euler(quat_to_euler(qj, order, degrees=True), order, degrees=True)
+            widened.append(f"{sk.names[j]} (rotation)")
+
+    for j, chans in enumerate(layout):
+        if not chans:
+            continue
+        # Rotation axes the layout lacks must stay at zero.
+        if j in rot_orders:
+            axes = [c[0] for c in chans if c.endswith("rotation")]
+            if len(axes) < 3 and F:
+                missing = np.abs(euler[j][:, len(axes):]).max() if F else 0.0
+                if missing > tol:
+                    chans = chans + [f"{a}rotation" for a in rot_orders[j][len(axes):]]
+                    widened.append(f"{sk.names[j]} (rotation)")
+        # Position components the layout lacks must stay at the offset.
+        if j in translated:
+            t = motion.translations[:, translated[j]][:, perm] * sign / unit_scale
+            present = {c[0] for c in chans if c.endswith("position")}
+            for a, axis in enumerate("XYZ"):
+                if axis not in present and F and np.abs(t[:, a] - offsets[j, a]).max() > tol:
+                    chans = chans + [f"{axis}position"]
+                    widened.append(f"{sk.names[j]} ({axis}position)")
+        else:
+            t = None
+        layout[j] = chans
+        for c in chans:
+            axis = "XYZ".index(c[0])
+            if c.endswith("position"):
+                columns.append(t[:, axis] if t is not None else np.full(F, offsets[j, axis]))
+            else:
+                columns.append(euler[j][:, rot_orders[j].index(c[0])])
+    if widened:
+        warn(
+            f"{path}: the source channel layout cannot hold this motion for "
+            + ", ".join(widened)
+            + "; added those channels"
+        )
+    data = np.stack(columns, axis=1) if columns else np.zeros((F, 0))
+    return write_bvh_channels(
+        path,
+        names=sk.names,
+        parents=sk.parents,
+        offsets=offsets,
+        end_site=sk.end_site,
+        channels=layout,
+        data=data,
+        frame_time=1.0 / motion.fps,
+        precision=precision,
+    )
+
+
+def _check_finite_motion(motion: Motion, path: Path) -> None:
+    sk = motion.skeleton
+    if not np.all(np.isfinite(sk.offsets)):
+        j = int(np.flatnonzero(~np.isfinite(sk.offsets).all(axis=1))[0])
+        raise OutputError(f"offset of joint {sk.names[j]!r} is not finite; refusing to write it", path=path)
+    for what, arr, joints in (
+        ("rotation", motion.rotations, np.arange(sk.num_joints)),
+        ("translation", motion.translations, motion.translated),
+    ):
+        assert arr is not None
+        bad = ~np.isfinite(arr).all(axis=-1)
+        if bad.any():
+            f, k = (int(v) for v in np.argwhere(bad)[0])
+            raise OutputError(
+                f"{what} of joint {sk.names[int(joints[k])]!r} is not finite; refusing to write it",
+                path=path,
+                frame=f,
+            )
+    if motion.rotations is not None and motion.rotations.size:
+        norm = np.linalg.norm(motion.rotations, axis=-1)
+        if norm.min() < 1e-6:
+            f, j = (int(v) for v in np.argwhere(norm < 1e-6)[0])
+            raise OutputError(
+                f"rotation of joint {sk.names[j]!r} is a zero quaternion; refusing to write it",
+                path=path,
+                frame=f,
+            )
+
+
+def _fmt(x: float, precision: int) -> str:
+    v = round(float(x), precision) + 0.0
+    return f"{v:.{precision}f}"
+
+
+def write_bvh_channels(
+    path: str | os.PathLike,
+    names: Sequence[str],
+    parents: Sequence[int] | np.ndarray,
+    offsets: np.ndarray,
+    end_site: Sequence[bool] | np.ndarray,
+    channels: Sequence[Sequence[str]],
+    data: np.ndarray,
+    frame_time: float,
+    precision: int = 6,
+) -> Path:
+    """Write a BVH file from precomputed parts (nothing is converted).
+
+    Args:
+        path: Output path (written atomically).
+        names: ``J`` joint names (no whitespace-only names, no braces).
+        parents: ``(J,)`` parent index, ``-1`` for roots, ``parents[j] < j``.
+        offsets: ``(J, 3)`` offsets in the file's units and axes.
+        end_site: ``(J,)`` True for end sites: leaves written as ``End Site``
+            (they must have no channels).  Other leaves are written as joints.
+        channels: Per joint, its channel names (from
+            :data:`~physmocap.sources.bvh.CHANNEL_NAMES`, each at most once),
+            in the order they are written.
+        data: ``(F, C)`` channel values, ``C`` = total number of channels,
+            columns grouped by joint in *joint index* order and within a joint
+            in ``channels`` order; angles in degrees.  The hierarchy is written
+            depth-first, and the columns are reordered to match it.
+        frame_time: Seconds per frame.
+        precision: Decimals printed for every number.
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    precision = _check_precision(precision)
+    names = [str(n) for n in names]
+    J = len(names)
+    parents = np.asarray(parents, dtype=np.int64).reshape(-1)
+    offsets = np.asarray(offsets, dtype=float).reshape(-1, 3)
+    end_site = np.asarray(end_site, dtype=bool).reshape(-1)
+    data = np.asarray(data, dtype=float)
+    if J == 0:
+        raise OptionError("cannot write a BVH file without joints", path=path)
+    if parents.shape != (J,) or offsets.shape != (J, 3) or end_site.shape != (J,) or len(channels) != J:
+        raise ValueError("names, parents, offsets, end_site and channels must all have one entry per joint")
+    if np.any(parents >= np.arange(J)) or np.any(parents < -1):
+        raise ValueError("parents must satisfy -1 <= parents[j] < j")
+    for n in names:
+        if not n.strip() or any(ch in n for ch in "{}\r\n"):
+            raise OutputError(f"joint name {n!r} cannot be written to a BVH file", path=path)
+    chans = [list(c) for c in channels]
+    children: list[list[int]] = [[] for _ in range(J)]
+    for j in range(J):
+        if parents[j] >= 0:
+            children[int(parents[j])].append(j)
+    start = np.zeros(J + 1, dtype=np.int64)
+    for j, c in enumerate(chans):
+        bad = [x for x in c if x not in CHANNEL_NAMES]
+        if bad or len(set(c)) != len(c):
+            raise ValueError(f"bad channel list for joint {names[j]!r}: {c}")
+        if end_site[j] and not children[j] and c:
+            raise ValueError(f"end site {names[j]!r} cannot have channels")
+        start[j + 1] = start[j] + len(c)
+    C = int(start[-1])
+    if data.ndim != 2 or data.shape[1] != C:
+        raise ValueError(f"data must be (F, {C}) for these channels, got {data.shape}")
+    if not (np.isfinite(frame_time) and frame_time > 0):
+        raise OutputError(f"frame time {frame_time!r} is not a positive number of seconds", path=path)
+    if not np.all(np.isfinite(offsets)):
+        j = int(np.flatnonzero(~np.isfinite(offsets).all(axis=1))[0])
+        raise OutputError(f"offset of joint {names[j]!r} is not finite; refusing to write it", path=path)
+    if not np.all(np.isfinite(data)):
+        f, c = (int(v) for v in np.argwhere(~np.isfinite(data))[0])
+        j = int(np.searchsorted(start, c, side="right") - 1)
+        raise OutputError(
+            f"{names[j]} {chans[j][c - start[j]]} is not finite; refusing to write it", path=path, frame=f
+        )
+
+    # Hierarchy text, depth-first, and the column order it implies.
+    lines = ["HIERARCHY"]
+    order: list[int] = []
+    stack: list[tuple[int, int, bool]] = [(r, 0, False) for r in reversed(np.flatnonzero(parents < 0).tolist())]
+    while stack:
+        j, depth, closing = stack.pop()
+        ind = "\t" * depth
+        if closing:
+            lines.append(f"{ind}}}")
+            continue
+        off = " ".join(_fmt(v, precision) for v in offsets[j])
+        if end_site[j] and not children[j]:
+            lines += [f"{ind}End Site", f"{ind}{{", f"{ind}\tOFFSET {off}", f"{ind}}}"]
+            continue
+        kind = "ROOT" if parents[j] < 0 else "JOINT"
+        lines += [f"{ind}{kind} {names[j]}", f"{ind}{{", f"{ind}\tOFFSET {off}"]
+        lines.append(f"{ind}\tCHANNELS {len(chans[j])}" + "".join(f" {c}" for c in chans[j]))
+        order.append(j)
+        stack.append((j, depth, True))
+        for c in reversed(children[j]):
+            stack.append((c, depth + 1, False))
+    cols = np.concatenate([np.arange(start[j], start[j + 1]) for j in order]) if order else np.zeros(0, int)
+    F = data.shape[0]
+    lines += ["MOTION", f"Frames: {F}", f"Frame Time: {frame_time:.10g}"]
+
+    row_fmt = (" ".join([f"%.{precision}f"] * C) + "\n") if C else "\n"
+    with atomic_open(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+        for s in range(0, F, _ROWS_PER_BLOCK):
+            block = np.round(data[s : s + _ROWS_PER_BLOCK][:, cols], precision) + 0.0
+            if C:
+                fh.write((row_fmt * block.shape[0]) % tuple(block.ravel().tolist()))
+            else:
+                fh.write(row_fmt * block.shape[0])
+    return path

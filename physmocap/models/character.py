@@ -135,8 +135,10 @@ def _find_map(mjcf: Path, map_path: str | os.PathLike | None) -> Path | None:
     if map_path is not None:
         return Path(map_path)
     candidates = [mjcf.with_name(mjcf.stem + ".map.toml")]
-    if mjcf.stem == "scene":  # a scene that includes the bundled humanoid
-        candidates.append(mjcf.with_name("humanoid.map.toml"))
+    if mjcf.stem == "scene":  # the scene that includes the default humanoid
+        candidates.append(mjcf.with_name(f"{DEFAULT_CHARACTER}.map.toml"))
+    elif mjcf.stem.startswith("scene_"):  # scene_<name>.xml includes <name>.xml
+        candidates.append(mjcf.with_name(mjcf.stem[len("scene_"):] + ".map.toml"))
     for c in candidates:
         if c.exists():
             return c

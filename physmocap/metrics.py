@@ -62,7 +62,8 @@ def velocity_violations(
     model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float], tol: float = 1e-6
 ) -> dict:
     """Frame-to-frame joint speeds against velocity limits (rad/s)."""
-    names = [n for n in limits if model.joint(n).type in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE)]
+    kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    names = [n for n in limits if int(model.jnt_type[model.joint(n).id]) in kinds]
     if qpos.shape[0] < 2 or not names:
         return {"count": 0, "peak_speed": 0.0, "peak_ratio": 0.0}
     adr = np.array([model.joint(n).qposadr[0] for n in names])

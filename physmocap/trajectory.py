@@ -24,7 +24,7 @@ def qpos_column_names(model: mujoco.MjModel) -> list[str]:
     names: list[str] = []
     for j in range(model.njnt):
         name = model.joint(j).name or f"joint{j}"
-        t = model.jnt_type[j]
+        t = int(model.jnt_type[j])
         if t == mujoco.mjtJoint.mjJNT_FREE:
             names += [f"{name}_{s}" for s in ("x", "y", "z", "qw", "qx", "qy", "qz")]
         elif t == mujoco.mjtJoint.mjJNT_BALL:

@@ -83,7 +83,7 @@ def character_skeleton(character) -> tuple[Skeleton, list[int], mujoco.MjData]:
         body_of.append(b)
         # hinge anchors away from the body origin would break the BVH's pivots
         for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
-            if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE and np.linalg.norm(model.jnt_pos[j]) > 1e-6:
+            if int(model.jnt_type[j]) != int(mujoco.mjtJoint.mjJNT_FREE) and np.linalg.norm(model.jnt_pos[j]) > 1e-6:
                 warn(f"joint {model.joint(j).name!r} does not pivot at its body origin; the BVH pivots there")
     # end sites for leaves
     leaves = [b for b in bodies if not any(parents[index[c]] == index[b] for c in bodies if c != b)]
@@ -106,7 +106,7 @@ def _channel_order(model: mujoco.MjModel, body: int, up: str, default: str) -> s
     C = up_axis_matrix("Z", up)
     axes = []
     for j in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
-        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
+        if int(model.jnt_type[j]) != int(mujoco.mjtJoint.mjJNT_HINGE):
             return default
         # hinge axis in world at rest (body frames are world-aligned for the default humanoid)
         axes.append(model.jnt_axis[j])

@@ -55,7 +55,7 @@ class FrameStepLimit(mink.Limit):
         qadr, dadr, vmax = [], [], []
         for name, v in velocities.items():
             jid = model.joint(name).id
-            if model.jnt_type[jid] not in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            if int(model.jnt_type[jid]) not in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
                 continue
             qadr.append(int(model.jnt_qposadr[jid]))
             dadr.append(int(model.jnt_dofadr[jid]))
@@ -122,33 +122,58 @@ def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
     return np.zeros((0, 4))
 
 
+class GeomCandidates:
+    """Stacked lowest-point candidates of a set of geoms, for vectorised queries."""
+
+    def __init__(self, model: mujoco.MjModel, geoms: Sequence[int]) -> None:
+        rows, owner = [], []
+        self.geoms = np.array(list(geoms), dtype=int)
+        for k, gid in enumerate(self.geoms):
+            cand = _geom_local_candidates(model, int(gid))
+            if len(cand) == 0:  # planes and the like have no lowest point
+                cand = np.array([[0.0, 0.0, 0.0, -np.inf]])
+            rows.append(cand)
+            owner.append(np.full(len(cand), k))
+        self.local = np.vstack(rows) if rows else np.zeros((0, 4))
+        self.owner = np.concatenate(owner) if owner else np.zeros(0, dtype=int)
+        self.gid = self.geoms[self.owner] if len(self.owner) else np.zeros(0, dtype=int)
+        self.starts = np.flatnonzero(np.r_[True, np.diff(self.owner) != 0]) if len(self.owner) else np.zeros(0, dtype=int)
+
+    def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
+        n = len(self.geoms)
+        if n == 0:
+            return np.zeros(0), np.zeros((0, 3))
+        R = data.geom_xmat[self.gid].reshape(-1, 3, 3)
+        pts = data.geom_xpos[self.gid] + np.einsum("kij,kj->ki", R, self.local[:, :3])
+        z = pts[:, 2] - self.local[:, 3]
+        z_low = np.minimum.reduceat(z, self.starts)
+        # index of the minimum within each geom's block
+        is_min = z == z_low[self.owner]
+        first = np.full(n, -1)
+        idx = np.flatnonzero(is_min)
+        first[self.owner[idx[::-1]]] = idx[::-1]
+        return z_low, pts[first]
+
+
 def geom_lowest_points(
     model: mujoco.MjModel, data: mujoco.MjData, geoms: Sequence[int]
 ) -> tuple[np.ndarray, np.ndarray]:
     """World height of each geom's lowest point and the world point to differentiate.
 
     Returns ``(z_low (n,), anchor (n, 3))`` where ``z_low`` is the lowest height
-    of the geom surface and ``anchor`` the candidate point (centre of the
-    lowest cap for capsules) whose vertical velocity equals that of the
-    lowest point.
+    of the geom surface (``+inf`` for planes) and ``anchor`` the candidate point
+    (centre of the lowest cap for capsules) whose vertical velocity equals that
+    of the lowest point.
     """
-    z_low = np.empty(len(geoms))
-    anchor = np.empty((len(geoms), 3))
-    for k, gid in enumerate(geoms):
-        cand = _GEOM_CACHE.get((id(model), gid))
-        if cand is None:
-            cand = _geom_local_candidates(model, gid)
-            _GEOM_CACHE[(id(model), gid)] = cand
-        R = data.geom_xmat[gid].reshape(3, 3)
-        pts = data.geom_xpos[gid] + cand[:, :3] @ R.T
-        z = pts[:, 2] - cand[:, 3]
-        i = int(np.argmin(z))
-        z_low[k] = z[i]
-        anchor[k] = pts[i]
-    return z_low, anchor
+    key = (id(model), tuple(int(g) for g in geoms))
+    cand = _CANDIDATES.get(key)
+    if cand is None:
+        cand = _CANDIDATES[key] = GeomCandidates(model, geoms)
+    return cand.lowest(data)
 
 
-_GEOM_CACHE: dict[tuple[int, int], np.ndarray] = {}
+_CANDIDATES: dict[tuple, GeomCandidates] = {}
 
 
 class FloorLimit(mink.Limit):
@@ -190,10 +215,11 @@ class FloorLimit(mink.Limit):
         self.activation = float(activation)
         self.enabled = True
         self._jacp = np.zeros((3, model.nv))
+        self._cand = GeomCandidates(model, self.geoms)
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points."""
-        z_g, a_g = geom_lowest_points(self.model, data, self.geoms)
+        z_g, a_g = self._cand.lowest(data)
         z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
         a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
         body = np.concatenate([self.model.geom_bodyid[self.geoms], self.model.site_bodyid[self.sites]])

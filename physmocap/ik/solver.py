@@ -75,9 +75,9 @@ class SolverOptions:
         solver: qpsolvers backend name.
     """
 
-    max_iterations: int = 6
+    max_iterations: int = 3
     first_frame_iterations: int = 150
-    tolerance: float = 1e-4
+    tolerance: float = 1e-3
     damping: float = 1e-4
     task_lm_damping: float = 0.0
     posture_cost: float = 0.02
@@ -129,6 +129,7 @@ class FrameSolver:
             )
             self.tasks.append(task)
             self.costs.append((pc, oc))
+        self._task_on = [True] * len(self.tasks)
         self.posture = mink.PostureTask(model, cost=opt.posture_cost)
         self.posture.set_target(np.array(character.rest_qpos, dtype=float))
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
@@ -150,17 +151,18 @@ class FrameSolver:
     # -- targets ----------------------------------------------------------------
     def set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
+        wxyz = xyzw_to_wxyz(orientations)
         for k, task in enumerate(self.tasks):
-            pc, oc = self.costs[k]
-            if valid[k]:
-                wxyz_xyz = np.concatenate([xyzw_to_wxyz(orientations[k]), positions[k]])
-                task.set_target(mink.SE3(wxyz_xyz=wxyz_xyz))
-                task.set_position_cost(pc)
-                task.set_orientation_cost(oc)
+            on = bool(valid[k])
+            if on:
+                task.set_target(mink.SE3(wxyz_xyz=np.concatenate([wxyz[k], positions[k]])))
             else:
                 task.set_target_from_configuration(self.configuration)
-                task.set_position_cost(0.0)
-                task.set_orientation_cost(0.0)
+            if on != self._task_on[k]:
+                pc, oc = self.costs[k] if on else (0.0, 0.0)
+                task.set_position_cost(pc)
+                task.set_orientation_cost(oc)
+                self._task_on[k] = on
 
     def reset(self, q: np.ndarray | None = None) -> None:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""

@@ -131,8 +131,8 @@ def _channel_order(model: mujoco.MjModel, body: int, up: str, default: str) -> s
 def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY") -> Motion:
     """The character's trajectory as a rotational :class:`Motion` (metres, Z-up).
 
-    ``meta["rotation_orders"]`` holds the per-joint channel order chosen for a
-    file written with ``up`` as its up axis.
+    ``meta["bvh_channels"]`` holds the per-joint channel list chosen for a
+    file written with ``up`` as its up axis (read by :func:`~physmocap.export.bvh.write_bvh`).
     """
     character = traj.character
     model = character.model
@@ -158,11 +158,12 @@ def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY
         if p >= 0:
             local[:, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
     local[:, skel.end_site] = np.array([0.0, 0.0, 0.0, 1.0])
-    orders = {
-        skel.names[j]: _channel_order(model, body_of[j], up, rotation_order)
-        for j in range(J)
-        if body_of[j] >= 0
-    }
+    channels = {}
+    for j in range(J):
+        if body_of[j] < 0:
+            continue
+        rot = [f"{a}rotation" for a in _channel_order(model, body_of[j], up, rotation_order)]
+        channels[skel.names[j]] = (["Xposition", "Yposition", "Zposition"] if j == 0 else []) + rot
     return Motion(
         skeleton=skel,
         fps=traj.fps,
@@ -173,7 +174,7 @@ def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY
         units="m",
         unit_scale=1.0,
         file_up=up,
-        meta={"rotation_orders": orders, "character": str(character.name)},
+        meta={"bvh_channels": channels, "character": str(character.name)},
     )
 
 
@@ -192,7 +193,7 @@ def write_character_bvh(
     write_bvh(
         motion,
         path,
-        rotation_order=motion.meta["rotation_orders"],
+        rotation_order=None,
         precision=precision,
         units=units,
         up=up,

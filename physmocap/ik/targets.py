@@ -66,6 +66,20 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float]] = {
 
 ORIENTED = ("pelvis", "chest", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
 RIGID_PARENTS = ("pelvis", "chest", "head")
+#: Joints placed rigidly with a torso segment (not along the actor's segment direction).
+RIGID_SEGMENT = {
+    "spine": "pelvis",
+    "left_hip": "pelvis",
+    "right_hip": "pelvis",
+    "neck": "chest",
+    "left_clavicle": "chest",
+    "right_clavicle": "chest",
+    "left_shoulder": "chest",
+    "right_shoulder": "chest",
+    "head_end": "head",
+}
+#: A character without a chest carries the upper torso on its spine (or pelvis).
+TORSO_BELOW = {"chest": ("spine", "pelvis")}
 
 
 def weight_of(name: str) -> tuple[float, float]:
@@ -183,6 +197,30 @@ def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
     return fwd / n
 
 
+def _frame_body(character, name: str) -> int:
+    tf = character.tracked[name]
+    m = character.model
+    return int(m.site(tf.name).bodyid[0]) if tf.kind == "site" else int(m.body(tf.name).id)
+
+
+def _has_dofs_between(character, child: str, parent: str | None) -> bool:
+    """True if some joint moves ``child``'s frame relative to ``parent``'s frame."""
+    if parent is None:
+        return True
+    m = character.model
+    b, top = _frame_body(character, child), _frame_body(character, parent)
+    ancestors = set()
+    a = top
+    while a > 0:
+        ancestors.add(a)
+        a = int(m.body_parentid[a])
+    while b > 0 and b not in ancestors:
+        if m.body_jntnum[b] > 0:
+            return True
+        b = int(m.body_parentid[b])
+    return False
+
+
 def _first_child(name: str, present: set[str]) -> str | None:
     for c in CANONICAL_NAMES:
         if c in present and canonical_parent(c, present) == name:
@@ -262,9 +300,11 @@ def build_targets(
         f_a = _facing(actor_pts["left_hip"], actor_pts["right_hip"])
         f_c = _facing(char_pts["left_hip"], char_pts["right_hip"])
         yaw = _yaw_between(f_c, f_a)
+    # which character sites can turn relative to their canonical parent's site
+    movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
     for c in opt.oriented:
-        if c not in pset:
-            continue
+        if c not in pset or not movable.get(c, True):
+            continue  # e.g. a wrist site on the forearm body of a robot without wrists
         i = col[c]
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
@@ -292,6 +332,24 @@ def build_targets(
         flip = np.cumsum(d < 0) % 2 == 1
         Q[1:, i][flip] *= -1.0
 
+    # --- world rotation of each torso segment from its rest pose, for rigid placement:
+    # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
+    # Q(t) R_c0^-1 where an orientation target exists.
+    delta: dict[str, np.ndarray] = {}
+    for seg in RIGID_PARENTS:
+        if seg in pset and has_q[col[seg]]:
+            delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
+        elif motion.is_rotational and rot_all is not None and seg in joint_indices:
+            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], yaw)
+    if "chest" not in delta:  # the upper torso turns with the highest source torso joint
+        for seg in ("spine", "pelvis"):
+            if motion.is_rotational and rot_all is not None and seg in joint_indices:
+                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], yaw)
+                break
+            if seg in delta:
+                delta["chest"] = delta[seg]
+                break
+
     # --- positions: root, then rigid children and limb chains in canonical order
     T = np.zeros((F, N, 3))
     p0 = S[:, col["pelvis"]]
@@ -305,10 +363,10 @@ def build_targets(
         if p is None:
             continue
         i, j = col[c], col[p]
-        if p in RIGID_PARENTS and has_q[j]:
-            off0 = char_pts[c] - char_pts[p]
-            rel = quat_mul(Q[:, j], quat_conj(rest_c[p][1]))
-            T[:, i] = T[:, j] + quat_apply(rel, off0)
+        seg = RIGID_SEGMENT.get(c)
+        if seg is not None and seg in delta and (p == seg or p in TORSO_BELOW.get(seg, ())):
+            # c is carried rigidly by a torso segment that the character's parent p belongs to
+            T[:, i] = T[:, j] + quat_apply(delta[seg], char_pts[c] - char_pts[p])
             continue
         length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])

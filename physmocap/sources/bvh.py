@@ -102,7 +102,7 @@ MAX_ABS_VALUE = 1e9
 #: Bytes of the MOTION block parsed at a time.
 CHUNK_BYTES = 4 << 20
 
-_NUMBER_RE = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _MOTION_RE = re.compile(rb"(?im)^[ \t]*MOTION[ \t]*\r?$")
 _FRAMES_RE = re.compile(r"(?i)^\s*frames\s*:\s*(.*?)\s*$")
 _FRAME_TIME_RE = re.compile(r"(?i)^\s*frame\s*time\s*:\s*(.*?)\s*$")
@@ -323,7 +323,7 @@ def _parse_hierarchy(text: str, path: Path) -> list[_Joint]:
             if cur.channels is not None:
                 raise InputError(f"second CHANNELS in {_what(cur)}", path=path, line=line)
             t, ln = toks.next("the number of channels after CHANNELS")
-            if not t.isdigit() or int(t) > 6:
+            if not re.fullmatch(r"[0-9]+", t) or int(t) > 6:
                 raise InputError(
                     f"expected the number of channels (0 to 6) after CHANNELS, found {_show(t)}",
                     path=path,
@@ -505,7 +505,7 @@ def _read_header(fh, path: Path) -> tuple[_Header, bytes]:
         if key not in found:
             raise InputError(f"file ends early: expected {what} after MOTION", path=path, line=line)
     frames_txt, frames_line = found["frames"]
-    if not re.fullmatch(r"\+?\d+", frames_txt):
+    if not re.fullmatch(r"\+?[0-9]+", frames_txt):
         raise InputError(f"expected a whole number of frames after 'Frames:', found {_show(frames_txt)}",
                          path=path, line=frames_line)
     time_txt, time_line = found["time"]

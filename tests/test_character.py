@@ -219,3 +219,15 @@ def test_range_policy_strict_and_overrides(tmp_path):
     assert wide.joint_limits["left_knee_flexion"] == pytest.approx((math.radians(-5), math.radians(175)))
     assert wide.velocity_limits["left_knee_flexion"] == pytest.approx(math.radians(3000))
     assert wide.joint_limits["right_knee_flexion"] == default.joint_limits["right_knee_flexion"]
+
+
+def test_humanoid_centre_of_mass_is_human():
+    """Whole-body centre of mass at 55-58 % of stature (standing adults), over the feet."""
+    ch = load_character()
+    data = _rest_data(ch)
+    com = data.subtree_com[0]
+    assert 0.54 < com[2] / ch.height < 0.59
+    assert com[1] == pytest.approx(0.0, abs=1e-9)
+    heel = data.site("left_heel").xpos[0]
+    toe = data.site("left_toe_tip").xpos[0]
+    assert heel < com[0] < toe

@@ -41,11 +41,13 @@ Sources
   the ``chest`` joint at the top of the middle trunk (xiphion, ~T10-T12).
 
 * **Hip joint spacing** is not in Winter's figure (0.191 H there is the hip
-  *breadth*).  We use 0.11 H (19 cm at 1.75 m), which matches the hip joint
-  spacing of the real solved skeletons in ``../shared/data`` (OptiTrack
-  Motive: 19.6 cm; CMU: about 22 cm) and the hip-joint-centre regressions of
-  Bell, Pedersen and Brand (*Hum. Mov. Sci.* 9:1990), where each hip joint
-  centre lies 14 % of the inter-ASIS distance medial to its ASIS.
+  *breadth*, used for the pelvis geom).  We use 0.11 H (19 cm at 1.75 m):
+  Bell, Pedersen and Brand (*J. Biomech.* 23(6):617-621, 1990) place each hip
+  joint centre 14 % of the inter-ASIS distance medial to its anterior superior
+  iliac spine, which for an adult inter-ASIS distance of 23-26 cm gives
+  17-19 cm between the hip joint centres; the real solved skeletons in
+  ``../shared/data`` have 19.6 cm (OptiTrack Motive, metres) and about 22 cm
+  (CMU).
 
 * **Masses, centres of mass, radii of gyration**: Winter 2009, Table 4.1
   (Dempster's cadaver data via Miller and Nelson, and Plagenhoef): mass

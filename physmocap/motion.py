@@ -293,8 +293,13 @@ class Motion:
         """Robust floor estimate: a low percentile of the per-frame lowest joint height.
 
         The single lowest sample is often an outlier (a glitching toe); a low
-        percentile of the per-frame minimum is not.
+        percentile of the per-frame minimum is not.  A source that established
+        the floor itself (a tracker levelled on its feet, whose lowest joints
+        are ankles above the floor) records its height as ``meta["floor_z"]``,
+        which is returned instead.
         """
+        if "floor_z" in self.meta:
+            return float(self.meta["floor_z"])
         z = self.world_positions()[..., 2]
         if self.positions is not None:
             z = np.where(np.isfinite(z), z, np.inf)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .ik.limits import geom_lowest_points
+from .ik.limits import GeomCandidates
 from .rotations import Rotation, wxyz_to_xyzw
 
 __all__ = [
@@ -81,11 +81,12 @@ def lowest_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """``(F,)`` height of the lowest point of any non-world geom per frame (metres)."""
     data = mujoco.MjData(model)
     geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] != 0]
+    cand = GeomCandidates(model, geoms)
     out = np.empty(qpos.shape[0])
     for t, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        z, _ = geom_lowest_points(model, data, geoms)
+        z, _ = cand.points(data)
         out[t] = z.min() if z.size else np.inf
     return out
 

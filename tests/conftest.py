@@ -30,3 +30,19 @@ def shared_file(name: str) -> Path:
 @pytest.fixture(params=SHARED_BVH)
 def shared_bvh(request) -> Path:
     return shared_file(request.param)
+
+
+_RETARGET_CACHE: dict = {}
+
+
+def retargeted(clip: str, character: str = "humanoid", **options):
+    """Retarget a shared clip once per test session (cached by clip, character, options)."""
+    key = (clip, character, tuple(sorted(options.items())))
+    if key not in _RETARGET_CACHE:
+        from physmocap.ik.retarget import retarget
+        from physmocap.models import load_character
+        from physmocap.sources import load_motion
+
+        motion = load_motion(shared_file(clip))
+        _RETARGET_CACHE[key] = (motion, retarget(motion, load_character(character), progress=False, **options))
+    return _RETARGET_CACHE[key]

@@ -19,7 +19,7 @@ import mink
 import mujoco
 import numpy as np
 
-__all__ = ["FrameStepLimit", "FloorLimit", "geom_lowest_points"]
+__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "geom_lowest_points"]
 
 
 class FrameStepLimit(mink.Limit):
@@ -139,14 +139,20 @@ class GeomCandidates:
         self.gid = self.geoms[self.owner] if len(self.owner) else np.zeros(0, dtype=int)
         self.starts = np.flatnonzero(np.r_[True, np.diff(self.owner) != 0]) if len(self.owner) else np.zeros(0, dtype=int)
 
+    def points(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height."""
+        if len(self.gid) == 0:
+            return np.zeros(0), np.zeros((0, 3))
+        R = data.geom_xmat[self.gid].reshape(-1, 3, 3)
+        pts = data.geom_xpos[self.gid] + np.einsum("kij,kj->ki", R, self.local[:, :3])
+        return pts[:, 2] - self.local[:, 3], pts
+
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
         n = len(self.geoms)
         if n == 0:
             return np.zeros(0), np.zeros((0, 3))
-        R = data.geom_xmat[self.gid].reshape(-1, 3, 3)
-        pts = data.geom_xpos[self.gid] + np.einsum("kij,kj->ki", R, self.local[:, :3])
-        z = pts[:, 2] - self.local[:, 3]
+        z, pts = self.points(data)
         z_low = np.minimum.reduceat(z, self.starts)
         # index of the minimum within each geom's block
         is_min = z == z_low[self.owner]
@@ -166,14 +172,7 @@ def geom_lowest_points(
     (centre of the lowest cap for capsules) whose vertical velocity equals that
     of the lowest point.
     """
-    key = (id(model), tuple(int(g) for g in geoms))
-    cand = _CANDIDATES.get(key)
-    if cand is None:
-        cand = _CANDIDATES[key] = GeomCandidates(model, geoms)
-    return cand.lowest(data)
-
-
-_CANDIDATES: dict[tuple, GeomCandidates] = {}
+    return GeomCandidates(model, geoms).lowest(data)
 
 
 class FloorLimit(mink.Limit):
@@ -218,11 +217,16 @@ class FloorLimit(mink.Limit):
         self._cand = GeomCandidates(model, self.geoms)
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points."""
-        z_g, a_g = self._cand.lowest(data)
+        """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points.
+
+        Every candidate of every geom is a point (both end caps of a capsule,
+        every corner of a box): constraining only the current lowest one lets
+        a rolling foot swap which cap is lowest between iterations.
+        """
+        z_g, a_g = self._cand.points(data)
         z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
         a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
-        body = np.concatenate([self.model.geom_bodyid[self.geoms], self.model.site_bodyid[self.sites]])
+        body = np.concatenate([self.model.geom_bodyid[self._cand.gid], self.model.site_bodyid[self.sites]])
         return np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), body
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:

@@ -70,6 +70,8 @@ class SolverOptions:
         floor: Keep all geoms and contact sites above ``floor_height``.
         floor_height: Height of the floor plane (metres).
         floor_margin: Clearance the linearised floor constraint aims for (metres).
+        floor_iterations: Extra iterations allowed when the last step left a
+            point below the floor (linearisation error).
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: qpsolvers backend name.
@@ -85,6 +87,7 @@ class SolverOptions:
     floor: bool = True
     floor_height: float = 0.0
     floor_margin: float = 2e-4
+    floor_iterations: int = 4
     limit_gain: float = 0.95
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
@@ -197,6 +200,16 @@ class FrameSolver:
             raise mink.NoSolutionFound(opt.solver)
         return v
 
+    def _floor_ok(self) -> bool:
+        """True if no constrained point is below the floor by more than the solver's tolerance.
+
+        The floor constraint is linearised, so a large last step can leave a
+        point a few millimetres below the floor (second-order error); the
+        solver then iterates again, up to ``floor_iterations`` more times.
+        """
+        z, _, _ = self.floor_limit.heights(self.configuration.data)
+        return bool(z.size == 0 or z.min() >= self.options.floor_height - 1e-4)
+
     def solve_frame(self, first: bool = False) -> tuple[np.ndarray, int, int]:
         """Iterate the QP for the current targets; returns ``(q, iterations, relaxation level)``.
 
@@ -209,7 +222,11 @@ class FrameSolver:
         worst = 0
         it = 0
         base = 0 if self.constraints else 1
-        for it in range(1, iters + 1):
+        extra = opt.floor_iterations if opt.floor else 0
+        for it in range(1, iters + extra + 1):
+            if it > iters and self._floor_ok():
+                it -= 1
+                break
             level = base
             v = None
             while level < 5:
@@ -224,7 +241,7 @@ class FrameSolver:
                 worst = 5
                 break
             self.configuration.integrate_inplace(v, 1.0)
-            if np.max(np.abs(v)) < opt.tolerance:
+            if np.max(np.abs(v)) < opt.tolerance and (not opt.floor or self._floor_ok()):
                 break
         q = self.configuration.q.copy()
         if worst == 5 or not np.all(np.isfinite(q)):

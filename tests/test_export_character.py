@@ -91,7 +91,10 @@ def test_non_finite_trajectory_is_refused_without_a_file(tmp_path):
 
 
 BLENDER_SCRIPT = r"""
-import bpy, json, sys
+import builtins, bpy, json, sys
+# Debian's Blender 3.4 BVH add-on opens files with mode "rU", which its Python 3.11 rejects.
+_open = builtins.open
+builtins.open = lambda f, mode="r", *a, **k: _open(f, mode.replace("U", ""), *a, **k)
 argv = sys.argv[sys.argv.index("--") + 1:]
 bvh, out, frames = argv[0], argv[1], int(argv[2])
 bpy.ops.wm.read_factory_settings(use_empty=True)

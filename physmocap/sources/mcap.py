@@ -1,0 +1,644 @@
+"""Read skeleton recordings from MCAP files (Foxglove well-known schemas, JSON).
+
+Three layouts are understood, tried in this order:
+
+1. **physmocap's own** (written by :mod:`physmocap.export.mcap`): a
+   ``physmocap.skeleton`` metadata record per skeleton (hierarchy, offsets,
+   fps) with ``foxglove.FrameTransforms`` on ``<prefix>/tf`` and joint
+   positions on ``<prefix>/joints``.  Reading gives back the motion that was
+   written: rotational motions exactly (local rotations and translations),
+   positional ones with their confidence.
+2. **Any transform tree** in ``foxglove.FrameTransforms`` (or single
+   ``foxglove.FrameTransform``) messages: every child frame becomes a joint,
+   its parent frame its parent; frames whose parent is not itself a child
+   frame (``world``, ``map``...) are the world.  A rotational motion.
+3. **World joint poses** in ``foxglove.PosesInFrame``: one pose per joint,
+   in a fixed joint order, one message per frame.  A positional motion (the
+   poses' orientations are not used); joint names come from ``joint_names=``,
+   a ``physmocap.skeleton`` record, the channel's ``joint_names`` metadata, or
+   the known tracker layouts by count (15: NITE, 25: Kinect v2, 32: Azure Kinect).
+
+Messages must be JSON-encoded (``message_encoding`` ``json``).  Frame ``i``
+of a clip is the message stamped nearest ``t0 + i / fps``; fps comes from the
+metadata, from ``fps=``, or from the median spacing of the timestamps.  A
+frame with no message holds the previous one (positional recordings: it is a
+lost frame and goes through the gap policy of :mod:`physmocap.sources.gaps`).
+
+Foxglove's world is Z-up in metres like physmocap's, so nothing is converted
+unless ``units=`` or ``up=`` say otherwise.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..errors import InputError, OptionError, warn
+from ..motion import Motion, Skeleton, forward_kinematics
+from ..rotations import Rotation, quat_mul, up_axis_matrix
+
+__all__ = ["read_mcap", "list_skeletons"]
+
+MAGIC = b"\x89MCAP0\r\n"
+TF_SCHEMAS = ("foxglove.FrameTransforms", "foxglove.FrameTransform")
+POSES_SCHEMA = "foxglove.PosesInFrame"
+SKELETON_METADATA = "physmocap.skeleton"
+
+
+# --- raw records -------------------------------------------------------------------
+@dataclass
+class _Channel:
+    id: int
+    topic: str
+    encoding: str
+    schema_name: str
+    schema_encoding: str
+    metadata: dict[str, str]
+
+
+@dataclass
+class _Raw:
+    channels: dict[int, _Channel] = field(default_factory=dict)
+    messages: dict[int, list[tuple[int, bytes]]] = field(default_factory=dict)  # (log_time, data)
+    metadata: list[tuple[str, dict[str, str]]] = field(default_factory=list)
+
+
+def _load(path: Path) -> _Raw:
+    """All channels, messages and metadata of an MCAP file, or one clear InputError."""
+    from mcap.records import Channel, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as fh:
+            head = fh.read(len(MAGIC))
+            fh.seek(max(size - len(MAGIC), 0))
+            tail = fh.read(len(MAGIC))
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc.strerror}", path=path) from None
+    if head != MAGIC:
+        raise InputError(
+            "not an MCAP file: it does not start with the MCAP magic bytes (\\x89MCAP0\\r\\n)", path=path
+        )
+    if size < 2 * len(MAGIC) or tail != MAGIC:
+        raise InputError(
+            "truncated MCAP file: it does not end with the MCAP magic bytes (the recording "
+            "was cut off before it was closed; `mcap recover` can salvage it)",
+            path=path,
+        )
+    raw = _Raw()
+    schemas: dict[int, Schema] = {}
+    try:
+        with open(path, "rb") as fh:
+            for record in StreamReader(fh, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    sch = schemas.get(record.schema_id)
+                    raw.channels[record.id] = _Channel(
+                        id=record.id,
+                        topic=record.topic,
+                        encoding=record.message_encoding,
+                        schema_name=sch.name if sch else "",
+                        schema_encoding=sch.encoding if sch else "",
+                        metadata=dict(record.metadata),
+                    )
+                elif isinstance(record, Message):
+                    raw.messages.setdefault(record.channel_id, []).append((record.log_time, record.data))
+                elif isinstance(record, Metadata):
+                    raw.metadata.append((record.name, dict(record.metadata)))
+    except Exception as exc:  # the mcap package raises many types on damaged input
+        detail = str(exc) or type(exc).__name__
+        raise InputError(f"corrupt MCAP file ({type(exc).__name__}: {detail})", path=path) from None
+    for cid in raw.messages:
+        if cid not in raw.channels:
+            raise InputError(f"corrupt MCAP file: messages on undeclared channel {cid}", path=path)
+    return raw
+
+
+def _describe_channels(raw: _Raw) -> str:
+    if not raw.channels:
+        return "the file has no channels"
+    parts = [
+        f"{c.topic} ({c.schema_name or 'no schema'}, {c.encoding or 'no encoding'})"
+        for c in sorted(raw.channels.values(), key=lambda c: c.id)
+    ]
+    return "channels: " + ", ".join(parts)
+
+
+# --- JSON helpers -------------------------------------------------------------------
+def _reject_constant(name: str) -> float:
+    raise ValueError(f"non-finite number {name}")
+
+
+class _Decoder:
+    """Decodes one channel's JSON messages with errors naming the message."""
+
+    def __init__(self, path: Path, channel: _Channel) -> None:
+        self.path = path
+        self.channel = channel
+        if channel.encoding != "json":
+            raise InputError(
+                f"topic {channel.topic} ({channel.schema_name}) uses {channel.encoding!r} message "
+                "encoding; physmocap reads JSON-encoded Foxglove messages only",
+                path=path,
+            )
+
+    def fail(self, k: int, what: str) -> InputError:
+        return InputError(f"message {k} on {self.channel.topic}: {what}", path=self.path)
+
+    def load(self, k: int, data: bytes) -> dict:
+        try:
+            obj = json.loads(data.decode("utf-8"), parse_constant=_reject_constant)
+        except (UnicodeDecodeError, ValueError) as exc:
+            raise self.fail(k, f"invalid JSON ({exc})") from None
+        if not isinstance(obj, dict):
+            raise self.fail(k, "expected a JSON object")
+        return obj
+
+    def number(self, k: int, obj: Any, key: str, default: float) -> float:
+        v = obj.get(key, default) if isinstance(obj, dict) else None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.fail(k, f"field {key!r} must be a finite number, got {v!r}")
+        return float(v)
+
+    def vec3(self, k: int, obj: Any, key: str) -> list[float]:
+        v = obj.get(key, {}) if isinstance(obj, dict) else None
+        if not isinstance(v, dict):
+            raise self.fail(k, f"field {key!r} must be an object with x, y, z")
+        return [self.number(k, v, a, 0.0) for a in "xyz"]
+
+    def quat(self, k: int, obj: Any, key: str) -> list[float]:
+        v = obj.get(key)
+        if v is None:
+            return [0.0, 0.0, 0.0, 1.0]
+        if not isinstance(v, dict):
+            raise self.fail(k, f"field {key!r} must be an object with x, y, z, w")
+        q = [self.number(k, v, a, 0.0) for a in "xyz"] + [self.number(k, v, "w", 1.0)]
+        n = math.sqrt(sum(c * c for c in q))
+        if n < 1e-6:
+            raise self.fail(k, f"field {key!r} is not a rotation (zero quaternion)")
+        if abs(n - 1.0) > 1e-9:
+            q = [c / n for c in q]
+        return q
+
+    def stamp(self, k: int, obj: Any, log_time: int) -> int:
+        ts = obj.get("timestamp") if isinstance(obj, dict) else None
+        if ts is None:
+            return log_time
+        if not isinstance(ts, dict):
+            raise self.fail(k, "field 'timestamp' must be an object with sec and nsec")
+        sec, nsec = ts.get("sec", 0), ts.get("nsec", 0)
+        if not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in (sec, nsec)):
+            raise self.fail(k, "timestamp sec and nsec must be non-negative integers")
+        t = sec * 1_000_000_000 + nsec
+        return t if t > 0 else log_time
+
+
+# --- frame grid -------------------------------------------------------------------
+def _frame_grid(
+    path: Path, times: Sequence[int], fps: float | None, start: int | None
+) -> tuple[np.ndarray, float, int]:
+    """Frame index per timestamp, the fps and the number of frames."""
+    t = np.asarray(times, dtype=np.int64)
+    uniq = np.unique(t)
+    if fps is None:
+        if uniq.size < 2:
+            raise InputError(
+                "cannot tell the frame rate from a single timestamp; give fps=", path=path
+            )
+        fps = 1e9 / float(np.median(np.diff(uniq)))
+    t0 = int(uniq[0]) if start is None else int(start)
+    idx = np.rint((t - t0) * (float(fps) / 1e9)).astype(np.int64)
+    if idx.min() < 0:
+        raise InputError("messages stamped before the clip's start time", path=path)
+    F = int(idx.max()) + 1
+    if F > 4 * uniq.size + 10:
+        raise InputError(
+            f"timestamps do not fit a {fps:.6g} fps clip ({uniq.size} distinct times would span "
+            f"{F} frames); give the right fps=",
+            path=path,
+        )
+    return idx, float(fps), F
+
+
+def _hold_fill(arr: np.ndarray, have: np.ndarray) -> np.ndarray:
+    """Fill frames without data (``have`` False) with the previous frame's values
+    (the next one's before the first), per joint.  ``arr (F, N, k)``, ``have (F, N)``."""
+    F = arr.shape[0]
+    out = arr.copy()
+    idx = np.where(have, np.arange(F)[:, None], -1)
+    last = np.maximum.accumulate(idx, axis=0)
+    first = np.argmax(have, axis=0)
+    last = np.where(last < 0, first[None, :], last)
+    cols = np.arange(arr.shape[1])[None, :]
+    return out[last, cols]
+
+
+# --- transform trees --------------------------------------------------------------
+@dataclass
+class _TfData:
+    frame_ids: list[str]
+    parent_ids: list[str]
+    translations: np.ndarray  # (F, N, 3)
+    rotations: np.ndarray  # (F, N, 4)
+    have: np.ndarray  # (F, N)
+    fps: float
+
+
+def _read_tf(
+    path: Path,
+    raw: _Raw,
+    channels: list[_Channel],
+    fps: float | None,
+    start: int | None,
+) -> _TfData:
+    samples: list[tuple[int, str, str, list[float], list[float]]] = []
+    for ch in channels:
+        dec = _Decoder(path, ch)
+        for k, (log_time, data) in enumerate(raw.messages.get(ch.id, [])):
+            obj = dec.load(k, data)
+            if ch.schema_name == "foxglove.FrameTransforms":
+                items = obj.get("transforms", [])
+                if not isinstance(items, list):
+                    raise dec.fail(k, "field 'transforms' must be an array")
+            else:
+                items = [obj]
+            msg_time = dec.stamp(k, obj, log_time) if ch.schema_name != "foxglove.FrameTransforms" else None
+            for tr in items:
+                if not isinstance(tr, dict):
+                    raise dec.fail(k, "each transform must be an object")
+                child, parent = tr.get("child_frame_id"), tr.get("parent_frame_id")
+                if not isinstance(child, str) or not child or not isinstance(parent, str):
+                    raise dec.fail(k, "a transform needs string parent_frame_id and child_frame_id")
+                when = msg_time if msg_time is not None else dec.stamp(k, tr, log_time)
+                samples.append((when, child, parent, dec.vec3(k, tr, "translation"), dec.quat(k, tr, "rotation")))
+    if not samples:
+        raise InputError("the transform topics hold no messages", path=path)
+
+    parent_of: dict[str, str] = {}
+    order: list[str] = []
+    for _, child, parent, _, _ in samples:
+        if child not in parent_of:
+            parent_of[child] = parent
+            order.append(child)
+        elif parent_of[child] != parent:
+            raise InputError(
+                f"frame {child!r} changes parent from {parent_of[child]!r} to {parent!r}; "
+                "physmocap needs a fixed hierarchy",
+                path=path,
+            )
+    # parents before children: walk from the roots (parents that are not children)
+    children: dict[str, list[str]] = {}
+    for c in order:
+        children.setdefault(parent_of[c], []).append(c)
+    sorted_ids: list[str] = []
+    stack = [c for c in order if parent_of[c] not in parent_of][::-1]
+    while stack:
+        c = stack.pop()
+        sorted_ids.append(c)
+        stack.extend(children.get(c, [])[::-1])
+    if len(sorted_ids) != len(order):
+        cyclic = sorted(set(order) - set(sorted_ids))
+        raise InputError(f"the transform tree has a cycle through {cyclic}", path=path)
+    col = {c: i for i, c in enumerate(sorted_ids)}
+
+    idx, fps, F = _frame_grid(path, [s[0] for s in samples], fps, start)
+    N = len(sorted_ids)
+    trans = np.zeros((F, N, 3))
+    rots = np.zeros((F, N, 4))
+    rots[..., 3] = 1.0
+    have = np.zeros((F, N), dtype=bool)
+    for i, (_, child, _, t, q) in zip(idx, samples):
+        j = col[child]
+        trans[i, j] = t
+        rots[i, j] = q
+        have[i, j] = True
+    if not have.all():
+        missing = int((~have).sum())
+        warn(f"{path}: {missing} joint transform(s) missing over {F} frames; holding the previous ones")
+        trans = _hold_fill(trans, have)
+        rots = _hold_fill(rots, have)
+    parents = [parent_of[c] for c in sorted_ids]
+    return _TfData(sorted_ids, parents, trans, rots, have, fps)
+
+
+def _convert_rotational(
+    trans: np.ndarray, rots: np.ndarray, scale: float, up: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Scale translations to metres and turn a Y-up world to Z-up (``R' = M R M^T``)."""
+    trans = trans * scale
+    if up.upper() != "Z":
+        M = up_axis_matrix(up, "Z")
+        qm = Rotation.from_matrix(M).as_quat()
+        qm_inv = qm * np.array([-1.0, -1.0, -1.0, 1.0])
+        trans = trans @ M.T
+        rots = quat_mul(quat_mul(qm, rots), qm_inv)
+    return trans, rots
+
+
+# --- metadata tracks ----------------------------------------------------------------
+def _json_field(path: Path, meta: dict[str, str], key: str, default: Any = None) -> Any:
+    if key not in meta:
+        if default is not None:
+            return default
+        raise InputError(f"physmocap.skeleton metadata lacks {key!r}", path=path)
+    try:
+        return json.loads(meta[key], parse_constant=_reject_constant)
+    except ValueError as exc:
+        raise InputError(f"physmocap.skeleton metadata {key!r} is not valid JSON ({exc})", path=path) from None
+
+
+def list_skeletons(path: str | os.PathLike) -> list[dict[str, str]]:
+    """The ``physmocap.skeleton`` metadata records of a file (one per skeleton)."""
+    raw = _load(Path(path))
+    return [m for name, m in raw.metadata if name == SKELETON_METADATA]
+
+
+def _pick_track(path: Path, tracks: list[dict[str, str]], skeleton: str | None) -> dict[str, str]:
+    if skeleton is not None:
+        want = "/" + skeleton.strip("/")
+        for t in tracks:
+            if t.get("topic_prefix") == want or t.get("role") == skeleton:
+                return t
+        known = ", ".join(f"{t.get('topic_prefix')} ({t.get('role')})" for t in tracks)
+        raise OptionError(f"no skeleton {skeleton!r} in the file; it has {known}", path=path)
+    for t in tracks:
+        if t.get("role") == "source":
+            return t
+    return tracks[0]
+
+
+def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, Any]) -> Motion:
+    prefix = meta.get("topic_prefix", "/skeleton")
+    if meta.get("units", "m") != "m" or meta.get("up_axis", "Z").upper() != "Z":
+        raise InputError(
+            f"skeleton {prefix}: units {meta.get('units')!r} / up axis {meta.get('up_axis')!r} are "
+            "not supported (physmocap writes metres, Z-up)",
+            path=path,
+        )
+    names = [str(n) for n in _json_field(path, meta, "joints")]
+    frame_ids = [str(n) for n in _json_field(path, meta, "frame_ids")]
+    parents = np.asarray(_json_field(path, meta, "parents"), dtype=np.int64)
+    N = len(names)
+    if len(frame_ids) != N or parents.shape != (N,):
+        raise InputError(f"skeleton {prefix}: joints, frame_ids and parents disagree in length", path=path)
+    try:
+        fps = float(meta["fps"])
+        F = int(meta["num_frames"])
+        start = int(meta.get("start_time_ns", "0"))
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"skeleton {prefix}: bad fps / num_frames / start_time_ns ({exc})", path=path) from None
+    if not (math.isfinite(fps) and fps > 0) or F < 1:
+        raise InputError(f"skeleton {prefix}: fps {fps} and {F} frames are not a clip", path=path)
+
+    topics = {c.topic: c for c in raw.channels.values()}
+    tf_ch = topics.get(f"{prefix}/tf")
+    if tf_ch is None or tf_ch.schema_name not in TF_SCHEMAS:
+        raise InputError(f"skeleton {prefix}: no foxglove.FrameTransforms channel {prefix}/tf", path=path)
+    tf = _read_tf(path, raw, [tf_ch], fps, start)
+    col = {fid: i for i, fid in enumerate(tf.frame_ids)}
+    missing = [f for f in frame_ids if f not in col]
+    if missing:
+        raise InputError(f"skeleton {prefix}: no transforms for frames {missing[:5]}", path=path)
+    sel = np.array([col[f] for f in frame_ids])
+    if tf.translations.shape[0] != F:
+        if tf.translations.shape[0] > F:
+            raise InputError(f"skeleton {prefix}: transforms stamped past its {F} frames", path=path)
+        pad = F - tf.translations.shape[0]
+        tf.translations = np.concatenate([tf.translations, np.repeat(tf.translations[-1:], pad, 0)])
+        tf.rotations = np.concatenate([tf.rotations, np.repeat(tf.rotations[-1:], pad, 0)])
+        warn(f"{path}: skeleton {prefix} has transforms for {F - pad} of {F} frames; holding the last")
+    trans = tf.translations[:, sel]
+    rots = tf.rotations[:, sel]
+    for j, p in enumerate(parents):
+        expect = frame_ids[p] if p >= 0 else None
+        got = tf.parent_ids[sel[j]]
+        if expect is not None and got != expect:
+            raise InputError(
+                f"skeleton {prefix}: transform of {frame_ids[j]!r} has parent {got!r}, metadata says {expect!r}",
+                path=path,
+            )
+    offsets = np.asarray(_json_field(path, meta, "offsets", default=trans[0].tolist()), dtype=float)
+    end_site = np.asarray(_json_field(path, meta, "end_site", default=[False] * N), dtype=bool)
+    try:
+        skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, end_site=end_site)
+    except ValueError as exc:
+        raise InputError(f"skeleton {prefix}: {exc}", path=path) from None
+    kind = meta.get("kind", "rotational")
+    source_meta = _json_field(path, meta, "meta", default={}) if "meta" in meta else {}
+    try:
+        unit_scale = float(meta.get("source_unit_scale", "1.0"))
+    except ValueError:
+        raise InputError(f"skeleton {prefix}: bad source_unit_scale", path=path) from None
+    common: dict[str, Any] = dict(
+        skeleton=skeleton,
+        fps=fps,
+        source=str(path),
+        units=meta.get("source_units", "m"),
+        unit_scale=unit_scale,
+        file_up=meta.get("source_file_up", "Z"),
+        meta={**(source_meta if isinstance(source_meta, dict) else {}), "mcap": {"topic_prefix": prefix}},
+    )
+    if kind == "positional":
+        positions, confidence = _read_joint_positions(path, raw, topics.get(f"{prefix}/joints"), names, fps, start, F)
+        if positions is None:
+            positions, _ = forward_kinematics(skeleton, rots, trans, np.arange(N))
+        return Motion(positions=positions, confidence=confidence, **common)
+    if "translated" in meta:
+        translated = np.asarray(_json_field(path, meta, "translated"), dtype=np.int64)
+    else:
+        translated = np.flatnonzero(np.any(np.abs(trans - offsets) > 1e-12, axis=(0, 2)))
+    return Motion(rotations=rots, translations=trans[:, translated], translated=translated, **common)
+
+
+def _read_joint_positions(
+    path: Path,
+    raw: _Raw,
+    ch: _Channel | None,
+    names: list[str],
+    fps: float,
+    start: int,
+    F: int,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    if ch is None or not raw.messages.get(ch.id):
+        return None, None
+    dec = _Decoder(path, ch)
+    pos = np.full((F, len(names), 3), np.nan)
+    conf = np.zeros((F, len(names)))
+    any_conf = False
+    col = {n: i for i, n in enumerate(names)}
+    for k, (log_time, data) in enumerate(raw.messages[ch.id]):
+        obj = dec.load(k, data)
+        t = dec.stamp(k, obj, log_time)
+        i = int(round((t - start) * fps / 1e9))
+        if not 0 <= i < F:
+            raise dec.fail(k, f"stamped outside the clip's {F} frames")
+        p = obj.get("positions")
+        if not isinstance(p, dict):
+            raise dec.fail(k, "field 'positions' must be an object of joint name -> {x, y, z}")
+        for name, v in p.items():
+            if name in col:
+                pos[i, col[name]] = dec.vec3(k, p, name)
+        c = obj.get("confidence")
+        if isinstance(c, dict):
+            any_conf = True
+            for name in c:
+                if name in col:
+                    conf[i, col[name]] = min(max(dec.number(k, c, name, 0.0), 0.0), 1.0)
+    if not np.all(np.isfinite(pos)):
+        return None, None
+    return pos, (conf if any_conf else None)
+
+
+# --- PosesInFrame -----------------------------------------------------------------
+def _read_poses(
+    path: Path,
+    raw: _Raw,
+    ch: _Channel,
+    joint_names: Sequence[str] | None,
+    fps: float | None,
+    options: dict[str, Any],
+) -> Motion:
+    from .positions import known_layout, positional_motion
+
+    dec = _Decoder(path, ch)
+    frames: list[tuple[int, list[list[float]]]] = []
+    for k, (log_time, data) in enumerate(raw.messages.get(ch.id, [])):
+        obj = dec.load(k, data)
+        poses = obj.get("poses", [])
+        if not isinstance(poses, list):
+            raise dec.fail(k, "field 'poses' must be an array")
+        pts = []
+        for pose in poses:
+            if not isinstance(pose, dict):
+                raise dec.fail(k, "each pose must be an object")
+            pts.append(dec.vec3(k, pose, "position"))
+        frames.append((dec.stamp(k, obj, log_time), pts))
+    if not frames:
+        raise InputError(f"topic {ch.topic} holds no messages", path=path)
+    J = max(len(p) for _, p in frames)
+    if J == 0:
+        raise InputError(f"topic {ch.topic}: every message has an empty poses array", path=path)
+    names: list[str] | None = None
+    if joint_names is not None:
+        names = [str(n) for n in joint_names]
+    elif "joint_names" in ch.metadata:
+        try:
+            names = [str(n) for n in json.loads(ch.metadata["joint_names"])]
+        except ValueError:
+            raise InputError(f"channel {ch.topic}: metadata joint_names is not a JSON list", path=path) from None
+    else:
+        for name, meta in raw.metadata:
+            if name == SKELETON_METADATA and json.loads(meta.get("topics", "{}")).get("poses") == ch.topic:
+                names = [str(n) for n in json.loads(meta.get("joints", "[]"))]
+        if names is None:
+            names = known_layout(J)
+    if names is None:
+        names = [f"joint_{k}" for k in range(J)]
+        warn(f"{path}: {ch.topic} has {J} poses per frame and no joint names; calling them joint_0..")
+    if len(names) != J:
+        raise InputError(f"topic {ch.topic}: {J} poses per frame but {len(names)} joint names", path=path)
+    idx, fps, F = _frame_grid(path, [t for t, _ in frames], fps, None)
+    pos = np.full((F, J, 3), np.nan)
+    for i, (_, pts) in zip(idx, frames):
+        if len(pts) == J:
+            pos[i] = pts
+        elif pts:
+            raise InputError(
+                f"topic {ch.topic}: frame {int(i)} has {len(pts)} poses, others have {J}", path=path, frame=int(i)
+            )
+    opts = {"frame": "world", "up": "Z", "units": "m", "level": False, "floor": None}
+    opts.update(options)
+    return positional_motion(names, pos, None, fps, path, **opts)
+
+
+# --- entry point -------------------------------------------------------------------
+def read_mcap(
+    path: str | os.PathLike,
+    *,
+    skeleton: str | None = None,
+    topic: str | None = None,
+    joint_names: Sequence[str] | None = None,
+    fps: float | None = None,
+    units: str | float | None = None,
+    up: str | None = None,
+    **options: Any,
+) -> Motion:
+    """Read a skeleton recording from an MCAP file (layouts: module docstring).
+
+    Args:
+        path: The ``.mcap`` file.
+        skeleton: Which physmocap skeleton (topic prefix such as ``/skeleton``,
+            or role ``source`` / ``character``); default: the source.
+        topic: For foreign recordings, the topic to read (default: the first
+            FrameTransforms topic, else the first PosesInFrame topic).
+        joint_names: Joint order of PosesInFrame poses.
+        fps: Frame rate, when the file does not say.
+        units: For foreign recordings: the length unit (default metres).
+        up: For foreign recordings: the world's up axis, ``"Z"`` (default) or ``"Y"``.
+        **options: Passed to the positional pipeline for PosesInFrame
+            recordings (:func:`physmocap.sources.positions.positional_motion`).
+
+    Raises:
+        InputError: not an MCAP file, truncated or corrupt, no skeleton
+            data, unknown schemas or encodings, malformed messages.
+    """
+    p = Path(path)
+    raw = _load(p)
+    tracks = [m for name, m in raw.metadata if name == SKELETON_METADATA]
+    if tracks and topic is None:
+        return _read_own(p, raw, _pick_track(p, tracks, skeleton), options)
+
+    chans = sorted(raw.channels.values(), key=lambda c: c.id)
+    if topic is not None:
+        chans = [c for c in chans if c.topic == topic]
+        if not chans:
+            raise OptionError(f"no topic {topic!r}; {_describe_channels(raw)}", path=p)
+    tf_chans = [c for c in chans if c.schema_name in TF_SCHEMAS]
+    pose_chans = [c for c in chans if c.schema_name == POSES_SCHEMA]
+    if tf_chans:
+        tf = _read_tf(p, raw, tf_chans, fps, None)
+        from .sensor import unit_scale
+
+        scale = unit_scale(units, p)[1] if units is not None else 1.0
+        trans, rots = _convert_rotational(tf.translations, tf.rotations, scale, up or "Z")
+        names = tf.frame_ids
+        col = {c: i for i, c in enumerate(names)}
+        parents = np.array([col.get(pp, -1) for pp in tf.parent_ids], dtype=np.int64)
+        offsets = trans[0]
+        skel = Skeleton(names=tuple(names), parents=parents, offsets=offsets)
+        translated = np.flatnonzero(np.any(np.abs(trans - offsets) > 1e-12, axis=(0, 2)))
+        return Motion(
+            skeleton=skel,
+            fps=tf.fps,
+            rotations=rots,
+            translations=trans[:, translated],
+            translated=translated,
+            source=str(p),
+            units="m" if units is None else str(units),
+            unit_scale=scale,
+            file_up=(up or "Z").upper(),
+            meta={"mcap": {"topics": [c.topic for c in tf_chans], "world_frames": sorted(
+                {pp for pp in tf.parent_ids if pp not in col})}},
+        )
+    if pose_chans:
+        if len(pose_chans) > 1:
+            warn(f"{p}: several PosesInFrame topics; reading {pose_chans[0].topic} (choose with topic=)")
+        opts = dict(options)
+        if units is not None:
+            opts["units"] = units
+        if up is not None:
+            opts["up"] = up
+        return _read_poses(p, raw, pose_chans[0], joint_names, fps, opts)
+    raise InputError(
+        "no skeleton data: physmocap reads foxglove.FrameTransforms, foxglove.FrameTransform or "
+        f"foxglove.PosesInFrame messages in JSON encoding; {_describe_channels(raw)}",
+        path=p,
+    )

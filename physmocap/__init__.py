@@ -13,10 +13,34 @@ from .motion import Motion, Skeleton, forward_kinematics
 
 __version__ = "0.1.0"
 
+
+def retarget(motion, character=None, **options):
+    """Retarget a :class:`Motion` onto a character; see :func:`physmocap.ik.retarget.retarget`."""
+    from .ik.retarget import retarget as _retarget
+
+    return _retarget(motion, character, **options)
+
+
+def load_motion(path, **options):
+    """Read a capture file (or ``"example"``); see :func:`physmocap.sources.load_motion`."""
+    from .sources import load_motion as _load
+
+    return _load(path, **options)
+
+
+def load_character(path=None, map_path=None, **options):
+    """Load a character; see :func:`physmocap.models.load_character`."""
+    from .models import load_character as _load
+
+    return _load(path, map_path, **options)
+
 __all__ = [
     "Motion",
     "Skeleton",
     "forward_kinematics",
+    "retarget",
+    "load_motion",
+    "load_character",
     "PhysmocapError",
     "InputError",
     "MappingError",

@@ -408,3 +408,28 @@ def test_cli_convert_round_trip_and_clean_errors(tmp_path):
     r = subprocess.run(run + [str(bad), str(tmp_path / "o.bvh")], capture_output=True, text=True)
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "truncated MCAP file" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_character_trajectory_with_source(tmp_path):
+    """The retargeted character's bodies as FrameTransforms, beside its source."""
+    from physmocap.models import load_character
+    from physmocap.trajectory import Trajectory
+    from physmocap.export.mcap import write_trajectory_mcap
+
+    character = load_character()
+    model = character.model
+    qpos = np.tile(model.qpos0, (4, 1))
+    qpos[:, 0] = np.linspace(0, 0.3, 4)  # slide the root along x
+    traj = Trajectory(character=character, qpos=qpos, fps=30.0)
+    sk = Skeleton(names=("a", "b"), parents=[-1, 0], offsets=[[0, 0, 1], [0, 0, 0.5]])
+    src = Motion(sk, 30.0, positions=np.tile([[0.0, 0, 1], [0, 0, 1.5]], (4, 1, 1)))
+    out = tmp_path / "char.mcap"
+    write_trajectory_mcap(traj, out, source=src)
+    assert [(s["topic_prefix"], s["role"]) for s in list_skeletons(out)] == [
+        ("/source", "source"),
+        ("/character", "character"),
+    ]
+    c = read_mcap(out, skeleton="character")
+    pos, _ = traj.body_poses()
+    np.testing.assert_allclose(c.world_positions(), pos[:, 1:], atol=1e-9)
+    np.testing.assert_array_equal(read_mcap(out).positions, src.positions)

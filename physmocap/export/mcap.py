@@ -604,13 +604,43 @@ def write_motion_mcap(
     )
 
 
+def _targets_track(targets: Any, prefix: str) -> TransformTrack | None:
+    """The actor's canonical joints from retargeting targets, as a positional source track."""
+    from ..canonical import canonical_parent
+
+    names = tuple(getattr(targets, "names", ()) or ())
+    pos = getattr(targets, "source_positions", None)
+    if not names or pos is None:
+        return None
+    pos = np.asarray(pos, dtype=float)
+    present = set(names)
+    col = {n: k for k, n in enumerate(names)}
+    parents = []
+    for n in names:
+        try:
+            pc = canonical_parent(n, present)
+        except KeyError:
+            pc = None
+        parents.append(-1 if pc is None else col[pc])
+    if any(p >= k for k, p in enumerate(parents)):
+        return None
+    valid = getattr(targets, "valid", None)
+    conf = None if valid is None else np.asarray(valid, dtype=float)
+    track = track_from_world_poses(
+        names, np.array(parents), np.where(np.isfinite(pos), pos, 0.0), None,
+        topic_prefix=prefix, role="source", confidence=conf,
+        metadata={"kind": "positional", "note": "the actor's canonical joints the character was fitted to"},
+    )  # fmt: skip
+    return track
+
+
 def write_trajectory_mcap(
     traj: Any,
     path: str | os.PathLike,
     *,
     source: Motion | None = None,
     topic_prefix: str = "/character",
-    source_prefix: str = "/skeleton",
+    source_prefix: str = "/source",
     poses: bool = False,
     compression: str = "zstd",
 ) -> Path:
@@ -618,9 +648,9 @@ def write_trajectory_mcap(
 
     Every MuJoCo body except the world becomes a joint of the character track
     (parent: its parent body; bodies on the world are roots), from
-    ``traj.body_poses()``.  With ``source`` (a motion with the same number of
-    frames and rate) the source skeleton is written too, so both play back
-    side by side in Foxglove.
+    ``traj.body_poses()``.  The source plays beside it: ``source`` (a motion
+    with the trajectory's frames) is written as its own track; without it,
+    the actor's canonical joints the IK was given (``traj.targets``) are.
     """
     model = traj.model
     pos, quat = traj.body_poses()
@@ -644,4 +674,8 @@ def write_trajectory_mcap(
                 f"the source has {source.num_frames} frames, the trajectory {traj.num_frames}", path=path
             )
         tracks.insert(0, track_from_motion(source, topic_prefix=source_prefix, role="source"))
+    elif getattr(traj, "targets", None) is not None:
+        st = _targets_track(traj.targets, source_prefix)
+        if st is not None and st.num_frames == traj.num_frames:
+            tracks.insert(0, st)
     return write_transforms_mcap(path, tracks, traj.fps, poses=poses, compression=compression)

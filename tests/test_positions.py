@@ -268,3 +268,31 @@ def test_cli_reports_missing_columns_in_one_line(tmp_path):
                        capture_output=True, text=True)  # fmt: skip
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip().count("\n") == 0 and "no head_z" in r.stderr
+
+
+def test_mapping_file_for_an_unknown_tracker(tmp_path):
+    """Joint names no profile knows, mapped by a user mapping file."""
+    pos = _standing(10)
+    names = [f"p{k}" for k in range(15)]
+    canon = {"head": "head", "neck": "neck", "torso": "chest", "left_shoulder": "left_shoulder",
+             "right_shoulder": "right_shoulder", "left_elbow": "left_elbow", "right_elbow": "right_elbow",
+             "left_hand": "left_wrist", "right_hand": "right_wrist", "left_hip": "left_hip",
+             "right_hip": "right_hip", "left_knee": "left_knee", "right_knee": "right_knee",
+             "left_foot": "left_ankle", "right_foot": "right_ankle"}  # fmt: skip
+    lines = ['profile = "none"', "[joints]"] + [f'{canon[n]} = "p{k}"' for k, n in enumerate(NITE)]
+    mapping = tmp_path / "tracker.map.toml"
+    mapping.write_text("\n".join(lines) + "\n")
+    npz = tmp_path / "t.npz"
+    np.savez(npz, positions=pos, names=np.array(names), fps=np.array(30.0))
+    m = read_positions(npz, mapping=str(mapping))
+    assert m.meta["tracker"]["joint_map"]["left_ankle"] == "p13"
+    sk = m.skeleton
+    assert sk.names[sk.parents[sk.index("p11")]] == "p9"  # knee hangs from the hip
+    head = m.positions[:, sk.index("p0"), 2]
+    assert 1.55 < np.median(head) < 1.75  # levelled, floor from the mapped feet
+    # without the mapping the names mean nothing: a warning, no hierarchy, no floor
+    with pytest.warns(UserWarning) as rec:
+        bare = read_positions(npz)
+    msgs = [str(w.message) for w in rec]
+    assert any("not recognised" in s for s in msgs) and any("no feet mapped" in s for s in msgs)
+    assert set(bare.skeleton.parents.tolist()) == {-1} and "floor_z" not in bare.meta

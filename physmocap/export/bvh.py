@@ -239,10 +239,14 @@ def write_bvh(
         if j in rot_orders:
             axes = [c[0] for c in chans if c.endswith("rotation")]
             if len(axes) < 3 and F:
-                missing = np.abs(euler[j][:, len(axes):]).max() if F else 0.0
-                if missing > tol:
+                q = motion.rotations[:, j]
+                q = np.concatenate([q[:, :3][:, perm] * sign, q[:, 3:]], axis=-1)
+                sub = _subset_euler(q, rot_orders[j], len(axes), tol)
+                if sub is None:
                     chans = chans + [f"{a}rotation" for a in rot_orders[j][len(axes):]]
                     widened.append(f"{sk.names[j]} (rotation)")
+                else:
+                    euler[j] = sub
         # Position components the layout lacks must stay at the offset.
         if j in translated:
             t = motion.translations[:, translated[j]][:, perm] * sign / unit_scale
@@ -278,6 +282,29 @@ def write_bvh(
         frame_time=1.0 / motion.fps,
         precision=precision,
     )
+
+
+def _wrap180(a: np.ndarray) -> np.ndarray:
+    return (a + 180.0) % 360.0 - 180.0
+
+
+def _subset_euler(q: np.ndarray, order: str, k: int, tol: float) -> np.ndarray | None:
+    """Angles ``(F, 3)`` in degrees for a joint whose file layout has only the
+    first ``k`` axes of ``order``: per frame, the one of the two Euler solutions
+    ``(a, b, c)`` and ``(a + 180, 180 - b, c + 180)`` whose missing angles are
+    zero (mod 360), then the present angles made continuous.  None if the
+    rotations need the missing axes (beyond ``tol`` degrees)."""
+    e = quat_to_euler(q, order, degrees=True)
+    alt = e + np.array([180.0, 0.0, 180.0])
+    alt[:, 1] = 180.0 - e[:, 1]
+    cost_e = np.abs(_wrap180(e[:, k:])).sum(axis=-1)
+    cost_alt = np.abs(_wrap180(alt[:, k:])).sum(axis=-1)
+    pick = np.where((cost_alt < cost_e)[:, None], alt, e)
+    if np.abs(_wrap180(pick[:, k:])).max() > tol:
+        return None
+    out = np.zeros_like(pick)
+    out[:, :k] = np.unwrap(_wrap180(pick[:, :k]), period=360.0, axis=0)
+    return out
 
 
 def _check_finite_motion(motion: Motion, path: Path) -> None:

@@ -103,6 +103,7 @@ MAX_ABS_VALUE = 1e9
 CHUNK_BYTES = 4 << 20
 
 _NUMBER_RE = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NUMBER_PREFIX_RE = re.compile(r"[+-]?[0-9]*\.?[0-9]*(?:[eE][+-]?[0-9]*)?")
 _MOTION_RE = re.compile(rb"(?im)^[ \t]*MOTION[ \t]*\r?$")
 _FRAMES_RE = re.compile(r"(?i)^\s*frames\s*:\s*(.*?)\s*$")
 _FRAME_TIME_RE = re.compile(r"(?i)^\s*frame\s*time\s*:\s*(.*?)\s*$")
@@ -348,6 +349,14 @@ def _parse_hierarchy(text: str, path: Path) -> list[_Joint]:
                 raise InputError(f"{_what(cur)} has channels; expected none in an End Site",
                                  path=path, line=line)
             cur.channels = chans
+        elif key in ("JOINT", "END", "ENDSITE") and not cur.end_site and (cur.offset is None or cur.channels is None):
+            missing = "OFFSET" if cur.offset is None else "CHANNELS"
+            expect = "'OFFSET x y z'" if cur.offset is None else "'CHANNELS n ...'"
+            raise InputError(
+                f"{_what(cur)} (line {cur.line}) has no {missing} before its children; expected {expect}",
+                path=path,
+                line=line,
+            )
         elif key == "JOINT":
             if cur.end_site:
                 raise InputError(f"JOINT inside {_what(cur)}; expected 'OFFSET' or '}}'", path=path, line=line)
@@ -365,15 +374,17 @@ def _parse_hierarchy(text: str, path: Path) -> list[_Joint]:
             if t != "{":
                 raise InputError(f"expected '{{' after End Site, found {_show(t)}", path=path, line=ln)
             cur.children += 1
-            joints.append(_Joint(name="", parent=stack[-1], line=line, end_site=True, channels=[]))
+            joints.append(_Joint(name="", parent=stack[-1], line=line, end_site=True))
             stack.append(len(joints) - 1)
         elif tok == "}":
             if cur.offset is None:
                 raise InputError(f"{_what(cur)} (line {cur.line}) has no OFFSET; expected 'OFFSET x y z'",
                                  path=path, line=line)
             if cur.channels is None:
-                raise InputError(f"{_what(cur)} (line {cur.line}) has no CHANNELS; expected "
-                                 "'CHANNELS n ...'", path=path, line=line)
+                if not cur.end_site:
+                    raise InputError(f"{_what(cur)} (line {cur.line}) has no CHANNELS; expected "
+                                     "'CHANNELS n ...'", path=path, line=line)
+                cur.channels = []
             stack.pop()
         elif tok == "{":
             raise InputError(f"unbalanced braces: unexpected '{{' in {_what(cur)}", path=path, line=line)
@@ -664,8 +675,15 @@ def _parse_chunk_exact(
             continue
         line = first_line + i
         frame = first_frame + len(rows)
-        if len(toks) < C and i == last_nonempty:
-            _check_tokens(toks, line, path, labels, frame)
+        cut_short = len(toks) < C or (
+            len(toks) == C and i == len(lines) - 1 and not _NUMBER_RE.fullmatch(toks[-1].decode("ascii", "replace"))
+        )
+        if cut_short and i == last_nonempty:
+            # Possibly a file cut short: the last token may be cut too.
+            _check_tokens(toks[:-1], line, path, labels, frame)
+            last = toks[-1].decode("ascii", errors="replace")
+            if not _NUMBER_PREFIX_RE.fullmatch(last):
+                _check_tokens(toks, line, path, labels, frame)  # raises
             pending = _RowError(line, len(toks))
             break
         if len(toks) != C:

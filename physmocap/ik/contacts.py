@@ -76,6 +76,7 @@ __all__ = [
     "ContactOptions",
     "Contacts",
     "ContactDetector",
+    "ContactStream",
     "FloorPlane",
     "detect_contacts",
     "detect_point_contacts",
@@ -131,9 +132,9 @@ class ContactOptions:
         max_floor_slope: A steeper fitted slope (rise over run) is dropped with a warning.
     """
 
-    heel_height_enter: float = 0.01
+    heel_height_enter: float = 0.025
     heel_height_exit: float = 0.03
-    toe_height_enter: float = 0.01
+    toe_height_enter: float = 0.015
     toe_height_exit: float = 0.04
     speed_enter: float = 0.30
     heel_speed_exit: float = 0.60
@@ -430,6 +431,52 @@ class ContactDetector:
             self.count[i] = 0
 
 
+class ContactStream:
+    """Streaming contact detection from foot point positions, one frame at a time.
+
+    Causal: frame ``t``'s labels use frames ``t - 2k .. t`` only (``k`` the
+    half speed window), so the look-behind is bounded.  The floor must be
+    known beforehand (e.g. :func:`estimate_floor` on a calibration clip or the
+    first seconds); labels lag the batch labels of :func:`detect_contacts` by
+    about ``k`` frames plus ``min_contact`` (onsets) or ``min_gap`` (ends).
+
+    Args:
+        points: Point names (``left_heel``, ``left_ball``, ``left_toe_end`` ...).
+        fps: Frame rate.
+        floor: The floor plane with each point's stance level.
+        options: Thresholds.
+    """
+
+    def __init__(self, points: Sequence[str], fps: float, floor: FloorPlane, options: ContactOptions | None = None) -> None:
+        self.options = opt = options or ContactOptions()
+        self.points = tuple(points)
+        self.fps = float(fps)
+        self.floor = floor
+        self.levels = np.array([floor.levels.get(p, 0.0) for p in self.points])
+        self.detector = ContactDetector([_kind(p) for p in self.points], fps, opt)
+        self.k2 = 2 * _half_window(fps, opt.speed_window)
+        self.history: list[np.ndarray] = []
+
+    def step(self, positions: np.ndarray) -> dict[str, bool]:
+        """Positions ``(P, 3)`` of this frame's points in; foot labels out
+        (:data:`CONTACT_LABELS` -> bool; a toe is on if its ball or toe end is)."""
+        x = np.asarray(positions, dtype=float).reshape(len(self.points), 3)
+        self.history.append(x)
+        if len(self.history) > self.k2 + 1:
+            self.history.pop(0)
+        old = self.history[0]
+        span = max(len(self.history) - 1, 1)
+        vel = (x - old) * (self.fps / span)
+        h = self.floor.heights(x) - self.levels
+        state = self.detector.step(h, np.linalg.norm(vel[:, :2], axis=1), vel[:, 2])
+        on = dict(zip(self.points, state))
+        out = {}
+        for label, pts in LABEL_POINTS.items():
+            present = [p for p in pts if p in on] or [label.split("_", 1)[0] + "_heel"]
+            out[label] = bool(any(on.get(p, False) for p in present))
+        return out
+
+
 # ---------------------------------------------------------------------------
 # Contacts
 # ---------------------------------------------------------------------------
@@ -680,9 +727,9 @@ def load_contact_csv(path: str | os.PathLike, num_frames: int, fps: float | None
             seen.add(name)
     if header is None:
         raise InputError("empty contact label file: expected a header 'point,start,end' and frame ranges", path=p)
-    for name in CONTACT_LABELS:
-        if name not in seen:
-            warn(f"{p}: no ranges for {name}; it is never in contact")
+    unlabelled = [n for n in CONTACT_LABELS if n not in seen]
+    if unlabelled:
+        warn(f"{p}: no ranges for {', '.join(unlabelled)}; never in contact")
     return Contacts(labels=labels, fps=fps, source=str(p), groups={n: (n,) for n in CONTACT_LABELS})
 
 

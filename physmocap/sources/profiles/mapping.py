@@ -67,15 +67,25 @@ class _Source:
         return js[0] if js else None
 
 
-def match_profile(src: _Source, profile: Profile) -> dict[str, int]:
+def match_profile(
+    src: _Source,
+    profile: Profile,
+    preset: Mapping[str, int] | None = None,
+    skip: Iterable[str] = (),
+) -> dict[str, int]:
     """Canonical joint -> joint index from ``profile``'s names (no rules applied).
 
     Canonical joints are filled in canonical order; a source joint is given to
-    the first canonical joint that names it.
+    the first canonical joint that names it.  ``preset`` joints (the user's)
+    are kept and their source joints are not given to others; ``skip``
+    canonical joints are left out.
     """
-    out: dict[str, int] = {}
-    taken: set[int] = set()
+    out: dict[str, int] = dict(preset or {})
+    taken: set[int] = set(out.values())
+    skipped = set(skip)
     for c in CANONICAL_NAMES:
+        if c in out or c in skipped:
+            continue
         for cand in profile.joints.get(c, ()):
             js = src.by_key.get(normalize_name(cand), [])
             j = next((j for j in js if j not in taken), None)
@@ -256,16 +266,16 @@ def map_skeleton(
     if user and user["joints"]:
         given, off = _resolve_user(src, user)
         fixed = set(given) | off
-        for c in off:
-            explicit.pop(c, None)
-        taken = {j: c for c, j in explicit.items()}
-        for c, j in given.items():
-            if j in taken and taken[j] != c:
-                explicit.pop(taken[j], None)
-            explicit[c] = j
+        if label in PROFILES:
+            # the profile fills the rest around the user's joints
+            explicit = match_profile(src, PROFILES[label], preset=given, skip=off)
+        else:
+            used = set(given.values())
+            explicit = {c: j for c, j in explicit.items() if c not in fixed and j not in used}
+            explicit.update(given)
         based_on = label
         label = "custom"
-        notes = notes + [f"mapping file {user['path'] or '(dict)'} starting from profile {based_on}"]
+        notes = notes + [f"mapping {user['path'] or '(dict)'} applied over profile {based_on}"]
     idx, derived, rule_notes = complete(src.view, explicit, fixed)
     jmap = JointMap(
         profile=label,
@@ -278,10 +288,10 @@ def map_skeleton(
     )
     missing = jmap.missing(required)
     if missing:
-        mapped_by = (
-            f"profile {label}" if label not in ("custom", "topology", "none") else
-            ("the skeleton's shape" if label == "topology" else f"the mapping ({label})")
-        )
+        what = {"topology": "the skeleton's shape", "none": "no profile"}
+        mapped_by = what.get(based_on or label, f"profile {based_on or label}")
+        if based_on:
+            mapped_by += f" with the mapping {user['path'] or '(dict)'}" if user else ""
         raise MappingError(
             f"cannot map the required canonical joint(s) {', '.join(missing)} "
             f"(tried {mapped_by}). The skeleton's joints are: {_offered(src)}. "

@@ -27,7 +27,8 @@ mostly vertical segment, the knee is the point halfway (by length) between
 them, then the ball of the foot and the toe tip.  Arms: the shoulder, elbow
 and wrist are the three points whose segment lengths best match human
 proportions (forearm/upper arm 0.785, shoulder-to-midline/upper arm 0.70,
-hand/upper arm 0.58, from the segment lengths as fractions of height in
+hand/upper arm 0.58 (a wrist ending the chain costs as much as a hand off by a
+factor two), from the segment lengths as fractions of height in
 Winter, *Biomechanics and Motor Control of Human Movement*, fig. 4.1, after
 Drillis and Contini 1966); a point before the shoulder is the clavicle, and
 the point nearest halfway along the hand is the hand end.
@@ -50,6 +51,8 @@ __all__ = ["topology_map", "ARM_RATIOS"]
 #: forearm 0.146 H, hand 0.108 H, shoulder width 0.259 H).
 ARM_RATIOS = {"forearm": 0.146 / 0.186, "shoulder_offset": 0.259 / 2 / 0.186, "hand": 0.108 / 0.186}
 _ARM_WEIGHTS = {"forearm": 1.0, "shoulder_offset": 0.5, "hand": 0.25}
+#: Hand term of a wrist with nothing beyond it (as if the hand were off by 2x).
+NO_HAND_COST = math.log(2.0) ** 2
 #: The hip is the last leg joint closer to the pelvis than this fraction of the
 #: leg's height (skips helpers such as Daz's lButtock between pelvis and thigh).
 HIP_REACH = 0.25
@@ -143,7 +146,9 @@ def _arm(v: SkeletonView, u: int, leaf: int, lateral: np.ndarray) -> dict[str, i
         cost = (
             _ARM_WEIGHTS["forearm"] * _log_sq(fa / ua, ARM_RATIOS["forearm"])
             + _ARM_WEIGHTS["shoulder_offset"] * _log_sq(off / ua, ARM_RATIOS["shoulder_offset"])
-            + _ARM_WEIGHTS["hand"] * _log_sq(hand / ua, ARM_RATIOS["hand"])
+            + _ARM_WEIGHTS["hand"] * (
+                _log_sq(hand / ua, ARM_RATIOS["hand"]) if hand > v.eps else NO_HAND_COST
+            )
         )
         if cost < best_cost - 1e-12:
             best, best_cost = (i, j, k), cost

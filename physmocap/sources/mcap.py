@@ -133,6 +133,9 @@ def _describe_channels(raw: _Raw) -> str:
 
 
 # --- JSON helpers -------------------------------------------------------------------
+_NUMS = (int, float)  # exact types: bool is excluded
+
+
 def _reject_constant(name: str) -> float:
     raise ValueError(f"non-finite number {name}")
 
@@ -170,6 +173,10 @@ class _Decoder:
 
     def vec3(self, k: int, obj: Any, key: str) -> list[float]:
         v = obj.get(key, {}) if isinstance(obj, dict) else None
+        if type(v) is dict and len(v) == 3:  # fast path: x, y, z all plain finite numbers
+            x, y, z = v.get("x"), v.get("y"), v.get("z")
+            if type(x) in _NUMS and type(y) in _NUMS and type(z) in _NUMS and math.isfinite(x + y + z):
+                return [float(x), float(y), float(z)]
         if not isinstance(v, dict):
             raise self.fail(k, f"field {key!r} must be an object with x, y, z")
         return [self.number(k, v, a, 0.0) for a in "xyz"]
@@ -180,7 +187,9 @@ class _Decoder:
             return [0.0, 0.0, 0.0, 1.0]
         if not isinstance(v, dict):
             raise self.fail(k, f"field {key!r} must be an object with x, y, z, w")
-        q = [self.number(k, v, a, 0.0) for a in "xyz"] + [self.number(k, v, "w", 1.0)]
+        q = [v.get("x"), v.get("y"), v.get("z"), v.get("w")]
+        if not (all(type(c) in _NUMS for c in q) and math.isfinite(sum(q))):  # type: ignore[arg-type]
+            q = [self.number(k, v, a, 0.0) for a in "xyz"] + [self.number(k, v, "w", 1.0)]
         n = math.sqrt(sum(c * c for c in q))
         if n < 1e-6:
             raise self.fail(k, f"field {key!r} is not a rotation (zero quaternion)")
@@ -192,6 +201,10 @@ class _Decoder:
         ts = obj.get("timestamp") if isinstance(obj, dict) else None
         if ts is None:
             return log_time
+        if type(ts) is dict and type(ts.get("sec")) is int and type(ts.get("nsec")) is int:
+            t = ts["sec"] * 1_000_000_000 + ts["nsec"]
+            if ts["sec"] >= 0 and ts["nsec"] >= 0:
+                return t if t > 0 else log_time
         if not isinstance(ts, dict):
             raise self.fail(k, "field 'timestamp' must be an object with sec and nsec")
         sec, nsec = ts.get("sec", 0), ts.get("nsec", 0)

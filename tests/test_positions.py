@@ -83,6 +83,12 @@ def test_wide_csv_standing_body(tmp_path):
     assert 1.55 < np.median(pos["head"][:, 2]) < 1.75
     assert 0.03 < np.median(pos["left_foot"][:, 2]) < 0.1
     assert m.floor_height() == 0.0
+    # the mapping used (with the synthesised pelvis) maps the motion for the retargeter
+    from physmocap.sources.profiles import map_skeleton
+
+    jm = map_skeleton(m, mapping=m.meta["source_mapping"])
+    assert m.skeleton.names[jm.indices["pelvis"]] == "pelvis"
+    assert m.skeleton.names[jm.indices["left_ankle"]] == "left_foot"
     # pelvis synthesised at the midpoint of the hips
     np.testing.assert_allclose(pos["pelvis"], 0.5 * (pos["left_hip"] + pos["right_hip"]), atol=1e-12)
     # right-handed body: facing the camera (world +Y after conversion), left is -X

@@ -879,6 +879,13 @@ def positional_motion(
     }
     if floor_known:
         meta["floor_z"] = 0.0
+    if canon_o:
+        # The mapping used here, incl. synthesised joints, as a mapping dict for
+        # physmocap.sources.profiles.map_skeleton(motion, mapping=...).
+        meta["source_mapping"] = {
+            "profile": profile_name if profile_name not in (None, "custom") else "none",
+            "joints": dict(meta["tracker"]["joint_map"]),
+        }
     return Motion(
         skeleton=skeleton,
         fps=float(fps),

@@ -72,8 +72,9 @@ class TrackerStream:
         return float(n[0]), float(n[1]), float(n[2]), d * scale
 
 
-def _tracker_to_source(motion: Motion, layout: tuple[str, ...]) -> list[int]:
-    """For each tracker joint, the source joint at the same canonical joint."""
+def _tracker_to_source(motion: Motion, layout: tuple[str, ...]) -> tuple[dict[int, int], dict[str, int]]:
+    """Tracker joint index -> the source joint at the same canonical joint (for
+    the tracker joints that have one); and the tracker's canonical map."""
     from .profiles import map_skeleton
 
     J = len(layout)
@@ -81,13 +82,12 @@ def _tracker_to_source(motion: Motion, layout: tuple[str, ...]) -> list[int]:
     tracker_map = map_skeleton(probe)
     source_map = map_skeleton(motion)
     by_tracker = {j: c for c, j in tracker_map.indices.items()}
-    out = []
-    for j, name in enumerate(layout):
+    out: dict[int, int] = {}
+    for j in range(J):
         c = by_tracker.get(j)
-        if c is None or c not in source_map.indices:
-            raise ValueError(f"tracker joint {name!r} has no counterpart in {motion.source}")
-        out.append(int(source_map.indices[c]))
-    return out
+        if c is not None and c in source_map.indices:
+            out[j] = int(source_map.indices[c])
+    return out, dict(tracker_map.indices)
 
 
 def tracker_stream(
@@ -118,7 +118,8 @@ def tracker_stream(
 
     Args:
         motion: A solved clip (metres, Z-up), e.g. a BVH.
-        layout: Tracker joint set (:data:`physmocap.sources.positions.TRACKER_LAYOUTS`).
+        layout: Tracker joint set (:data:`physmocap.sources.positions.TRACKER_LAYOUTS`);
+            tracker joints with no counterpart in ``motion`` are left out.
         fps: Tracker frame rate (the clip is resampled).
         units: ``"mm"`` (OpenNI, Azure Kinect) or ``"m"`` (Kinect v2).
         mirrored: Camera-frame convention (:mod:`physmocap.sources.sensor`).
@@ -129,8 +130,14 @@ def tracker_stream(
         low_confidence: Fraction of samples reported at confidence 0.5 (inferred).
         seed: Random seed.
     """
-    names = TRACKER_LAYOUTS[layout]
-    src_idx = _tracker_to_source(motion, names)
+    layout_names = TRACKER_LAYOUTS[layout]
+    pairs, canon = _tracker_to_source(motion, layout_names)
+    keep = sorted(pairs)
+    names = tuple(layout_names[j] for j in keep)
+    src_idx = [pairs[j] for j in keep]
+    if "left_hip" not in canon or "right_hip" not in canon or canon["left_hip"] not in pairs:
+        raise ValueError(f"the {layout} layout has no hips to place the camera by")
+    lh, rh = keep.index(canon["left_hip"]), keep.index(canon["right_hip"])
     m = motion.resample(fps) if abs(motion.fps - fps) > 1e-9 else motion
     world = m.world_positions()
     floor = motion.floor_height()
@@ -140,12 +147,11 @@ def tracker_stream(
     rng = np.random.default_rng(seed)
 
     # camera placement
-    pelvis = truth[:, [names.index(n) for n in names if "hip" in n]].mean(axis=1)
+    pelvis = 0.5 * (truth[:, lh] + truth[:, rh])
     travel = pelvis[-1, :2] - pelvis[0, :2]
     if np.linalg.norm(travel) > 0.5:
         ahead = travel / np.linalg.norm(travel)
     else:
-        lh, rh = names.index("left_hip") if "left_hip" in names else 0, names.index("right_hip") if "right_hip" in names else 1
         lat = truth[0, lh, :2] - truth[0, rh, :2]
         ahead = np.array([lat[1], -lat[0]]) / max(np.linalg.norm(lat), 1e-9)  # facing = left x up
     yaw = np.radians(camera_yaw_deg)

@@ -146,6 +146,8 @@ def facing_lateral(pos: np.ndarray, jm: JointMap, names) -> float:
 def assert_sides(jm: JointMap, skel: Skeleton, pos: np.ndarray | None = None) -> None:
     """Left canonical joints come from the source's left joints, by name and by geometry."""
     for c, j in jm.indices.items():
+        if skel.end_site[j]:  # end sites are named after their parent joint
+            j = int(skel.parents[j])
         n = normalize_name(skel.names[j])
         if c.startswith("left_"):
             assert re.search(r"left|^l(?!eg)|_l$|l$", n) and "right" not in n, (c, skel.names[j])
@@ -416,9 +418,15 @@ def test_bone_local_rest_poses_use_an_animated_frame(make, profile, expected):
     assert names_of(jm) == expected
     world = motion.world_positions()
     assert_sides(jm, motion.skeleton, world[0])
-    # the names work from the skeleton alone too (the geometry rules need the frame)
-    assert {c: jm.indices[c] for c in REQUIRED_JOINTS} == {
-        c: map_skeleton(motion.skeleton, required=()).indices.get(c) for c in REQUIRED_JOINTS}
+    # the names work from the skeleton alone too, without a false left/right alarm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PhysmocapWarning)
+        alone = map_skeleton(motion.skeleton)
+    assert {c: jm.indices[c] for c in REQUIRED_JOINTS} == {c: alone.indices[c] for c in REQUIRED_JOINTS}
+    assert alone.pose == "rest pose"
+    # but the shape cannot be read from that rest pose
+    with pytest.raises(MappingError, match="tried the skeleton's shape"):
+        map_skeleton(motion.skeleton, profile="topology")
     # and the shape, read from the frame, agrees on the limbs
     topo = map_skeleton(Motion(
         Skeleton(tuple(f"n{k}" for k in range(motion.skeleton.num_joints)), motion.skeleton.parents,
@@ -659,6 +667,38 @@ def test_tracker_skeletons(tracker, facing):
         assert np.all(d @ left > 0.1), stem
 
 
+def test_tracker_without_hierarchy_and_with_occlusions():
+    """A positional file may give no parents and lose joints in some frames."""
+    motion = tracker_motion(kinect_v2_joints(), 75.0, frames=9)
+    P = motion.positions.copy()
+    P[::2, 5:9] = np.nan  # left arm occluded in every other frame
+    flat = Skeleton(motion.skeleton.names, np.full(motion.skeleton.num_joints, -1),
+                    np.zeros((motion.skeleton.num_joints, 3)))
+    jm = map_skeleton(Motion(flat, 30.0, positions=P))
+    assert jm.profile == "kinect_v2"
+    assert names_of(jm) == TRACKERS["kinect_v2"][1]
+
+
+def test_unreal_mannequin():
+    arm = chain([("clavicle_l", (3, 15, 0)), ("upperarm_l", (15, 0, 0)),
+                 ("lowerarm_l", (28, 0, 0), ), ("hand_l", (26, 0, 0)), ("middle_01_l", (10, 0, 0))], (8, 0, 0))
+    arm = (arm[0], arm[1], arm[2] + [("upperarm_twist_01_l", (0, 0, 0), [])])
+    leg = chain([("thigh_l", (9, -2, 0)), ("calf_l", (0, -43, 0)), ("foot_l", (0, -42, 0)),
+                 ("ball_l", (0, -6, 13))], (0, 0, 6))
+    top = ("spine_03", (0, 13, 0), [chain([("neck_01", (0, 14, 0)), ("head", (0, 10, 0))], (0, 18, 0)),
+                                    arm, mirror(arm)])
+    ue = build(("root", (0, 0, 0), [("pelvis", (0, 97, 0), [
+        chain([("spine_01", (0, 10, 0)), ("spine_02", (0, 12, 0))], [top]), leg, mirror(leg)]),
+        ("ik_foot_root", (0, 0, 0), [])]))
+    jm = map_skeleton(ue)
+    assert jm.profile == "unreal"
+    n = names_of(jm)
+    assert (n["pelvis"], n["neck"], n["left_shoulder"], n["right_elbow"], n["left_hand_end"],
+            n["right_knee"], n["left_toe"]) == ("pelvis", "neck_01", "upperarm_l", "lowerarm_r",
+                                                "middle_01_l", "calf_r", "ball_l")
+    assert_sides(jm, ue, ue.rest_positions())
+
+
 def test_openni_pelvis_is_the_midpoint_of_the_hips():
     motion = tracker_motion(openni_joints(), 0.0)
     jm = map_skeleton(motion)
@@ -786,10 +826,11 @@ def test_emitted_toml_round_trips(tmp_path):
     [
         ("[joints]\nleft_wrist = \n", InputError, r"not valid TOML", 2),
         ('[joints]\nneck = "Neck"\nleft_writs = "LeftHand"\n', MappingError,
-         r"entry 'left_writs' is not a canonical joint; did you mean left_wrist", 3),
+         r"entry 'left_writs' is not a canonical joint \(did you mean left_wrist[ )].*\. Canonical", 3),
         ('[joints]\nleft_wrist = 3\n', MappingError, r"entry 'left_wrist' = 3: expected a source joint name", 2),
         ('[joints]\nleft_wrist = "LeftHnd"\n', MappingError,
-         r"entry left_wrist = 'LeftHnd': the skeleton has no such joint; did you mean 'LeftHand'", 2),
+         r"entry left_wrist = 'LeftHnd': the skeleton has no such joint \(did you mean 'LeftHand'[ )].*\. "
+         r"Its joints: Hips, LHipJoint", 2),
         ('profile = "cmuu"\n', MappingError, r"entry 'profile' = 'cmuu': expected one of", 1),
         ('[joints]\nleft_wrist = "LeftHand"\nright_wrist = "LeftHand"\n', MappingError,
          r"already mapped to left_wrist", 3),

@@ -17,7 +17,7 @@ How a mapping is made (:func:`map_skeleton`):
 1. **Profile.**  A built-in naming convention (:data:`PROFILES`: CMU, CMU
    ASF, OptiTrack, Vicon, MotionBuilder, Mixamo, LAFAN1, Perception Neuron,
    PyMO, Xsens, MocapBank, Xsens MVNX, Biovision, Bandai Namco, Daz, Biped,
-   Unity, SMPL, OpenNI, Kinect v1/v2, Azure Kinect, generic), chosen by the
+   Unity, Unreal, SMPL, OpenNI, Kinect v1/v2, Azure Kinect, generic), chosen by the
    caller or detected from the names (:mod:`.mapping`); names are compared
    ignoring case, separators and tool prefixes (:mod:`.names`).
 2. **Shape**, when no profile knows the names (:mod:`.topology`).

@@ -103,9 +103,9 @@ def check_mapping(
     for key, value in entries.items():
         if key not in CANONICAL_NAMES:
             close = difflib.get_close_matches(str(key), CANONICAL_NAMES, n=3)
-            hint = f"; did you mean {' or '.join(close)}?" if close else ""
+            hint = f" (did you mean {' or '.join(close)}?)" if close else ""
             raise fail(
-                f"entry {key!r} is not a canonical joint{hint} Canonical joints: "
+                f"entry {key!r} is not a canonical joint{hint}. Canonical joints: "
                 + ", ".join(CANONICAL_NAMES),
                 key,
             )

@@ -31,7 +31,7 @@ from .jointmap import JointMap
 from .mapfile import UserMapping, check_mapping, load_mapping_file
 from .names import normalize_name, skeleton_keys
 from .rules import complete, side_check
-from .structure import SkeletonView, standing_pose
+from .structure import SkeletonView, is_upright, standing_pose
 from .tables import PROFILES, Profile, profile_names
 from .topology import topology_map
 
@@ -182,9 +182,9 @@ def _resolve_user(src: _Source, user: UserMapping) -> tuple[dict[str, int], set[
         if j is None:
             wanted = " or ".join(repr(x) for x in cands)
             close = difflib.get_close_matches(cands[0], [names[k] for k in src.body], n=3)
-            hint = f"; did you mean {' or '.join(repr(x) for x in close)}?" if close else ""
+            hint = f" (did you mean {' or '.join(repr(x) for x in close)}?)" if close else ""
             raise MappingError(
-                f"entry {c} = {wanted}: the skeleton has no such joint{hint} "
+                f"entry {c} = {wanted}: the skeleton has no such joint{hint}. "
                 f"Its joints: {_offered(src)}",
                 path=user["path"],
                 line=line,
@@ -300,7 +300,7 @@ def map_skeleton(
             "(physmocap inspect FILE --emit-map writes a starting file)",
             path=where,
         )
-    msg = side_check(src.view, idx)
+    msg = side_check(src.view, idx) if is_upright(src.view.pose) else None
     if msg:
         warn(f"{where}: {msg}" if where else msg)
     return jmap

@@ -40,7 +40,8 @@ def standing_pose(obj: Skeleton | Motion) -> tuple[np.ndarray, str]:
     A :class:`~physmocap.motion.Skeleton` gives its rest pose.  A
     :class:`~physmocap.motion.Motion` gives its rest pose if upright, else the
     first upright one of up to 9 evenly spaced frames (positional motions:
-    the frame with the most finite joints among them), else the rest pose.
+    joints missing in a frame are filled with their median over those frames),
+    else the rest pose.
     """
     if isinstance(obj, Skeleton):
         return obj.rest_positions(), "rest pose"
@@ -60,6 +61,12 @@ def standing_pose(obj: Skeleton | Motion) -> tuple[np.ndarray, str]:
     else:
         assert obj.positions is not None
         pos = obj.positions[frames]
+    if not obj.is_rotational:
+        # occluded joints: fill from the other sampled frames
+        pos = np.array(pos, dtype=float)
+        ok = np.all(np.isfinite(pos), axis=2)  # (S, J)
+        for j in np.flatnonzero(ok.any(axis=0) & ~ok.all(axis=0)):
+            pos[~ok[:, j], j] = np.median(pos[ok[:, j], j], axis=0)
     finite = np.all(np.isfinite(pos), axis=2).sum(axis=1)
     order = np.argsort(-finite, kind="stable")
     for k in order:

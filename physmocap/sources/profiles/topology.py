@@ -43,7 +43,7 @@ import math
 
 import numpy as np
 
-from .structure import SkeletonView
+from .structure import SkeletonView, is_upright
 
 __all__ = ["topology_map", "ARM_RATIOS"]
 
@@ -172,6 +172,9 @@ def topology_map(v: SkeletonView) -> tuple[dict[str, int], list[str]]:
     cannot be found are absent; the notes say why.
     """
     notes: list[str] = []
+    if not is_upright(v.pose):
+        return {}, ["topology: the skeleton's pose is not a standing body (pass the Motion, "
+                    "not its Skeleton, so an animated frame can be used)"]
     found = _feet(v)
     if found is None:
         return {}, ["topology: no two leg chains reach the floor in the pose"]

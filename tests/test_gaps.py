@@ -118,3 +118,31 @@ def test_property_always_finite_and_valid_samples_untouched(missing, max_gap, se
 def test_rejects_negative_span():
     with pytest.raises(ValueError):
         fill_gaps(_ramp(), None, NAMES, max_gap_frames=-1)
+
+
+def test_causal_filler_holds_masks_and_holds_lost_frames():
+    from physmocap.sources.gaps import CausalGapFiller
+
+    x = _ramp(10)
+    y = x.copy()
+    y[3, 1] = np.nan  # one joint lost
+    y[6] = np.nan  # whole frame lost
+    y[:2, 2] = np.nan  # not seen yet: sits on its parent
+    conf = np.full((10, 3), 0.8)
+    f = CausalGapFiller(3, parents=np.array([-1, 0, 1]))
+    out = [f.step(y[i], conf[i]) for i in range(10)]
+    P = np.array([o[0] for o in out])
+    C = np.array([o[1] for o in out])
+    assert np.all(np.isfinite(P))
+    np.testing.assert_array_equal(P[3, 1], x[2, 1])
+    assert C[3, 1] == 0.0 and C[4, 1] == 0.8
+    np.testing.assert_array_equal(P[6], P[5])
+    np.testing.assert_array_equal(C[6], C[5])
+    np.testing.assert_array_equal(P[:2, 2], P[:2, 1])
+    assert (C[:2, 2] == 0).all() and f.lost_frames == 1
+    # without gaps it is the identity, like the batch policy
+    g = CausalGapFiller(3)
+    for i in range(10):
+        p, c = g.step(x[i])
+        np.testing.assert_array_equal(p, x[i])
+        assert (c == 1).all()

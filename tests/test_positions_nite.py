@@ -113,3 +113,16 @@ def test_given_floor_plane_matches_the_estimate(stream, tmp_path):
     dz = (given.positions[:, idx, 2] - stream.truth[..., 2])[ok]
     assert abs(np.median(dz)) < 0.005
     assert np.abs(np.median(est.positions[..., 2] - given.positions[..., 2])) < 0.03
+
+
+def test_kinect_v2_stream_in_metres(walk, tmp_path):
+    """The 25-joint Kinect v2 layout (metres, has its own pelvis): no synthesis needed."""
+    s = tracker_stream(walk, layout="kinect_v2", units="m", seed=4)
+    m = read_positions(write_stream_jsonl(s, tmp_path / "k.jsonl"))
+    assert m.units == "m" and m.meta["tracker"]["synthesized"] == []
+    assert m.skeleton.names[0] == "SpineBase" and m.meta["tracker"]["joint_map"]["left_toe"] == "FootLeft"
+    idx = [m.skeleton.index(n) for n in s.names]
+    ok = m.confidence[:, idx] > 0
+    dz = (m.positions[:, idx, 2] - s.truth[..., 2])[ok]
+    assert abs(np.median(dz)) < 0.04
+    assert _align_xy(m.positions[:, idx][ok], s.truth[ok]) < 0.03

@@ -24,6 +24,10 @@ confidence 0.  The result has finite positions everywhere and a confidence
 that is 0 exactly where a joint's task must be off.  Every run is listed in
 :attr:`GapReport.gaps` (JSON-serialisable; frames are 0-based, ``end``
 inclusive); runs of lost frames are listed once with ``joint`` ``"*"``.
+
+:class:`CausalGapFiller` applies the same policy frame by frame for live
+streams, where no later frame is known yet: every gap is handled as a long
+one (held and masked), and lost frames hold the previous pose.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["GapReport", "fill_gaps", "find_runs", "invalid_samples"]
+__all__ = ["GapReport", "fill_gaps", "find_runs", "invalid_samples", "CausalGapFiller"]
 
 
 @dataclass
@@ -184,3 +188,57 @@ def fill_gaps(
     order = {str(n): i for i, n in enumerate(names)}
     gaps.sort(key=lambda g: (g["start"], order.get(g["joint"], -1), g["end"]))
     return GapReport(positions=pos, confidence=conf, lost=lost, gaps=gaps)
+
+
+class CausalGapFiller:
+    """Frame-by-frame gap policy for live streams (no look-ahead, no latency).
+
+    :meth:`step` takes one frame and returns finite positions and confidences:
+    a valid sample passes through; an invalid one holds the joint's last
+    output position with confidence 0 (its task off); a lost frame (no valid
+    joint) holds the whole previous output pose, confidences included; a
+    joint not seen yet sits on its parent's output (or the mean of the valid
+    joints) with confidence 0.
+
+    Args:
+        num_joints: ``J``.
+        min_confidence: Samples below this confidence are invalid.
+        parents: ``(J,)`` parent indices (parents first), or None.
+    """
+
+    def __init__(self, num_joints: int, min_confidence: float = 0.5, parents: np.ndarray | None = None) -> None:
+        self.num_joints = int(num_joints)
+        self.min_confidence = float(min_confidence)
+        self.parents = None if parents is None else np.asarray(parents, dtype=np.int64)
+        self.reset()
+
+    def reset(self) -> None:
+        self._pos: np.ndarray | None = None
+        self._conf: np.ndarray | None = None
+        self._seen = np.zeros(self.num_joints, dtype=bool)
+        self.lost_frames = 0
+
+    def step(self, positions: np.ndarray, confidence: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """One frame: ``positions (J, 3)`` (NaN where lost), ``confidence (J,)`` or None."""
+        pos = np.asarray(positions, dtype=float).reshape(self.num_joints, 3)
+        conf = None if confidence is None else np.asarray(confidence, dtype=float).reshape(self.num_joints)
+        bad = invalid_samples(pos[None], None if conf is None else conf[None], self.min_confidence)[0]
+        c_in = np.ones(self.num_joints) if conf is None else np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0)
+        if bad.all() and self._pos is not None:
+            self.lost_frames += 1
+            assert self._conf is not None
+            return self._pos.copy(), self._conf.copy()
+        out = np.where(bad[:, None], 0.0, pos)
+        out_c = np.where(bad, 0.0, c_in)
+        self._seen |= ~bad
+        good = ~bad
+        mean = out[good].mean(axis=0) if good.any() else np.zeros(3)
+        for j in np.flatnonzero(bad):
+            if self._pos is not None and self._seen[j]:
+                out[j] = self._pos[j]
+            elif self.parents is not None and self.parents[j] >= 0:
+                out[j] = out[self.parents[j]]
+            else:
+                out[j] = mean
+        self._pos, self._conf = out, out_c
+        return out.copy(), out_c.copy()

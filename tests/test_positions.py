@@ -8,6 +8,9 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
 from physmocap.errors import InputError, OptionError
 from physmocap.sources import load_motion
@@ -302,3 +305,27 @@ def test_mapping_file_for_an_unknown_tracker(tmp_path):
     msgs = [str(w.message) for w in rec]
     assert any("not recognised" in s for s in msgs) and any("no feet mapped" in s for s in msgs)
     assert set(bare.skeleton.parents.tolist()) == {-1} and "floor_z" not in bare.meta
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    hnp.arrays(bool, (12, 15), elements=st.booleans()),
+    st.sampled_from([0.0, 0.1, 0.5]),
+    st.booleans(),
+)
+def test_property_nothing_non_finite_reaches_the_motion(missing, max_gap, smooth):
+    import warnings
+
+    pos = _standing(12)
+    pos[missing] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = positional_motion(NITE, pos, None, 30.0, "mem", units="mm", max_gap=max_gap, smooth=smooth)
+    assert np.all(np.isfinite(m.positions)) and np.all(np.isfinite(m.confidence))
+    assert np.all((m.confidence >= 0) & (m.confidence <= 1))
+    assert np.all(np.isfinite(m.skeleton.offsets))
+    # a joint is only ever tracked where it, or both neighbours of a short gap, were measured
+    for j, name in enumerate(NITE):
+        k = m.skeleton.index(name)
+        if missing[:, j].all():
+            assert np.all(m.confidence[:, k] == 0)

@@ -433,3 +433,11 @@ def test_character_trajectory_with_source(tmp_path):
     pos, _ = traj.body_poses()
     np.testing.assert_allclose(c.world_positions(), pos[:, 1:], atol=1e-9)
     np.testing.assert_array_equal(read_mcap(out).positions, src.positions)
+
+
+def test_own_recordings_refuse_unit_overrides(walk, tmp_path):
+    out = tmp_path / "w.mcap"
+    write_motion_mcap(walk.slice_frames(0, 3), out)
+    with pytest.raises(OptionError, match="says its own units"):
+        read_mcap(out, units="cm")
+    assert read_mcap(out, units="m").num_frames == 3

@@ -607,6 +607,12 @@ def read_mcap(
     raw = _load(p)
     tracks = [m for name, m in raw.metadata if name == SKELETON_METADATA]
     if tracks and topic is None:
+        if (units is not None and str(units).lower() not in ("m", "auto")) or (up is not None and up.upper() != "Z"):
+            raise OptionError(
+                "this recording was written by physmocap and says its own units and up axis "
+                "(metres, Z-up); drop the units / up override",
+                path=p,
+            )
         return _read_own(p, raw, _pick_track(p, tracks, skeleton), options)
 
     chans = sorted(raw.channels.values(), key=lambda c: c.id)

@@ -14,6 +14,18 @@ Definitions follow ``shared/design/metrics.md``; units are stated per figure
   over hinge joints.
 * **Tracking error**: distance between each tracked site and its target (cm,
   mean and p95) and orientation error (degrees) for oriented targets.
+* **Foot skating**: horizontal speed of contact points on their stance frames
+  (central differences x fps), in cm/s: mean, p95, max, and the share of
+  stance frames faster than 5 cm/s.  Stance is *height only*: within 1 cm of
+  the floor ``z = 0`` for a character's contact sites; within 1 cm of the
+  point's own 5th-percentile height for a source's toe (ball) joints and toe
+  end sites.  A foot that slides while down counts as sliding.
+* **Hovering**: on frames where a foot is labelled in contact, the height of
+  that foot's lowest contact point above the floor (mm, clipped at 0, since
+  depth below the floor is penetration): median and p95.
+
+Figures that a clip cannot have (no stance frames, no labelled contacts) are
+None, which the JSON report writes as ``null``.
 """
 
 from __future__ import annotations
@@ -21,7 +33,6 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .ik.limits import GeomCandidates
 from .rotations import Rotation, wxyz_to_xyzw
 
 __all__ = [
@@ -29,12 +40,32 @@ __all__ = [
     "joint_limit_violations",
     "velocity_violations",
     "penetration",
+    "lowest_heights",
+    "geom_lowest_heights",
     "smoothness",
     "tracking_errors",
     "trajectory_metrics",
+    "STANCE_TOLERANCE",
+    "SKATE_SPEED",
+    "horizontal_speeds",
+    "skating",
+    "character_stance",
+    "source_stance",
+    "character_skating",
+    "source_skating",
+    "hovering",
+    "character_hovering",
+    "source_hovering",
+    "source_penetration",
+    "source_metrics",
 ]
 
 LIMIT_TOLERANCE = 1e-6  # rad
+STANCE_TOLERANCE = 0.01  # m: stance is within 1 cm of the floor (metrics.md)
+SKATE_SPEED = 0.05  # m/s: stance frames faster than this count as skating
+SOURCE_STANCE_PERCENTILE = 5.0
+#: Canonical joints that are a source's contact points (toe/ball joints and toe end sites).
+SOURCE_CONTACT_JOINTS = ("toe", "toe_end")
 KEY_JOINTS = ("ankle", "knee", "wrist", "elbow")
 
 
@@ -77,16 +108,59 @@ def velocity_violations(
     }
 
 
+def geom_lowest_heights(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.ndarray | None = None) -> np.ndarray:
+    """Exact height of each geom's lowest surface point (metres), from ``data``'s kinematics.
+
+    With :math:`R` the geom's world rotation, :math:`c` its centre and
+    :math:`r_i = R_{2i}` the world-z row: sphere :math:`c_z - \\rho`; capsule
+    :math:`c_z - h |r_2| - \\rho`; cylinder :math:`c_z - h |r_2| - \\rho
+    \\sqrt{1 - r_2^2}`; box :math:`c_z - \\sum_i s_i |r_i|`; ellipsoid
+    :math:`c_z - \\lVert (s_i r_i)_i \\rVert`; mesh: its lowest vertex.  Planes,
+    height fields and SDFs give ``+inf``.  This is computed independently of the
+    solver's floor constraint, so the metric checks it.
+    """
+    if geoms is None:
+        geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
+    out = np.full(len(geoms), np.inf)
+    G = mujoco.mjtGeom
+    kind = {int(G.mjGEOM_SPHERE): "sphere", int(G.mjGEOM_CAPSULE): "capsule", int(G.mjGEOM_CYLINDER): "cylinder",
+            int(G.mjGEOM_BOX): "box", int(G.mjGEOM_ELLIPSOID): "ellipsoid", int(G.mjGEOM_MESH): "mesh"}
+    for k, g in enumerate(geoms):
+        t = kind.get(int(model.geom_type[g]))
+        if t is None:
+            continue
+        c = data.geom_xpos[g]
+        R = data.geom_xmat[g].reshape(3, 3)
+        rz = R[2]
+        size = model.geom_size[g]
+        if t == "sphere":
+            out[k] = c[2] - size[0]
+        elif t == "capsule":
+            out[k] = c[2] - size[1] * abs(rz[2]) - size[0]
+        elif t == "cylinder":
+            out[k] = c[2] - size[1] * abs(rz[2]) - size[0] * np.sqrt(max(0.0, 1.0 - rz[2] ** 2))
+        elif t == "box":
+            out[k] = c[2] - float(np.abs(rz) @ size)
+        elif t == "ellipsoid":
+            out[k] = c[2] - float(np.linalg.norm(rz * size))
+        else:
+            mid = model.geom_dataid[g]
+            a, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
+            v = model.mesh_vert[a : a + n].astype(float)
+            out[k] = c[2] + float((v @ rz).min()) if n else np.inf
+    return out
+
+
 def lowest_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
-    """``(F,)`` height of the lowest point of any non-world geom per frame (metres)."""
+    """``(F,)`` height of the lowest point of any non-world geom per frame (metres)
+    (:func:`geom_lowest_heights`)."""
     data = mujoco.MjData(model)
-    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] != 0]
-    cand = GeomCandidates(model, geoms)
+    geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
     out = np.empty(qpos.shape[0])
     for t, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        z, _ = cand.points(data)
+        z = geom_lowest_heights(model, data, geoms)
         out[t] = z.min() if z.size else np.inf
     return out
 
@@ -168,8 +242,14 @@ def tracking_errors(traj, mask: np.ndarray | None = None) -> dict:
     return out
 
 
-def trajectory_metrics(traj) -> dict:
-    """All trajectory figures that do not need contact labels."""
+def trajectory_metrics(traj, contacts=None) -> dict:
+    """All figures of a character trajectory.
+
+    Args:
+        traj: A :class:`~physmocap.trajectory.Trajectory`.
+        contacts: Foot contact labels (:class:`~physmocap.ik.contacts.Contacts`,
+            same frames as ``traj``); without them hovering is not measured.
+    """
     model = traj.model
     out = {
         "frames": traj.num_frames,
@@ -182,4 +262,206 @@ def trajectory_metrics(traj) -> dict:
     }
     if traj.targets is not None:
         out["tracking"] = tracking_errors(traj)
+    if getattr(traj.character, "contacts", None):
+        sites, pos = _contact_sites(traj)
+        out["skating"] = skating(pos, traj.fps, character_stance(pos[..., 2]))
+        if contacts is not None:
+            out["hovering"] = _character_hovering(traj, contacts, pos)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Feet: skating and hovering
+# ---------------------------------------------------------------------------
+
+
+def horizontal_speeds(points: np.ndarray, fps: float) -> np.ndarray:
+    """``(F, P)`` horizontal speed (m/s) of points ``(F, P, 3)``: central
+    differences over frames (one-sided on the first and last), times fps."""
+    p = np.asarray(points, dtype=float)
+    if p.shape[0] < 2:
+        return np.zeros(p.shape[:2])
+    v = np.gradient(p[..., :2], axis=0) * fps
+    return np.linalg.norm(v, axis=-1)
+
+
+def _stats(values: np.ndarray, scale: float) -> tuple:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)] * scale
+    if v.size == 0:
+        return None, None, None
+    return float(v.mean()), float(np.percentile(v, 95)), float(v.max())
+
+
+def skating(points: np.ndarray, fps: float, stance: np.ndarray) -> dict:
+    """Foot skating of points ``(F, P, 3)`` on their ``stance`` ``(F, P)`` frames.
+
+    Returns mean, p95 and max horizontal speed in cm/s, the share of stance
+    frames faster than 5 cm/s, and the number of (frame, point) stance samples.
+    """
+    v = horizontal_speeds(points, fps)
+    st = np.asarray(stance, dtype=bool) & np.isfinite(v)
+    s = v[st]
+    mean, p95, vmax = _stats(s, 100.0)
+    return {
+        "mean_cm_s": mean,
+        "p95_cm_s": p95,
+        "max_cm_s": vmax,
+        "share_over_5cm_s": float(np.mean(s > SKATE_SPEED)) if s.size else None,
+        "stance_samples": int(s.size),
+    }
+
+
+def character_stance(heights: np.ndarray, floor: float = 0.0, tol: float = STANCE_TOLERANCE) -> np.ndarray:
+    """Stance of a character's contact sites: height within ``tol`` of the floor
+    (or below it)."""
+    h = np.asarray(heights, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return h - floor <= tol
+
+
+def source_stance(
+    heights: np.ndarray, tol: float = STANCE_TOLERANCE, percentile: float = SOURCE_STANCE_PERCENTILE
+) -> np.ndarray:
+    """Stance of a source's contact points ``(F, P)``: within ``tol`` of each
+    point's own ``percentile`` height (NaN samples are never in stance)."""
+    h = np.asarray(heights, dtype=float)
+    out = np.zeros(h.shape, dtype=bool)
+    for k in range(h.shape[1]):
+        col = h[:, k]
+        ok = np.isfinite(col)
+        if ok.any():
+            out[ok, k] = col[ok] <= np.percentile(col[ok], percentile) + tol
+    return out
+
+
+def _contact_sites(traj) -> tuple[list[str], np.ndarray]:
+    sites = [s for side in sorted(traj.character.contacts) for s in traj.character.contacts[side]]
+    return sites, traj.site_positions(sites)
+
+
+def character_skating(traj, floor: float = 0.0) -> dict:
+    """Skating of the character's declared contact sites (stance: within 1 cm of the floor)."""
+    _, pos = _contact_sites(traj)
+    return skating(pos, traj.fps, character_stance(pos[..., 2], floor))
+
+
+def _source_points(motion, joint_indices) -> tuple[list[str], np.ndarray]:
+    names = [
+        f"{side}_{j}" for side in ("left", "right") for j in SOURCE_CONTACT_JOINTS if f"{side}_{j}" in joint_indices
+    ]
+    if not names:  # a skeleton without toes: its ankles are the best it has
+        names = [n for n in ("left_ankle", "right_ankle") if n in joint_indices]
+    world = motion.world_positions()
+    return names, world[:, [joint_indices[n] for n in names]]
+
+
+def source_skating(motion, joint_indices: dict[str, int]) -> dict:
+    """Skating of a source motion's toe (ball) joints and toe end sites
+    (stance: within 1 cm of the point's own 5th-percentile height)."""
+    names, pos = _source_points(motion, joint_indices)
+    if not names:
+        return skating(np.zeros((motion.num_frames, 0, 3)), motion.fps, np.zeros((motion.num_frames, 0), bool))
+    return skating(pos, motion.fps, source_stance(pos[..., 2]))
+
+
+def hovering(heights: np.ndarray, in_contact: np.ndarray) -> dict:
+    """Hovering: ``heights`` ``(F, feet)`` of each foot's lowest contact point
+    above the floor (metres) on the frames ``in_contact`` ``(F, feet)``; in mm,
+    clipped at 0 (depth below the floor is penetration)."""
+    h = np.asarray(heights, dtype=float)
+    m = np.asarray(in_contact, dtype=bool) & np.isfinite(h)
+    v = np.maximum(h[m], 0.0) * 1000.0
+    return {
+        "median_mm": float(np.median(v)) if v.size else None,
+        "p95_mm": float(np.percentile(v, 95)) if v.size else None,
+        "contact_samples": int(v.size),
+    }
+
+
+def _check_frames(n: int, contacts, what: str) -> None:
+    if contacts.num_frames != n:
+        from .errors import OptionError
+
+        raise OptionError(
+            f"the contact labels cover {contacts.num_frames} frames but the {what} has {n}",
+            path=None if contacts.source == "detected" else contacts.source,
+        )
+
+
+def _character_hovering(traj, contacts, pos: np.ndarray, floor: float = 0.0) -> dict:
+    _check_frames(traj.num_frames, contacts, "trajectory")
+    ch = traj.character.contacts
+    sides = sorted(ch)
+    lowest, labelled = [], []
+    k = 0
+    for side in sides:
+        n = len(ch[side])
+        lowest.append(pos[:, k : k + n, 2].min(axis=1) - floor)
+        labelled.append(contacts.foot(side))
+        k += n
+    return hovering(np.column_stack(lowest), np.column_stack(labelled))
+
+
+def character_hovering(traj, contacts, floor: float = 0.0) -> dict:
+    """Hovering of the character's feet on the frames ``contacts`` labels a foot in contact."""
+    _, pos = _contact_sites(traj)
+    return _character_hovering(traj, contacts, pos, floor)
+
+
+def source_hovering(motion, joint_indices: dict[str, int], contacts) -> dict:
+    """Hovering of a source's feet above its estimated floor (``contacts.floor``)
+    on the frames it is labelled in contact; contact points as for skating."""
+    _check_frames(motion.num_frames, contacts, "source motion")
+    names, pos = _source_points(motion, joint_indices)
+    floor = contacts.floor
+    lowest, labelled = [], []
+    for side in ("left", "right"):
+        cols = [i for i, n in enumerate(names) if n.startswith(side + "_")]
+        if not cols:
+            continue
+        h = pos[:, cols, 2] - (floor.at(pos[:, cols]) if floor is not None else 0.0)
+        lowest.append(h.min(axis=1))
+        labelled.append(contacts.foot(side))
+    if not lowest:
+        return hovering(np.zeros((motion.num_frames, 0)), np.zeros((motion.num_frames, 0), bool))
+    return hovering(np.column_stack(lowest), np.column_stack(labelled))
+
+
+def source_penetration(motion, floor=None) -> dict:
+    """Penetration of a source: depth of its lowest joint below the floor (mm).
+
+    ``floor`` is a :class:`~physmocap.ik.contacts.FloorPlane` (or a height);
+    default: :meth:`Motion.floor_height`.  Same figures as :func:`penetration`.
+    """
+    world = motion.world_positions()
+    if floor is None:
+        z = world[..., 2] - motion.floor_height()
+    elif hasattr(floor, "heights"):
+        z = floor.heights(world)
+    else:
+        z = world[..., 2] - float(floor)
+    with np.errstate(invalid="ignore"):
+        low = np.nanmin(np.where(np.isfinite(z), z, np.nan), axis=1) if z.size else np.zeros(0)
+    depth = np.maximum(-np.nan_to_num(low, nan=0.0), 0.0) * 1000.0
+    pen = depth[depth > 0]
+    return {
+        "max_mm": float(depth.max()) if depth.size else 0.0,
+        "mean_mm": float(pen.mean()) if pen.size else 0.0,
+        "share_over_1mm": float(np.mean(depth > 1.0)) if depth.size else 0.0,
+    }
+
+
+def source_metrics(motion, joint_indices: dict[str, int], contacts=None) -> dict:
+    """The figures a source motion has: skating, penetration and hovering
+    (the last two against ``contacts.floor`` when contacts are given)."""
+    floor = None if contacts is None else contacts.floor
+    out = {
+        "frames": motion.num_frames,
+        "fps": float(motion.fps),
+        "skating": source_skating(motion, joint_indices),
+        "penetration": source_penetration(motion, floor),
+    }
+    if contacts is not None:
+        out["hovering"] = source_hovering(motion, joint_indices, contacts)
     return out

@@ -159,16 +159,28 @@ def test_every_message_validates_against_its_schema(walk, tmp_path):
         assert summary is not None
         assert {c.message_encoding for c in summary.channels.values()} == {"json"}
         assert {s.encoding for s in summary.schemas.values()} == {"jsonschema"}
+        validators: dict = {}
         for schema, channel, message in reader.iter_messages():
-            declared = json.loads(schema.data)
+            if schema.id not in validators:
+                declared = json.loads(schema.data)
+                jsonschema.Draft7Validator.check_schema(declared)
+                checks = [jsonschema.Draft7Validator(declared)]
+                if schema.name.startswith("foxglove."):
+                    ref = FOXGLOVE_FRAME_TRANSFORMS if "Transforms" in schema.name else FOXGLOVE_POSES_IN_FRAME
+                    assert _structure(declared) == ref
+                    checks.append(jsonschema.Draft7Validator(_strict(ref)))
+                validators[schema.id] = checks
             obj = json.loads(message.data)
-            jsonschema.validate(obj, declared)
-            if schema.name.startswith("foxglove."):
-                jsonschema.validate(obj, _strict(FOXGLOVE_FRAME_TRANSFORMS if "Transforms" in schema.name
-                                                 else FOXGLOVE_POSES_IN_FRAME))  # fmt: skip
+            for v in validators[schema.id]:
+                v.validate(obj)
             seen.setdefault(channel.topic, (schema.name, 0))
             seen[channel.topic] = (schema.name, seen[channel.topic][1] + 1)
         metas = list(reader.iter_metadata())
+    # the validators do reject what Foxglove would not read
+    tf_checks = next(v for v in validators.values() if v[0].schema["title"] == "foxglove.FrameTransforms")
+    for bad in ({"transforms": [{"translation": {"x": "1"}}]}, {"transforms": {}}):
+        with pytest.raises(jsonschema.ValidationError):
+            tf_checks[0].validate(bad)
     assert seen == {
         "/skeleton/tf": ("foxglove.FrameTransforms", 40),
         "/skeleton/joints": ("physmocap.JointPositions", 40),

@@ -1,0 +1,104 @@
+"""``physmocap report``: quality figures of a retargeted trajectory, source versus result."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..errors import OptionError, warn
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "report",
+        help="measure a retargeted trajectory (skating, penetration, hovering, limits, tracking)",
+        description=(
+            "Print a table of quality figures (definitions: shared/design/metrics.md) for a "
+            "trajectory written by 'physmocap retarget --qpos OUT.npz', next to the same figures "
+            "on its source motion; optionally write them as JSON and draw PNG plots."
+        ),
+    )
+    p.add_argument("trajectory", metavar="TRAJECTORY.npz", help="joint trajectory from physmocap retarget --qpos")
+    p.add_argument("--source", metavar="CLIP", help="source motion (default: the path stored in the trajectory)")
+    p.add_argument("--no-source", action="store_true", help="report on the trajectory alone")
+    p.add_argument("--json", metavar="OUT.json", help="also write the report as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR (needs: pip install physmocap[plot])")
+    p.add_argument("--contacts", metavar="LABELS.csv", help="contact labels (point,start,end) instead of detection")
+    p.add_argument("--character", metavar="PATH", help="MJCF or bundled name (default: the one stored in the file)")
+    p.add_argument("--map", metavar="MAP.toml", help="character mapping file")
+    p.add_argument("--profile", help="force the source skeleton's naming profile")
+    p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
+    p.add_argument("--in-units", help="override the source's length unit (as for retarget)")
+    p.add_argument(
+        "--start", type=int, default=0, help="source frame the trajectory starts at (retarget --start; default 0)"
+    )
+    p.set_defaults(func=run)
+
+
+def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
+    if args.no_source:
+        return None
+    if args.source:
+        return Path(args.source)
+    p = Path(stored)
+    if stored and stored not in ("<memory>", "<unknown>") and p.exists():
+        return p
+    warn(f"the trajectory's source {stored!r} is not available; reporting on the result alone (pass --source)")
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..fileio import check_writable
+    from ..ik.contacts import detect_contacts, load_contact_csv
+    from ..report import emit_report, load_trajectory, tracking_targets
+
+    if args.json:
+        check_writable(args.json)
+    if args.plots:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
+    if args.start < 0:
+        raise OptionError(f"--start must be >= 0, got {args.start}")
+    traj = load_trajectory(args.trajectory, args.character, args.map)
+    F = traj.num_frames
+    motion = None
+    joint_indices = None
+    src = _source_path(args, traj.source)
+    if src is not None:
+        from ..ik.retarget import map_motion
+        from ..sources import load_motion
+
+        opts = {"units": args.in_units} if args.in_units else {}
+        motion = load_motion(src, **opts)
+        if abs(motion.fps - traj.fps) > 1e-6 * traj.fps:
+            motion = motion.resample(traj.fps)
+        end = args.start + F
+        if end > motion.num_frames:
+            raise OptionError(
+                f"the trajectory has {F} frames but the source has only {motion.num_frames} "
+                f"(from --start {args.start}); is this the right source?",
+                path=src,
+            )
+        if (args.start, end) != (0, motion.num_frames):
+            motion = motion.slice_frames(args.start, end)
+        joint_indices = map_motion(motion, profile=args.profile, mapping=args.source_map)
+    if args.contacts:
+        contacts = load_contact_csv(args.contacts, F, traj.fps)
+    elif motion is not None:
+        contacts = detect_contacts(motion, joint_indices)
+    else:
+        contacts = None
+    if motion is not None:
+        traj.targets = tracking_targets(motion, joint_indices, traj.character, contacts)
+    emit_report(
+        traj,
+        motion,
+        contacts,
+        json_path=args.json,
+        plots_dir=args.plots,
+        joint_indices=joint_indices,
+        stream=sys.stdout,
+    )
+    return 0

@@ -1,0 +1,413 @@
+"""The quality report: source versus result, as a table and as JSON.
+
+:func:`build_report` measures a character trajectory and, when given, the
+source motion it came from with the definitions of :mod:`physmocap.metrics`
+(``shared/design/metrics.md``), side by side:
+
+==========================  =====================  =====================
+figure                      source                 result
+==========================  =====================  =====================
+foot skating                toe/ball + toe ends    contact sites
+penetration                 lowest joint           lowest geom point
+hovering (in contact)       above its floor        above ``z = 0``
+joint limits, velocity,     (none: another         the character's
+smoothness, tracking        skeleton)              joints and targets
+==========================  =====================  =====================
+
+:func:`format_report` renders the readable table, :func:`write_report_json`
+writes the JSON (atomically, keys sorted, no NaN: missing figures are
+``null``), :func:`emit_report` does both and the plots for the command line
+(``physmocap report`` and ``physmocap retarget --report``).
+
+JSON layout (``format`` is ``physmocap-report/1``)::
+
+    {"format": ..., "character": {"name", "mjcf_path"},
+     "source": {"path", "frames", "fps", "floor_m", "floor_slope"} | null,
+     "contacts": {"origin": "detected" | CSV path,
+                  "labels": {label: {"frames", "share", "segments"}}} | null,
+     "metrics": {"source": {...} | null, "result": {...}}}
+
+``metrics.result`` holds :func:`physmocap.metrics.trajectory_metrics`,
+``metrics.source`` :func:`physmocap.metrics.source_metrics`; units are in the
+key names (``_cm_s``, ``_mm``, ``_deg``, ``_cm``) or rad, rad/s, rad/s^2,
+rad/s^3 (joint speeds, smoothness).
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from .errors import InputError, OptionError
+from .fileio import atomic_open
+
+__all__ = [
+    "REPORT_FORMAT",
+    "build_report",
+    "format_report",
+    "write_report_json",
+    "emit_report",
+    "load_trajectory",
+    "tracking_targets",
+]
+
+REPORT_FORMAT = "physmocap-report/1"
+
+#: Table rows: (label, dotted key into a metrics dict, unit, scale for display).
+ROWS: tuple[tuple[str, str | None, str, float], ...] = (
+    ("Foot skating in stance: mean", "skating.mean_cm_s", "cm/s", 1.0),
+    ("  p95", "skating.p95_cm_s", "cm/s", 1.0),
+    ("  max", "skating.max_cm_s", "cm/s", 1.0),
+    ("  stance frames > 5 cm/s", "skating.share_over_5cm_s", "%", 100.0),
+    ("Penetration: max", "penetration.max_mm", "mm", 1.0),
+    ("  mean (penetrating frames)", "penetration.mean_mm", "mm", 1.0),
+    ("  frames > 1 mm", "penetration.share_over_1mm", "%", 100.0),
+    ("Hovering in contact: median", "hovering.median_mm", "mm", 1.0),
+    ("  p95", "hovering.p95_mm", "mm", 1.0),
+    ("Joint-limit violations", "joint_limits.count", "", 1.0),
+    ("  largest excess", "joint_limits.max_deg", "deg", 1.0),
+    ("Velocity-limit violations", "velocity.count", "", 1.0),
+    ("  peak joint speed", "velocity.peak_speed", "rad/s", 1.0),
+    ("  peak speed / limit", "velocity.peak_ratio", "", 1.0),
+    ("Mean |joint acceleration|", "smoothness.mean_abs_acc", "rad/s^2", 1.0),
+    ("Mean |joint jerk|", "smoothness.mean_abs_jerk", "rad/s^3", 1.0),
+    ("Tracking error: all joints, mean", "tracking.all_mean_cm", "cm", 1.0),
+    ("  ankles/knees/wrists/elbows, mean", "tracking.key_joints_mean_cm", "cm", 1.0),
+    ("  ankles/knees/wrists/elbows, p95", "tracking.key_joints_p95_cm", "cm", 1.0),
+)
+
+
+# ---------------------------------------------------------------------------
+# Building
+# ---------------------------------------------------------------------------
+
+
+def _contacts_summary(contacts) -> dict | None:
+    if contacts is None:
+        return None
+    labels = {}
+    for name, lab in contacts.labels.items():
+        lab = np.asarray(lab, dtype=bool)
+        labels[name] = {
+            "frames": int(lab.sum()),
+            "share": float(lab.mean()) if lab.size else 0.0,
+            "segments": len(contacts.segments(name)),
+        }
+    return {"origin": contacts.source, "labels": labels}
+
+
+def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[str, int] | None = None) -> dict:
+    """Measure a trajectory (and its source) into a report dict (module docstring).
+
+    Args:
+        traj: The character's :class:`~physmocap.trajectory.Trajectory`
+            (tracking errors need ``traj.targets``).
+        source_motion: The motion it was retargeted from, over the same frames
+            (after any ``--start/--end/--fps``), or None.
+        contacts: Foot contact labels over the same frames; None takes
+            ``traj.stats["contacts"]`` if present, else detects them on the
+            source.
+        joint_indices: Canonical joint -> source joint index; None maps the
+            source's names (:func:`physmocap.sources.profiles.map_skeleton`).
+    """
+    from . import metrics
+
+    F = traj.num_frames
+    if contacts is None:
+        contacts = traj.stats.get("contacts") if isinstance(getattr(traj, "stats", None), dict) else None
+    source_info = None
+    source_metrics = None
+    if source_motion is not None:
+        if source_motion.num_frames != F:
+            raise OptionError(
+                f"the source has {source_motion.num_frames} frames but the trajectory {F}; pass the "
+                "source over the frames that were retargeted (--start, --fps)",
+                path=source_motion.source,
+            )
+        if joint_indices is None:
+            from .sources.profiles import map_skeleton
+
+            joint_indices = dict(map_skeleton(source_motion.skeleton).indices)
+        if contacts is None:
+            from .ik.contacts import detect_contacts
+
+            contacts = detect_contacts(source_motion, joint_indices)
+        source_metrics = metrics.source_metrics(source_motion, joint_indices, contacts)
+        floor = contacts.floor if contacts is not None else None
+        source_info = {
+            "path": str(source_motion.source),
+            "frames": source_motion.num_frames,
+            "fps": float(source_motion.fps),
+            "floor_m": None if floor is None else float(floor.height),
+            "floor_slope": None if floor is None else [float(floor.slope[0]), float(floor.slope[1])],
+        }
+    if contacts is not None and contacts.num_frames != F:
+        raise OptionError(
+            f"the contact labels cover {contacts.num_frames} frames but the trajectory has {F}",
+            path=None if contacts.source == "detected" else contacts.source,
+        )
+    ch = traj.character
+    return {
+        "format": REPORT_FORMAT,
+        "character": {
+            "name": str(getattr(ch, "name", "")),
+            "mjcf_path": str(getattr(ch, "mjcf_path", "")),
+        },
+        "source": source_info,
+        "contacts": _contacts_summary(contacts),
+        "metrics": {
+            "source": source_metrics,
+            "result": metrics.trajectory_metrics(traj, contacts),
+        },
+    }
+
+
+# ---------------------------------------------------------------------------
+# Table
+# ---------------------------------------------------------------------------
+
+
+def _get(d: dict | None, dotted: str):
+    for part in dotted.split("."):
+        if not isinstance(d, dict) or part not in d:
+            return None
+        d = d[part]
+    return d
+
+
+def _fmt(value, scale: float = 1.0) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)) and scale == 1.0:
+        return str(int(value))
+    v = float(value) * scale
+    if not math.isfinite(v):
+        return "-"
+    a = abs(v)
+    if a >= 1e5:
+        return f"{v:.3g}"
+    if a >= 100:
+        return f"{v:.0f}"
+    if a >= 10:
+        return f"{v:.1f}"
+    return f"{v:.2f}"
+
+
+def _table(header: list[str], rows: list[list[str]], right: set[int]) -> list[str]:
+    widths = [max(len(r[i]) for r in [header] + rows) for i in range(len(header))]
+
+    def line(r: list[str]) -> str:
+        return "  ".join(c.rjust(widths[i]) if i in right else c.ljust(widths[i]) for i, c in enumerate(r)).rstrip()
+
+    return [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
+
+
+def format_report(report: dict) -> str:
+    """A readable text table: metric, unit, source, result; then tracking per joint."""
+    src = _get(report, "metrics.source")
+    res = _get(report, "metrics.result")
+    out = []
+    ch = report.get("character") or {}
+    title = f"physmocap report: {ch.get('name') or 'character'}"
+    s = report.get("source")
+    if s:
+        title += f" from {s['path']} ({s['frames']} frames at {_fmt(s['fps'])} Hz)"
+    elif res:
+        title += f" ({res.get('frames')} frames at {_fmt(res.get('fps'))} Hz, no source)"
+    out.append(title)
+    if s and s.get("floor_m") is not None:
+        slope = s.get("floor_slope") or [0.0, 0.0]
+        out.append(
+            f"source floor: {100 * s['floor_m']:.1f} cm, slope {100 * math.hypot(*slope):.2f} %"
+        )
+    c = report.get("contacts")
+    if c:
+        parts = [
+            f"{name} {100 * v['share']:.0f} % ({v['segments']} contacts)" for name, v in c["labels"].items()
+        ]
+        out.append(f"contacts ({c['origin']}): " + ", ".join(parts))
+    out.append("")
+    rows = []
+    for label, key, unit, scale in ROWS:
+        a = _get(src, key) if key else None
+        b = _get(res, key) if key else None
+        if a is None and b is None:
+            continue
+        rows.append([label, unit, _fmt(a, scale), _fmt(b, scale)])
+    out += _table(["metric", "unit", "source", "result"], rows, {2, 3})
+    tr = _get(res, "tracking")
+    if tr and tr.get("position_cm"):
+        out += ["", "tracking error per joint (result)"]
+        rows = []
+        for name in tr["position_cm"]:
+            p = tr["position_cm"][name]
+            o = (tr.get("orientation_deg") or {}).get(name) or {}
+            rows.append([name, _fmt(p["mean"]), _fmt(p["p95"]), _fmt(o.get("mean")), _fmt(o.get("p95"))])
+        out += _table(["joint", "mean cm", "p95 cm", "mean deg", "p95 deg"], rows, {1, 2, 3, 4})
+    return "\n".join(out) + "\n"
+
+
+# ---------------------------------------------------------------------------
+# JSON
+# ---------------------------------------------------------------------------
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe copy: numpy scalars and arrays to Python, non-finite floats to
+    None, floats rounded to 6 significant digits (stable, readable)."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_clean(v) for v in x.tolist()]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        v = float(x)
+        return float(f"{v:.6g}") if math.isfinite(v) else None
+    if x is None or isinstance(x, str):
+        return x
+    return str(x)
+
+
+def report_json(report: dict) -> str:
+    """The report as JSON text: keys sorted, two-space indent, no NaN."""
+    return json.dumps(_clean(report), sort_keys=True, indent=2, allow_nan=False) + "\n"
+
+
+def write_report_json(report: dict, path: str | os.PathLike) -> Path:
+    """Write the report as JSON, atomically (see :func:`report_json`)."""
+    text = report_json(report)
+    p = Path(path)
+    with atomic_open(p, "w") as fh:
+        fh.write(text)
+    return p
+
+
+# ---------------------------------------------------------------------------
+# Command-line glue
+# ---------------------------------------------------------------------------
+
+
+def emit_report(
+    traj,
+    source_motion=None,
+    contacts=None,
+    *,
+    json_path: str | os.PathLike | None = None,
+    plots_dir: str | os.PathLike | None = None,
+    joint_indices: dict[str, int] | None = None,
+    stream: IO[str] | None = None,
+) -> dict:
+    """Build the report, print its table on ``stream`` (stdout), write the JSON
+    and the plots if asked; returns the report.  Paths are checked before any
+    work is done.  For ``physmocap retarget --report``."""
+    from .fileio import check_writable
+
+    if json_path is not None:
+        check_writable(json_path)
+    if plots_dir is not None:
+        from .plots import require_matplotlib
+
+        require_matplotlib()
+        _check_plot_dir(plots_dir)
+    report = build_report(traj, source_motion, contacts, joint_indices)
+    (stream or sys.stdout).write(format_report(report))
+    if json_path is not None:
+        write_report_json(report, json_path)
+        print(f"wrote {json_path}", file=sys.stderr)
+    if plots_dir is not None:
+        from .plots import write_plots
+
+        if contacts is None:
+            contacts = traj.stats.get("contacts") if isinstance(getattr(traj, "stats", None), dict) else None
+        for p in write_plots(traj, source_motion, contacts, plots_dir, joint_indices=joint_indices):
+            print(f"wrote {p}", file=sys.stderr)
+    return report
+
+
+def _check_plot_dir(path: str | os.PathLike) -> Path:
+    from .errors import OutputError
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError("plot output is not a directory", path=p)
+    if not p.exists():
+        parent = p.parent if str(p.parent) else Path(".")
+        if not parent.is_dir():
+            raise OutputError(f"directory {str(parent)!r} does not exist", path=p)
+    return p
+
+
+def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.PathLike | None = None):
+    """Read a trajectory NPZ (``physmocap retarget --qpos``) back into a
+    :class:`~physmocap.trajectory.Trajectory` (without targets).
+
+    The character is loaded from the file's ``mjcf_path`` unless ``character``
+    (a Character, a bundled name or an MJCF path) is given.
+    """
+    from .models import load_character
+    from .trajectory import Trajectory
+
+    p = Path(path)
+    if not p.exists():
+        raise InputError("trajectory file not found", path=p)
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (OSError, ValueError) as exc:
+        raise InputError(f"not a trajectory .npz file: {exc}", path=p) from None
+    for key in ("qpos", "fps"):
+        if key not in data:
+            raise InputError(f"trajectory file has no {key!r} array (expected a physmocap retarget --qpos file)", path=p)
+    qpos = np.asarray(data["qpos"], dtype=float)
+    fps = float(np.asarray(data["fps"]).reshape(-1)[0]) if data["fps"].size else float("nan")
+    if qpos.ndim != 2 or qpos.shape[0] == 0:
+        raise InputError(f"'qpos' must be a (frames, nq) array, got shape {qpos.shape}", path=p)
+    if not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"'fps' must be a positive number, got {fps}", path=p)
+    bad = ~np.all(np.isfinite(qpos), axis=1)
+    if bad.any():
+        raise InputError("'qpos' has non-finite values", path=p, frame=int(np.argmax(bad)))
+    if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
+        if character is None:
+            if "mjcf_path" not in data:
+                raise InputError("trajectory file names no character (mjcf_path); pass --character", path=p)
+            character = str(data["mjcf_path"])
+            if not Path(character).exists():
+                raise InputError(
+                    f"the character's MJCF {character!r} named in the file does not exist; pass --character",
+                    path=p,
+                )
+        character = load_character(character, map_path)
+    nq = character.model.nq
+    if qpos.shape[1] != nq:
+        raise InputError(
+            f"'qpos' has {qpos.shape[1]} columns but the character {getattr(character, 'name', '')!r} has nq={nq}",
+            path=p,
+        )
+    source = str(data["source"]) if "source" in data else "<unknown>"
+    return Trajectory(character=character, qpos=qpos, fps=fps, source=source)
+
+
+def tracking_targets(motion, joint_indices: dict[str, int], character, contacts=None):
+    """Rebuild the IK targets of a retargeted clip (default target options),
+    so a report on a saved trajectory can measure tracking errors."""
+    from .ik.targets import build_targets
+
+    kwargs = {}
+    if contacts is not None and contacts.floor is not None and "floor" in inspect.signature(build_targets).parameters:
+        kwargs["floor"] = contacts.floor
+    return build_targets(motion, joint_indices, character, **kwargs)

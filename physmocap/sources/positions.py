@@ -801,10 +801,8 @@ def positional_motion(
         ground = estimate_ground(pos, valid_meas, feet, top, fps, foot_height=fh)
     elif level or floor == "auto":
         warn(f"{p}: no feet mapped; the up axis and floor are not estimated")
-    R = np.eye(3)
     if level and ground is not None:
-        R = level_rotation(ground.up)
-        pos = pos @ R.T
+        pos = pos @ level_rotation(ground.up).T
     floor_z = 0.0
     floor_known = floor is not None
     if isinstance(floor, str):

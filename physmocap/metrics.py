@@ -52,7 +52,9 @@ __all__ = [
     "character_stance",
     "source_stance",
     "character_skating",
+    "labelled_skating",
     "source_skating",
+    "source_labelled_skating",
     "hovering",
     "character_hovering",
     "source_hovering",
@@ -267,7 +269,23 @@ def trajectory_metrics(traj, contacts=None) -> dict:
         out["skating"] = skating(pos, traj.fps, character_stance(pos[..., 2]))
         if contacts is not None:
             out["hovering"] = _character_hovering(traj, contacts, pos)
+            out["skating_labelled"] = labelled_skating(traj, contacts, sites, pos)
     return out
+
+
+def labelled_skating(traj, contacts, sites: list[str] | None = None, pos: np.ndarray | None = None) -> dict:
+    """Diagnostic beside metrics.md's skating: the same figures restricted to
+    stance samples whose site is labelled in contact (heel site: heel label;
+    other sites: toe label).  Skating outside it comes from frames the
+    contact labels leave free (landing, toe-off, swing close to the floor)."""
+    from .ik.contacts import contact_sites_labels
+
+    _check_frames(traj.num_frames, contacts, "trajectory")
+    if sites is None or pos is None:
+        sites, pos = _contact_sites(traj)
+    labels = contact_sites_labels(contacts, traj.character)
+    lab = np.stack([labels[s] for s in sites], axis=1)
+    return skating(pos, traj.fps, character_stance(pos[..., 2]) & lab)
 
 
 # ---------------------------------------------------------------------------
@@ -464,4 +482,17 @@ def source_metrics(motion, joint_indices: dict[str, int], contacts=None) -> dict
     }
     if contacts is not None:
         out["hovering"] = source_hovering(motion, joint_indices, contacts)
+        out["skating_labelled"] = source_labelled_skating(motion, joint_indices, contacts)
     return out
+
+
+def source_labelled_skating(motion, joint_indices: dict[str, int], contacts) -> dict:
+    """:func:`source_skating` restricted to stance samples whose point is
+    labelled in contact (toe points: the toe label; ankles: the heel label)."""
+    _check_frames(motion.num_frames, contacts, "source motion")
+    names, pos = _source_points(motion, joint_indices)
+    lab = np.zeros((motion.num_frames, len(names)), dtype=bool)
+    for k, n in enumerate(names):
+        side, joint = n.split("_", 1)
+        lab[:, k] = contacts.labels[f"{side}_{'heel' if joint == 'ankle' else 'toe'}"]
+    return skating(pos, motion.fps, source_stance(pos[..., 2]) & lab)

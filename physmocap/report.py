@@ -66,6 +66,8 @@ ROWS: tuple[tuple[str, str | None, str, float], ...] = (
     ("  p95", "skating.p95_cm_s", "cm/s", 1.0),
     ("  max", "skating.max_cm_s", "cm/s", 1.0),
     ("  stance frames > 5 cm/s", "skating.share_over_5cm_s", "%", 100.0),
+    ("  mean on labelled contact frames", "skating_labelled.mean_cm_s", "cm/s", 1.0),
+    ("  p95 on labelled contact frames", "skating_labelled.p95_cm_s", "cm/s", 1.0),
     ("Penetration: max", "penetration.max_mm", "mm", 1.0),
     ("  mean (penetrating frames)", "penetration.mean_mm", "mm", 1.0),
     ("  frames > 1 mm", "penetration.share_over_1mm", "%", 100.0),

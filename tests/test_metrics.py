@@ -247,3 +247,20 @@ def test_geom_lowest_heights_are_exact(q):
         assert z[k] <= brute + 1e-9, model.geom(g).name
         assert brute - z[k] < 2e-3, model.geom(g).name
     assert np.isinf(metrics.geom_lowest_heights(model, data, np.array([0])))[0]  # the plane
+
+
+def test_labelled_skating_is_the_labelled_subset():
+    traj = _standing("humanoid", vx=0.10)
+    every = metrics.trajectory_metrics(traj, _all_contact(traj.num_frames))
+    assert every["skating_labelled"] == every["skating"]
+    none = Contacts(labels={n: np.zeros(traj.num_frames, bool) for n in CONTACT_LABELS}, fps=traj.fps)
+    assert metrics.labelled_skating(traj, none)["stance_samples"] == 0
+    heels = Contacts(labels={n: np.full(traj.num_frames, n.endswith("heel")) for n in CONTACT_LABELS}, fps=traj.fps)
+    assert metrics.labelled_skating(traj, heels)["stance_samples"] == 2 * traj.num_frames
+
+
+def test_source_labelled_skating_is_a_subset():
+    motion, idx, out = _source("cmu_12_01_walk.bvh")
+    assert 0 < out["skating_labelled"]["stance_samples"] <= out["skating"]["stance_samples"]
+    # the raw walk slides less while its feet are labelled down than over all its low frames
+    assert out["skating_labelled"]["mean_cm_s"] < out["skating"]["mean_cm_s"]

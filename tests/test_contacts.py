@@ -83,6 +83,16 @@ def test_walk_at_30_hz_agrees_with_hand_labels():
         assert f1 >= 0.93, f"{label} at 30 Hz: F1 {f1:.3f}"
 
 
+@pytest.mark.parametrize("name", ["pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"])
+def test_30_hz_agrees_with_120_hz(name):
+    motion, idx = clip(name)
+    fast = detected(name)
+    slow = detect_contacts(motion.resample(30.0), idx)
+    nearest = np.clip(np.round(np.arange(motion.num_frames) / motion.fps * 30.0).astype(int), 0, slow.num_frames - 1)
+    for label in CONTACT_LABELS:
+        assert label_f1(slow.labels[label][nearest], fast.labels[label]) >= 0.93, label
+
+
 def test_walk_floor_is_a_slightly_tilted_plane():
     contacts = detected("cmu_12_01_walk.bvh")
     floor = contacts.floor

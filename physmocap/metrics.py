@@ -427,12 +427,24 @@ def character_hovering(traj, contacts, floor: float = 0.0) -> dict:
     return _character_hovering(traj, contacts, pos, floor)
 
 
-def source_hovering(motion, joint_indices: dict[str, int], contacts) -> dict:
-    """Hovering of a source's feet above its estimated floor (``contacts.floor``)
-    on the frames it is labelled in contact; contact points as for skating."""
+def _source_floor(motion, joint_indices, contacts):
+    """The source's floor: the contacts' own, else estimated as detection does
+    (user labels from a CSV carry no floor)."""
+    if contacts is not None and contacts.floor is not None:
+        return contacts.floor
+    from .ik.contacts import detect_contacts
+
+    return detect_contacts(motion, joint_indices).floor
+
+
+def source_hovering(motion, joint_indices: dict[str, int], contacts, floor=None) -> dict:
+    """Hovering of a source's feet above its estimated floor (``floor``, by
+    default ``contacts.floor`` or a fresh estimate) on the frames it is
+    labelled in contact; contact points as for skating."""
     _check_frames(motion.num_frames, contacts, "source motion")
     names, pos = _source_points(motion, joint_indices)
-    floor = contacts.floor
+    if floor is None:
+        floor = _source_floor(motion, joint_indices, contacts)
     lowest, labelled = [], []
     for side in ("left", "right"):
         cols = [i for i, n in enumerate(names) if n.startswith(side + "_")]
@@ -471,9 +483,10 @@ def source_penetration(motion, floor=None) -> dict:
 
 
 def source_metrics(motion, joint_indices: dict[str, int], contacts=None) -> dict:
-    """The figures a source motion has: skating, penetration and hovering
-    (the last two against ``contacts.floor`` when contacts are given)."""
-    floor = None if contacts is None else contacts.floor
+    """The figures a source motion has: skating, penetration and (with
+    contact labels) hovering; penetration and hovering are measured against
+    the floor contact detection estimates (``contacts.floor`` if it has one)."""
+    floor = _source_floor(motion, joint_indices, contacts)
     out = {
         "frames": motion.num_frames,
         "fps": float(motion.fps),
@@ -481,7 +494,7 @@ def source_metrics(motion, joint_indices: dict[str, int], contacts=None) -> dict
         "penetration": source_penetration(motion, floor),
     }
     if contacts is not None:
-        out["hovering"] = source_hovering(motion, joint_indices, contacts)
+        out["hovering"] = source_hovering(motion, joint_indices, contacts, floor)
         out["skating_labelled"] = source_labelled_skating(motion, joint_indices, contacts)
     return out
 

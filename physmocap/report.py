@@ -142,7 +142,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
 
             contacts = detect_contacts(source_motion, joint_indices)
         source_metrics = metrics.source_metrics(source_motion, joint_indices, contacts)
-        floor = contacts.floor if contacts is not None else None
+        floor = metrics._source_floor(source_motion, joint_indices, contacts)
         source_info = {
             "path": str(source_motion.source),
             "frames": source_motion.num_frames,

@@ -167,6 +167,9 @@ def test_cli_report_with_user_contacts_and_plots(walk_npz, tmp_path, capsys):
     data = json.loads(out.read_text())
     assert data["contacts"]["origin"] == str(FIXTURE)
     assert data["contacts"]["labels"]["left_heel"]["segments"] == 4
+    # user labels carry no floor: the source's is still estimated for its figures
+    assert data["source"]["floor_m"] is not None
+    assert 0 < data["metrics"]["source"]["hovering"]["median_mm"] < 50
     from physmocap.plots import PLOT_FILES
 
     assert sorted(p.name for p in plots.iterdir()) == sorted(PLOT_FILES)

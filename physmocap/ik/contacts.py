@@ -645,7 +645,10 @@ def detect_contacts(motion, joint_indices: Mapping[str, int], options: ContactOp
     """
     pts = contact_points(joint_indices)
     world = motion.world_positions()
-    contacts = detect_point_contacts({n: world[:, j] for n, j in pts.items()}, motion.fps, options)
+    try:
+        contacts = detect_point_contacts({n: world[:, j] for n, j in pts.items()}, motion.fps, options)
+    except InputError as exc:
+        raise InputError(exc.message, path=motion.source) from None
     contacts.joints = pts
     contacts.source = "detected"
     return contacts

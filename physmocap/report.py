@@ -406,7 +406,12 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
 
 def tracking_targets(motion, joint_indices: dict[str, int], character, contacts=None):
     """Rebuild the IK targets of a retargeted clip (default target options),
-    so a report on a saved trajectory can measure tracking errors."""
+    so a report on a saved trajectory can measure tracking errors.
+
+    These are :func:`~physmocap.ik.targets.build_targets`' targets; any later
+    adjustment the retargeter makes to them (options, planting) is not
+    reproduced, so figures can differ slightly from ``retarget --report``.
+    """
     from .ik.targets import build_targets
 
     kwargs = {}

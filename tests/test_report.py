@@ -215,7 +215,7 @@ def test_cli_report_wrong_source_and_columns(walk_npz, tmp_path, capsys):
 
     write_npz(short, arrays)
     assert main(["report", str(short), "--start", "500"]) == 2
-    assert "only 524" in capsys.readouterr().err
+    assert "has only 24 (from --start 500)" in capsys.readouterr().err
     arrays["qpos"] = arrays["qpos"][:, :10]
     write_npz(short, arrays)
     assert main(["report", str(short), "--source", str(shared_file(WALK))]) == 2
@@ -227,3 +227,23 @@ def test_load_trajectory_round_trip(walk_npz):
     back = load_trajectory(walk_npz)
     np.testing.assert_array_equal(back.qpos, traj.qpos)
     assert back.fps == traj.fps and back.character.name == traj.character.name
+
+
+def test_cli_report_aligns_a_cut_and_resampled_retarget(tmp_path, capsys):
+    from physmocap import metrics
+
+    motion, traj = retargeted(WALK, "humanoid", start=100, end=400, fps=30.0)
+    npz = write_trajectory_npz(traj, tmp_path / "cut.npz")
+    out = tmp_path / "r.json"
+    assert main(["report", str(npz), "--start", "100", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    # the source the command re-reads lines up with the frames retarget used
+    from physmocap.report import tracking_targets
+
+    cut = motion.slice_frames(100, 400).resample(30.0)
+    idx = dict(map_skeleton(cut.skeleton).indices)
+    targets = tracking_targets(cut, idx, traj.character, detect_contacts(cut, idx))
+    rebuilt = Trajectory(traj.character, traj.qpos, traj.fps, targets=targets)
+    expected = metrics.tracking_errors(rebuilt)["all_mean_cm"]
+    assert data["metrics"]["result"]["tracking"]["all_mean_cm"] == pytest.approx(expected, rel=1e-4)
+    assert data["source"]["frames"] == traj.num_frames and data["source"]["fps"] == 30.0

@@ -72,17 +72,21 @@ def run(args: argparse.Namespace) -> int:
 
         opts = {"units": args.in_units} if args.in_units else {}
         motion = load_motion(src, **opts)
+        # as retarget does: cut at the source's rate (--start is a source frame), then resample
+        if args.start >= motion.num_frames:
+            raise OptionError(f"--start {args.start} is past the source's {motion.num_frames} frames", path=src)
+        if args.start:
+            motion = motion.slice_frames(args.start, motion.num_frames)
         if abs(motion.fps - traj.fps) > 1e-6 * traj.fps:
             motion = motion.resample(traj.fps)
-        end = args.start + F
-        if end > motion.num_frames:
+        if F > motion.num_frames:
             raise OptionError(
-                f"the trajectory has {F} frames but the source has only {motion.num_frames} "
-                f"(from --start {args.start}); is this the right source?",
+                f"the trajectory has {F} frames at {traj.fps:g} Hz but the source has only "
+                f"{motion.num_frames} (from --start {args.start}); is this the right source?",
                 path=src,
             )
-        if (args.start, end) != (0, motion.num_frames):
-            motion = motion.slice_frames(args.start, end)
+        if F < motion.num_frames:
+            motion = motion.slice_frames(0, F)
         joint_indices = map_motion(motion, profile=args.profile, mapping=args.source_map)
     if args.contacts:
         contacts = load_contact_csv(args.contacts, F, traj.fps)

@@ -13,11 +13,12 @@ is on when the ball or the toe end is in contact.
 **Floor.**  Estimated robustly from the clip, not from its single lowest
 sample: the floor is a plane :math:`z = f + s \cdot (p_{xy} - o)` fitted to
 the *slow* samples of every foot point (horizontal speed below
-``floor_speed``), each point with its own offset, by least squares over the
-lower envelope (samples more than ``floor_trim`` above the fit are dropped and
-the fit repeated).  The slope :math:`s` is only fitted when the slow samples
+``floor_speed``), each point with its own offset, by least squares repeated
+on the samples within a band around the previous fit that shrinks from 5 cm to
+``floor_trim`` (lifted feet and glitches drop out).  The slope :math:`s` is
+only fitted along horizontal directions in which the slow samples of a point
 span at least ``slope_min_extent`` metres (a walk across the capture volume;
-real volumes are often calibrated slightly tilted, e.g. 0.75 % on the CMU walk
+real volumes are often calibrated slightly tilted: 0.86 % along the CMU walk
 12_01) and is dropped, with a warning, if steeper than ``max_floor_slope``.
 Each point's *stance level* :math:`l_p` is the ``floor_percentile`` percentile
 of its slow samples' heights above the plane, and the floor height :math:`f`
@@ -25,30 +26,33 @@ is the lowest stance level, so the toe end sits at about 0 and the ankle
 joint a few centimetres up.
 
 **Detection.**  Per point and frame, with :math:`h = z - \text{plane} - (l_p -
-f)` the height above the point's own stance level and :math:`v` the
-horizontal speed (central differences over ``speed_window`` seconds), a
-hysteresis state machine:
+f)` the height above the point's own stance level, :math:`v` the horizontal
+speed and :math:`\dot z` the vertical velocity (central differences over
+``speed_window`` seconds), a hysteresis state machine:
 
-* *enter* contact when :math:`h < h_{enter}` and :math:`v < v_{enter}` have
-  held for ``min_contact`` seconds;
-* *leave* contact when :math:`h > h_{exit}` or :math:`v > v_{exit}` has held
-  for ``min_gap`` seconds.
+* *enter* contact when :math:`h < h_{enter}`, :math:`v < v_{enter}` and
+  :math:`\dot z < \dot z_{lift}` have held for ``min_contact`` seconds;
+* *leave* contact when :math:`h > h_{exit}`, :math:`v > v_{exit}` or
+  :math:`\dot z > \dot z_{lift}` has held for ``min_gap`` seconds.
 
-Heel and toe have their own height and exit-speed thresholds because they
-move differently in gait: the heel leaves the floor by rising slowly (heel
-rise), so its exit height is low; the forefoot pivots and rolls before toe-off
-(markers on it often lift a few centimetres and slide while the toes stay
-down), so its exit height and speed are generous.  Thresholds in metres, m/s
-and seconds, so the defaults work at 30 and 120 Hz alike.
+Heel and toe have their own thresholds because they move differently in gait:
+the heel leaves the floor by rising, slowly at first (heel rise, about 10-30
+cm/s upward while it barely moves forward), so its lift speed decides; the
+forefoot pivots and rolls before toe-off (toe markers often lift a few
+centimetres and slide while the toes stay down), so its exit height, speed
+and lift speed are generous.  Thresholds are in metres, m/s and seconds, so
+the defaults work at 30 and 120 Hz alike (tuned on the hand-labelled CMU walk,
+checked on the other shared clips and on 30 Hz resamples).
 
 **Causal use.**  :class:`ContactDetector` is the state machine; it only needs
-the current frame's heights and speeds, so a streaming retargeter can call
-:meth:`ContactDetector.step` per frame (with a backward-difference speed,
-:func:`backward_speed`, and a floor estimated beforehand).  Its transitions
-are committed ``min_contact`` / ``min_gap`` seconds after they begin.  The
-batch function :func:`detect_contacts` runs the same machine and then
-back-dates every transition to the frame its condition began, and uses
-centred speeds, so batch labels are the streaming labels without their lag.
+the current frame's heights and velocities.  :class:`ContactStream` feeds it
+from positions one frame at a time with backward differences (a look-behind
+of ``speed_window`` seconds) and a floor estimated beforehand, for a streaming
+retargeter.  Its transitions are committed ``min_contact`` / ``min_gap``
+seconds after they begin.  The batch function :func:`detect_contacts` runs
+the same machine on centred differences and back-dates every transition to
+the frame its condition began, so batch labels are the streaming labels
+without their lag.
 
 **User labels.**  :func:`load_contact_csv` reads frame ranges per point from a
 CSV file instead (see its docstring); :func:`write_contact_csv` writes labels
@@ -126,7 +130,7 @@ class ContactOptions:
         speed_window: Span (s) of the central difference for horizontal speed.
         floor_percentile: Percentile of a point's slow heights taken as its stance level.
         floor_speed: Samples slower than this (m/s) inform the floor estimate.
-        floor_trim: Samples this far above the floor fit are dropped and the fit repeated.
+        floor_trim: Final half-width (m) of the band around the plane fit that samples must lie in.
         fit_slope: Fit a tilted floor plane (else a level floor).
         slope_min_extent: Fit a slope only if slow samples span this many metres.
         max_floor_slope: A steeper fitted slope (rise over run) is dropped with a warning.

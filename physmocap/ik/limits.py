@@ -102,18 +102,18 @@ def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
     eight corners, cylinders and ellipsoids conservatively by the corners of
     their bounding box, meshes by their vertices.
     """
-    t = model.geom_type[gid]
+    t = int(model.geom_type[gid])
     s = model.geom_size[gid]
     G = mujoco.mjtGeom
-    if t == G.mjGEOM_SPHERE:
+    if t == int(G.mjGEOM_SPHERE):
         return np.array([[0.0, 0.0, 0.0, s[0]]])
-    if t == G.mjGEOM_CAPSULE:
+    if t == int(G.mjGEOM_CAPSULE):
         return np.array([[0.0, 0.0, s[1], s[0]], [0.0, 0.0, -s[1], s[0]]])
-    if t in (G.mjGEOM_BOX, G.mjGEOM_ELLIPSOID, G.mjGEOM_CYLINDER):
-        hx, hy, hz = (s[0], s[1], s[2]) if t != G.mjGEOM_CYLINDER else (s[0], s[0], s[1])
+    if t in (int(G.mjGEOM_BOX), int(G.mjGEOM_ELLIPSOID), int(G.mjGEOM_CYLINDER)):
+        hx, hy, hz = (s[0], s[1], s[2]) if t != int(G.mjGEOM_CYLINDER) else (s[0], s[0], s[1])
         corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
         return corners
-    if t == G.mjGEOM_MESH:
+    if t == int(G.mjGEOM_MESH):
         mid = model.geom_dataid[gid]
         start, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
         v = model.mesh_vert[start : start + n].astype(float)
@@ -189,6 +189,12 @@ class FloorLimit(mink.Limit):
     Jacobian of the point and :math:`m` a small margin that absorbs the
     linearisation error.  Geoms of the world body (the floor itself) are
     skipped.
+
+    Swing clearance: for the contact sites in :attr:`clearance` (set per frame
+    by the planting: sites of a foot that is neither in contact nor planted),
+    :math:`z_s + J_{z,s} \Delta q \ge \min(z_{floor} + c, z_s + r)`, so a
+    swing foot clears the stance band, rising at most ``max_rise`` per frame
+    when it starts below it.
     """
 
     def __init__(
@@ -215,6 +221,9 @@ class FloorLimit(mink.Limit):
         self.enabled = True
         self._jacp = np.zeros((3, model.nv))
         self._cand = GeomCandidates(model, self.geoms)
+        #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
+        self.clearance: dict[int, float] = {}
+        self.max_rise = 0.004
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points.
@@ -238,10 +247,17 @@ class FloorLimit(mink.Limit):
         active = np.flatnonzero(z < self.floor + self.activation)
         if active.size == 0:
             return mink.Constraint()
-        G = np.empty((active.size, self.model.nv))
-        h = np.empty(active.size)
+        rows = len(active) + len(self.clearance)
+        G = np.empty((rows, self.model.nv))
+        h = np.empty(rows)
         for row, k in enumerate(active):
             mujoco.mj_jac(self.model, data, self._jacp, None, anchor[k], int(body[k]))
             G[row] = -self._jacp[2]
             h[row] = z[k] - self.floor - self.margin
+        # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
+        for row, (sid, c) in enumerate(self.clearance.items(), start=len(active)):
+            zs = data.site_xpos[sid, 2]
+            mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
+            G[row] = -self._jacp[2]
+            h[row] = zs - min(self.floor + c, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)

@@ -32,7 +32,7 @@ import numpy as np
 
 from .tasks import SitePositionTask
 
-__all__ = ["PlantOptions", "FootPlanter"]
+__all__ = ["PlantOptions", "FootPlanter", "FootAnchor", "Planting"]
 
 
 @dataclass
@@ -41,17 +41,33 @@ class PlantOptions:
 
     Attributes:
         plant: Enable planting at all.
-        cost_xy: Cost per metre of the horizontal lock.
-        cost_z: Cost per metre of the height lock (floor).
+        cost_xy: Cost per metre of the horizontal lock when the solver has to
+            soften it (it is a hard equality otherwise).
+        cost_z: Cost per metre of the height task pulling a labelled site onto the floor.
         onset_time: Seconds over which the height cost ramps in at contact start.
         release_time: Seconds over which the lock fades out after contact ends.
+        anchor_release_time: Seconds over which a foot's target offset
+            (:class:`FootAnchor`) fades back to the actor's motion after release.
+        lock_low: Also hold a contact site horizontally while it is within
+            ``engage_height`` of the floor, labelled or not.
+        engage_height: Height (metres) below which a site is held (just above
+            the 1 cm stance band of the quality metrics).
+        release_margin: A held site is let go only above ``engage_height`` plus this.
+        clearance: Swing feet (contact sites neither labelled nor held) stay
+            at least this high (metres), a hard inequality (0 disables): a foot
+            skimming the floor would otherwise slide within the stance band.
     """
 
     plant: bool = True
     cost_xy: float = 400.0
     cost_z: float = 400.0
     onset_time: float = 0.03
-    release_time: float = 0.12
+    release_time: float = 0.05
+    anchor_release_time: float = 0.25
+    lock_low: bool = True
+    engage_height: float = 0.012
+    release_margin: float = 0.006
+    clearance: float = 0.012
 
 
 def _smooth(x: float) -> float:
@@ -75,59 +91,298 @@ class FootPlanter:
         self.model = model
         self.sites = tuple(sites)
         self.floor = float(floor)
-        self.tasks = [SitePositionTask(model, s, cost=0.0) for s in self.sites]
+        self.tasks = [SitePositionTask(model, s, cost=0.0, axes=(2,)) for s in self.sites]
+        self.xy = [SitePositionTask(model, s, cost=opt.cost_xy, axes=(0, 1)) for s in self.sites]
+        self._prev_z: np.ndarray | None = None
         n = len(self.sites)
         self.locked = np.zeros(n, dtype=bool)
         self.age = np.zeros(n, dtype=int)
         self.release_left = np.zeros(n, dtype=int)
+        self.labelled = np.zeros(n, dtype=bool)
+        #: sites neither labelled nor held this frame (they get the swing clearance)
+        self.free = np.zeros(n, dtype=bool)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
         self.release_frames = max(1, int(round(opt.release_time * fps)))
         self.anchor = np.zeros((n, 3))
 
     def reset(self) -> None:
         self.locked[:] = False
+        self.labelled[:] = False
+        self._prev_z = None
         self.age[:] = 0
         self.release_left[:] = 0
 
-    def update(self, in_contact: Mapping[str, bool] | np.ndarray, data: mujoco.MjData) -> list[SitePositionTask]:
-        """Advance one frame; returns the tasks to add to this frame's QP.
+    def update(
+        self, in_contact: Mapping[str, bool] | np.ndarray, data: mujoco.MjData
+    ) -> tuple[list[SitePositionTask], list[SitePositionTask], np.ndarray]:
+        """Advance one frame.
+
+        A site is *engaged* (held horizontally by a hard equality) from the
+        frame a labelled site is, or is about to be (one frame ahead at twice
+        its current vertical speed, to catch a foot slapping down), within
+        ``engage_height`` of the floor; with ``lock_low`` it stays engaged after
+        its label ends until it has lifted above the band (plus
+        ``release_margin``), so a foot rises before it moves, as a planted foot
+        does.  Labelled sites are pulled down onto the floor by a soft height
+        task.  A swing foot that skims the floor without a label is not held.
 
         Args:
-            in_contact: Per site, whether it is in contact on this frame
+            in_contact: Per site, whether it is labelled in contact on this frame
                 (a mapping by site name, or a bool array in ``self.sites`` order).
             data: MuJoCo data holding the previous frame's solution (anchors
-                are taken from it when a contact begins).
+                and heights are taken from it).
+
+        Returns:
+            ``(soft tasks, equality constraints, engaged flags)``.
         """
         opt = self.options
         if isinstance(in_contact, Mapping):
             flags = np.array([bool(in_contact.get(s, False)) for s in self.sites])
         else:
             flags = np.asarray(in_contact, dtype=bool)
-        active: list[SitePositionTask] = []
+        n = len(self.sites)
+        engaged = np.zeros(n, dtype=bool)
+        soft: list[SitePositionTask] = []
+        hard: list[SitePositionTask] = []
         if not opt.plant:
-            return active
+            return soft, hard, engaged
+        z = np.array([data.site_xpos[t.site_id, 2] for t in self.tasks]) - self.floor
+        vz = np.zeros(n) if self._prev_z is None else z - self._prev_z
+        self._prev_z = z
         for k, task in enumerate(self.tasks):
-            if flags[k]:
+            sid = task.site_id
+            # hysteresis: a held site stays held until it is clearly above the band
+            band = opt.engage_height + (opt.release_margin if self.locked[k] else 0.0)
+            low = min(z[k], z[k] + 2.0 * vz[k]) < band
+            # A lock starts when a labelled site touches down (a labelled site still in
+            # the air is pulled down first: holding it in the air would keep it from
+            # reaching the floor).  With lock_low it lasts, label or not, until the
+            # site lifts clear of the band, so a foot rises before it moves.
+            engaged[k] = low and (flags[k] or (opt.lock_low and self.locked[k]))
+            if engaged[k]:
                 if not self.locked[k]:
-                    sid = task.site_id
                     self.anchor[k, :2] = data.site_xpos[sid, :2]
                     self.anchor[k, 2] = self.floor
                     self.locked[k] = True
-                    self.age[k] = 0
-                    self.release_left[k] = 0
-                else:
-                    self.age[k] += 1
-                ramp = _smooth((self.age[k] + 1) / self.onset_frames)
-                task.set_cost((opt.cost_xy, opt.cost_xy, opt.cost_z * ramp))
+                self.xy[k].set_target(self.anchor[k])
+                hard.append(self.xy[k])
             else:
-                if self.locked[k]:
-                    self.locked[k] = False
-                    self.release_left[k] = self.release_frames
-                if self.release_left[k] <= 0:
-                    continue
-                fade = _smooth(self.release_left[k] / (self.release_frames + 1))
-                self.release_left[k] -= 1
-                task.set_cost((opt.cost_xy * fade, opt.cost_xy * fade, opt.cost_z * fade))
-            task.set_target(self.anchor[k])
-            active.append(task)
-        return active
+                self.locked[k] = False
+            self.free[k] = not flags[k] and not engaged[k]
+            if flags[k]:
+                # pulled onto the floor, the pull ramping in over onset_time
+                self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
+                ramp = _smooth((self.age[k] + 1) / self.onset_frames)
+                task.set_cost(opt.cost_z * ramp)
+                task.set_target(np.array([0.0, 0.0, self.floor]))
+                soft.append(task)
+            self.labelled[k] = flags[k]
+        return soft, hard, engaged
+
+
+class FootAnchor:
+    r"""Causal horizontal offset that holds one foot's *targets* still during contact.
+
+    The actor's own feet slide during stance (raw capture slides, and so do
+    targets built for other proportions), so locking the character's foot
+    while its target drifts would store up a gap that snaps back on release.
+    Instead the foot's targets are shifted by an offset :math:`o(t)`
+    (horizontal, metres):
+
+    * when a contact begins and the foot has no other contact, the anchor is
+      where the *character's* point is (previous frame's solution), so the
+      targets agree with the planted contact sites;
+    * while the heel is in contact, :math:`o = A_h - T_{ankle}(t)`; while only
+      the toe is, :math:`o = A_t - T_{toe}(t)` (a toe anchor set during heel
+      contact follows the heel's offset, so switching is continuous);
+    * after release, :math:`o` fades to zero along a smoothstep over
+      ``release_time``, so the foot rejoins the actor's motion during the
+      swing without a pop.
+    """
+
+    def __init__(self, fps: float, release_time: float = 0.25) -> None:
+        self.release_frames = max(1, int(round(release_time * fps)))
+        self.offset = np.zeros(2)
+        self.heel_anchor: np.ndarray | None = None
+        self.toe_anchor: np.ndarray | None = None
+        self._fade_from = np.zeros(2)
+        self._fade_left = 0
+
+    def step(
+        self,
+        heel: bool,
+        toe: bool,
+        ankle_xy: np.ndarray,
+        toe_xy: np.ndarray,
+        ankle_now: np.ndarray | None = None,
+        toe_now: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Advance one frame; returns the offset to add to this foot's targets.
+
+        Args:
+            heel, toe: Contact labels of this frame.
+            ankle_xy, toe_xy: This frame's (unshifted) ankle and toe targets.
+            ankle_now, toe_now: The character's ankle and toe positions in the
+                previous frame's solution (None: use the shifted targets).
+        """
+        free = self.heel_anchor is None and self.toe_anchor is None
+        if heel and self.heel_anchor is None:
+            self.heel_anchor = (ankle_now if free and ankle_now is not None else ankle_xy + self.offset).copy()
+        if toe and self.toe_anchor is None:
+            self.toe_anchor = (toe_now if free and toe_now is not None else toe_xy + self.offset).copy()
+        if not heel:
+            self.heel_anchor = None
+        if not toe:
+            self.toe_anchor = None
+        if self.heel_anchor is not None:
+            new = self.heel_anchor - ankle_xy
+            if self.toe_anchor is not None:  # keep the toe anchor consistent with the heel's
+                self.toe_anchor = toe_xy + new
+        elif self.toe_anchor is not None:
+            new = self.toe_anchor - toe_xy
+        else:
+            if self._fade_left == 0 and np.any(self.offset):
+                self._fade_from = self.offset.copy()
+                self._fade_left = self.release_frames
+            if self._fade_left > 0:
+                self._fade_left -= 1
+                new = self._fade_from * _smooth(self._fade_left / self.release_frames)
+            else:
+                new = np.zeros(2)
+            self.offset = new
+            return new
+        self._fade_left = 0
+        self.offset = new
+        return new
+
+
+#: Share of a foot's offset applied to each of its canonical joints (the knee
+#: is then re-solved by :func:`_knee_between`).
+FOOT_JOINT_SHARE = {"ankle": 1.0, "toe": 1.0, "toe_end": 1.0}
+
+
+def _knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float) -> np.ndarray:
+    """Knee position for a hip and a (moved) ankle, keeping thigh ``l1`` and shank ``l2``.
+
+    Two-bone IK in closed form: with :math:`d = |a - h|` (clamped to the
+    reachable range) and :math:`u = (a - h)/d`, the knee is
+    :math:`h + x u + y p` where :math:`x = (l_1^2 - l_2^2 + d^2)/(2d)`,
+    :math:`y = \\sqrt{l_1^2 - x^2}` and :math:`p` the unit direction of the
+    original knee off the hip-ankle line (the knee keeps its plane).
+    """
+    v = ankle - hip
+    d = float(np.linalg.norm(v))
+    if d < 1e-9:
+        return knee0
+    u = v / d
+    d = min(max(d, abs(l1 - l2) + 1e-6), l1 + l2 - 1e-6)
+    x = (l1 * l1 - l2 * l2 + d * d) / (2.0 * d)
+    y = np.sqrt(max(l1 * l1 - x * x, 0.0))
+    w = knee0 - hip
+    p = w - np.dot(w, u) * u
+    n = np.linalg.norm(p)
+    if n < 1e-9:
+        return hip + x * u
+    return hip + x * u + y * p / n
+
+
+class Planting:
+    """Per-frame planting for one character: foot target offsets plus contact-site locks.
+
+    Causal: each :meth:`step` uses only this frame's labels and targets and the
+    previous frame's solution, so offline and streaming retargeting share it.
+
+    Args:
+        character: The :class:`~physmocap.models.Character`.
+        names: Canonical joints of the targets, in target order.
+        fps: Frame rate.
+        options: :class:`PlantOptions`.
+        floor: Floor height (metres).
+    """
+
+    def __init__(self, character, names, fps: float, options: PlantOptions | None = None, floor: float = 0.0) -> None:
+        self.options = opt = options or PlantOptions()
+        self.character = character
+        self.names = tuple(names)
+        model = character.model
+        self.sites = [s for side in ("left", "right") for s in character.contacts.get(side, ())]
+        self.site_label = {}
+        for side in ("left", "right"):
+            for k, site in enumerate(character.contacts.get(side, ())):
+                self.site_label[site] = f"{side}_heel" if k == 0 else f"{side}_toe"
+        self.locks = FootPlanter(model, self.sites, fps, opt, floor=floor)
+        self.lengths = {}
+        rest = {c: character.rest_positions()[c] for c in self.names if c in character.rest_positions()}
+        for side in ("left", "right"):
+            hip, knee, ankle = f"{side}_hip", f"{side}_knee", f"{side}_ankle"
+            if all(j in rest for j in (hip, knee, ankle)):
+                self.lengths[side] = (
+                    self.names.index(hip),
+                    self.names.index(knee),
+                    self.names.index(ankle),
+                    float(np.linalg.norm(rest[knee] - rest[hip])),
+                    float(np.linalg.norm(rest[ankle] - rest[knee])),
+                )
+        self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
+        self.feet = {}
+        for side in ("left", "right"):
+            ankle = f"{side}_ankle"
+            if ankle not in self.names:
+                continue
+            toe = next((f"{side}_{p}" for p in ("toe", "toe_end") if f"{side}_{p}" in self.names), ankle)
+            ref = {}
+            for j in (ankle, toe):
+                tf = character.tracked[j]
+                ref[j] = (tf.kind, model.site(tf.name).id if tf.kind == "site" else model.body(tf.name).id)
+            shares = [(self.names.index(f"{side}_{j}"), w) for j, w in FOOT_JOINT_SHARE.items() if f"{side}_{j}" in self.names]
+            self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], shares)
+
+    def clearance_sites(self) -> dict[int, float]:
+        """Site id -> clearance height for this frame's swing sites (after :meth:`step`)."""
+        c = self.options.clearance
+        if not self.options.plant or c <= 0:
+            return {}
+        return {t.site_id: c for t, free in zip(self.locks.tasks, self.locks.free) if free}
+
+    @staticmethod
+    def _xy(data: mujoco.MjData, ref: tuple[str, int]) -> np.ndarray:
+        kind, i = ref
+        return (data.site_xpos[i] if kind == "site" else data.xpos[i])[:2].copy()
+
+    def step(
+        self, positions: np.ndarray, labels: Mapping[str, bool], data: mujoco.MjData, first: bool = False
+    ) -> tuple[np.ndarray, list[SitePositionTask], list[SitePositionTask], np.ndarray]:
+        """Shifted targets ``(N, 3)``, soft tasks, equality constraints, and the
+        foot offsets ``(2, 2)`` (left, right)."""
+        out = np.array(positions, dtype=float, copy=True)
+        offsets = np.zeros((2, 2))
+        if not self.options.plant:
+            return out, [], [], offsets
+        flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
+        tasks, hard, engaged = self.locks.update(flags, data)
+        held = {name: bool(labels.get(name, False)) for name in ("left_heel", "left_toe", "right_heel", "right_toe")}
+        for site, e in zip(self.sites, engaged):
+            held[self.site_label[site]] |= bool(e)
+        for s, side in enumerate(("left", "right")):
+            if side not in self.feet:
+                continue
+            ia, it, ra, rt, shares = self.feet[side]
+            now_a = None if first else self._xy(data, ra)
+            now_t = None if first else self._xy(data, rt)
+            o = self.anchors[side].step(
+                held[f"{side}_heel"],
+                held[f"{side}_toe"],
+                positions[ia, :2],
+                positions[it, :2],
+                now_a,
+                now_t,
+            )
+            offsets[s] = o
+            if not np.any(o):
+                continue
+            for i, w in shares:
+                out[i, :2] += w * o
+            if side in self.lengths:
+                ih, ik, ia2, l1, l2 = self.lengths[side]
+                out[ik] = _knee_between(out[ih], out[ia2], positions[ik], l1, l2)
+        return out, tasks, hard, offsets

@@ -18,6 +18,8 @@ from ..errors import MappingError, OptionError, warn
 from ..motion import Motion
 from ..progress import Progress
 from ..trajectory import Trajectory
+from .contacts import ContactOptions, Contacts, detect_contacts, load_contact_csv
+from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, FrameSolver, SolverOptions
 from .targets import TargetOptions, Targets, build_targets
 
@@ -25,10 +27,15 @@ __all__ = ["retarget", "split_options", "map_motion"]
 
 _TARGET_FIELDS = {f.name for f in dataclasses.fields(TargetOptions)}
 _SOLVER_FIELDS = {f.name for f in dataclasses.fields(SolverOptions)}
+_PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantOptions)}
+_KNOWN = _TARGET_FIELDS | _SOLVER_FIELDS | _PLANT_FIELDS
 
 
-def split_options(options: dict[str, Any]) -> tuple[TargetOptions, SolverOptions, dict[str, Any]]:
-    """Split flat keyword options into target options, solver options and the rest."""
+def split_options(
+    options: dict[str, Any],
+) -> tuple[TargetOptions, SolverOptions, dict[str, Any]]:
+    """Split flat keyword options into target options, solver options and the rest
+    (planting options stay in the rest; see :func:`plant_options`)."""
     t, s, rest = {}, {}, {}
     for k, v in options.items():
         if k in _TARGET_FIELDS:
@@ -38,6 +45,27 @@ def split_options(options: dict[str, Any]) -> tuple[TargetOptions, SolverOptions
         else:
             rest[k] = v
     return TargetOptions(**t), SolverOptions(**s), rest
+
+
+def plant_options(rest: dict[str, Any]) -> tuple[PlantOptions, dict[str, Any]]:
+    """Take the :class:`PlantOptions` fields out of ``rest``."""
+    p = {k: v for k, v in rest.items() if k in _PLANT_FIELDS}
+    return PlantOptions(**p), {k: v for k, v in rest.items() if k not in _PLANT_FIELDS}
+
+
+def resolve_contacts(motion: Motion, joint_indices: dict[str, int], contacts, options: ContactOptions | None):
+    """Contacts for ``motion``: detected (None), loaded from a CSV path, given, or none (False)."""
+    if contacts is False:
+        return None
+    if contacts is None:
+        return detect_contacts(motion, joint_indices, options)
+    if isinstance(contacts, Contacts):
+        if contacts.num_frames != motion.num_frames:
+            raise OptionError(
+                f"contact labels cover {contacts.num_frames} frames but the motion has {motion.num_frames}"
+            )
+        return contacts
+    return load_contact_csv(contacts, motion.num_frames, motion.fps)
 
 
 def map_motion(motion: Motion, profile: str | None = None, mapping=None) -> dict[str, int]:
@@ -73,6 +101,8 @@ def retarget(
     fps: float | None = None,
     progress: bool | None = None,
     targets: Targets | None = None,
+    contacts=None,
+    contact_options: ContactOptions | None = None,
     **options: Any,
 ) -> Trajectory:
     """Retarget ``motion`` onto ``character`` (default: the bundled humanoid).
@@ -88,9 +118,17 @@ def retarget(
         fps: Resample the source to this rate first.
         progress: Draw a progress bar on stderr (default: when it is a terminal).
         targets: Precomputed targets (skips target building).
-        **options: Fields of :class:`~physmocap.ik.targets.TargetOptions` and
-            :class:`~physmocap.ik.solver.SolverOptions` (e.g. ``max_iterations=8``,
-            ``floor=False``, ``scale_root=False``).
+        contacts: Foot contact labels: None detects them on the (sliced,
+            resampled) motion, a path reads a CSV of frame ranges
+            (:func:`~physmocap.ik.contacts.load_contact_csv`), a
+            :class:`~physmocap.ik.contacts.Contacts` is used as is, False
+            turns planting off.
+        contact_options: Detection thresholds (:class:`~physmocap.ik.contacts.ContactOptions`).
+        **options: Fields of :class:`~physmocap.ik.targets.TargetOptions`,
+            :class:`~physmocap.ik.solver.SolverOptions` and
+            :class:`~physmocap.ik.planting.PlantOptions` (e.g.
+            ``max_iterations=8``, ``floor=False``, ``scale_root=False``,
+            ``plant=False``, ``release_time=0.2``).
 
     Returns:
         The character's :class:`~physmocap.trajectory.Trajectory`.
@@ -100,9 +138,9 @@ def retarget(
     if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
         character = load_character(character)
     target_opt, solver_opt, rest = split_options(options)
+    plant_opt, rest = plant_options(rest)
     if rest:
-        known = sorted(_TARGET_FIELDS | _SOLVER_FIELDS)
-        raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {known}")
+        raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {sorted(_KNOWN)}")
     if not character.contacts:
         raise MappingError(
             "the character declares no foot contact points; add [contacts] to its mapping file",
@@ -113,11 +151,23 @@ def retarget(
         if not (np.isfinite(fps) and fps > 0):
             raise OptionError(f"--fps must be a positive number, got {fps}")
         motion = motion.resample(float(fps))
+    if joint_indices is None:
+        joint_indices = map_motion(motion, profile=profile, mapping=mapping)
+    found = resolve_contacts(motion, joint_indices, contacts if plant_opt.plant else False, contact_options)
     if targets is None:
-        if joint_indices is None:
-            joint_indices = map_motion(motion, profile=profile, mapping=mapping)
-        targets = build_targets(motion, joint_indices, character, target_opt)
-    return solve_targets(targets, character, solver_opt, source=motion.source, progress=progress)
+        floor = found.floor if found is not None else None
+        targets = build_targets(motion, joint_indices, character, target_opt, floor=floor)
+    traj = solve_targets(
+        targets,
+        character,
+        solver_opt,
+        source=motion.source,
+        progress=progress,
+        labels=found.labels if found is not None else None,
+        plant=plant_opt,
+    )
+    traj.stats["contacts"] = found
+    return traj
 
 
 def solve_targets(
@@ -126,17 +176,45 @@ def solve_targets(
     options: SolverOptions | None = None,
     source: str = "<memory>",
     progress: bool | None = None,
+    labels: dict[str, np.ndarray] | None = None,
+    plant: PlantOptions | None = None,
 ) -> Trajectory:
-    """Run the per-frame IK over prepared targets."""
+    """Run the per-frame IK over prepared targets.
+
+    With contact ``labels`` (``left_heel``, ``left_toe``, ``right_heel``,
+    ``right_toe`` -> ``(F,)`` bool) the feet are planted
+    (:class:`~physmocap.ik.planting.Planting`): the targets the IK tracks
+    become ``targets.positions`` with each foot's offsets applied (the
+    unshifted ones are kept in ``targets.info["raw_positions"]``).  On frame 0
+    the solver first converges from the rest pose without planting, then
+    anchors the feet in contact where that solution put them and solves again.
+    """
     solver = FrameSolver(character, targets.names, targets.has_orientation, targets.fps, options)
     F = targets.num_frames
+    planting = None
+    if labels is not None and (plant is None or plant.plant):
+        planting = Planting(character, targets.names, targets.fps, plant, floor=solver.options.floor_height)
+        targets.info["raw_positions"] = targets.positions.copy()
+        targets.info["foot_offsets"] = np.zeros((F, 2, 2))
     qpos = np.empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
     with Progress(F, "retarget", enabled=progress) as bar:
         for t in range(F):
+            if planting is not None:
+                if t == 0:
+                    solver.set_targets(targets.positions[0], targets.orientations[0], targets.valid[0])
+                    solver.solve_frame(first=True)
+                    solver.q_prev = None
+                frame_labels = {k: v[t] for k, v in labels.items()}
+                pos, solver.extra_tasks, solver.constraints, off = planting.step(
+                    targets.positions[t], frame_labels, solver.configuration.data
+                )
+                targets.positions[t] = pos
+                targets.info["foot_offsets"][t] = off
+                solver.set_clearance(planting.clearance_sites())
             solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
-            q, it, level = solver.solve_frame(first=(t == 0))
+            q, it, level = solver.solve_frame(first=(t == 0 and planting is None))
             qpos[t] = q
             iterations[t] = it
             relaxation[t] = level

@@ -20,7 +20,7 @@ Levenberg-Marquardt damping.  QPs are solved with ``daqp``.
 **Relaxation order** when a QP is infeasible or the backend fails (each level
 is tried in turn, and the frame is reported):
 
-1. drop the equality constraints (planted contacts);
+1. soften the equality constraints (planted contacts) into high-cost tasks;
 2. drop the frame-to-frame velocity bound;
 3. drop the floor;
 4. keep only the joint limits, with extra damping;
@@ -47,7 +47,7 @@ __all__ = ["SolverOptions", "FrameSolver", "RELAXATION_LEVELS"]
 
 RELAXATION_LEVELS = (
     "all constraints",
-    "contact equalities dropped",
+    "contact equalities softened",
     "velocity limits dropped",
     "floor dropped",
     "joint limits only",
@@ -167,6 +167,10 @@ class FrameSolver:
                 task.set_orientation_cost(oc)
                 self._task_on[k] = on
 
+    def set_clearance(self, sites: dict[int, float]) -> None:
+        """Swing-foot clearance for the next frame: site id -> height above the floor (m)."""
+        self.floor_limit.clearance = dict(sites)
+
     def reset(self, q: np.ndarray | None = None) -> None:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""
         q0 = self.character.rest_qpos if q is None else q
@@ -186,6 +190,8 @@ class FrameSolver:
         opt = self.options
         tasks = [*self.tasks, self.posture, *self.extra_tasks]
         constraints = self.constraints if level == 0 else []
+        if level >= 1:  # equalities softened into high-cost tasks
+            tasks += self.constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
         v = mink.solve_ik(
             self.configuration,
@@ -200,6 +206,99 @@ class FrameSolver:
             raise mink.NoSolutionFound(opt.solver)
         return v
 
+    def _settle_from_rest(self) -> None:
+        """First stage of frame 0: converge with a strong pull towards the rest pose.
+
+        Three-hinge joints (shoulders, hips) have two branches near gimbal lock
+        (a T-pose puts the shoulders there); converging first with a posture
+        cost of 1 picks the branch nearest the anatomical rest pose, and the
+        normal iterations then refine from it.
+        """
+        opt = self.options
+        self.posture.set_cost(max(1.0, opt.posture_cost))
+        try:
+            for _ in range(max(1, opt.first_frame_iterations // 3)):
+                try:
+                    v = self._step(1)
+                except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                    break
+                self.configuration.integrate_inplace(v, 1.0)
+                if np.max(np.abs(v)) < opt.tolerance:
+                    break
+        finally:
+            self.posture.set_cost(opt.posture_cost)
+
+    def _project_floor(self, level: int) -> None:
+        """Smallest step that puts every point back above the floor.
+
+        Tasks can pull against the floor until the iterations run out; this
+        solves :math:`\\min \\|\\Delta q\\|^2` under the hard constraints alone
+        (same limits as ``level``), a few times, which converges quickly.
+        """
+        for _ in range(5):
+            try:
+                v = mink.solve_ik(
+                    self.configuration,
+                    [],
+                    1.0,
+                    self.options.solver,
+                    damping=1e-6,
+                    limits=self._limits(level),
+                    constraints=(self.constraints if level == 0 and self.constraints else None),
+                )
+            except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                return
+            if not np.all(np.isfinite(v)):
+                return
+            self.configuration.integrate_inplace(v, 1.0)
+            if self._floor_ok():
+                return
+
+    def _hard_residual(self) -> float:
+        """Largest violation of the hard constraints that are linearised: planted
+        contacts (metres off their anchor) and the floor (metres below it)."""
+        r = 0.0
+        for task in self.constraints:
+            r = max(r, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        if self.options.floor:
+            z, _, _ = self.floor_limit.heights(self.configuration.data)
+            if z.size:
+                r = max(r, float(self.options.floor_height - z.min()))
+        return r
+
+    def _line_search(self, v: np.ndarray, tol: float = 5e-5) -> None:
+        """Take the step ``v``, halving it while it makes the hard constraints worse.
+
+        The QP satisfies the linearised constraints exactly, but near a
+        singular pose (a straight knee under a planted foot) a full step can
+        overshoot by millimetres and the next step undo it, forever.  Backtracking
+        on the hard-constraint residual removes that oscillation.
+        """
+        if not self.constraints and not self.options.floor:
+            self.configuration.integrate_inplace(v, 1.0)
+            return
+        q0 = self.configuration.q.copy()
+        r0 = self._hard_residual()
+        alpha = 1.0
+        for _ in range(4):
+            self.configuration.integrate_inplace(v, alpha)
+            if self._hard_residual() <= max(r0, tol):
+                return
+            alpha *= 0.5
+            self.configuration.update(q0)
+        self.configuration.integrate_inplace(v, alpha)
+
+    def _constraints_ok(self, tol: float = 5e-5) -> bool:
+        """True if every equality constraint (planted contact) holds within ``tol`` metres.
+
+        The equalities are linearised too: a large last step leaves a
+        second-order residual, and the solver iterates again to remove it.
+        """
+        for task in self.constraints:
+            if np.max(np.abs(task.compute_error(self.configuration))) > tol:
+                return False
+        return True
+
     def _floor_ok(self) -> bool:
         """True if no constrained point is below the floor by more than the solver's tolerance.
 
@@ -207,6 +306,8 @@ class FrameSolver:
         point a few millimetres below the floor (second-order error); the
         solver then iterates again, up to ``floor_iterations`` more times.
         """
+        if not self.options.floor:
+            return True
         z, _, _ = self.floor_limit.heights(self.configuration.data)
         return bool(z.size == 0 or z.min() >= self.options.floor_height - 1e-4)
 
@@ -219,12 +320,15 @@ class FrameSolver:
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
         iters = opt.first_frame_iterations if first else opt.max_iterations
+        if first:
+            self._settle_from_rest()
         worst = 0
         it = 0
         base = 0 if self.constraints else 1
         extra = opt.floor_iterations if opt.floor else 0
+        extra = max(extra, opt.floor_iterations if self.constraints else 0)
         for it in range(1, iters + extra + 1):
-            if it > iters and self._floor_ok():
+            if it > iters and self._floor_ok() and self._constraints_ok():
                 it -= 1
                 break
             level = base
@@ -240,9 +344,11 @@ class FrameSolver:
             if v is None:
                 worst = 5
                 break
-            self.configuration.integrate_inplace(v, 1.0)
-            if np.max(np.abs(v)) < opt.tolerance and (not opt.floor or self._floor_ok()):
+            self._line_search(v)
+            if np.max(np.abs(v)) < opt.tolerance and self._floor_ok() and self._constraints_ok():
                 break
+        if opt.floor and worst < 3 and not self._floor_ok():
+            self._project_floor(base)
         q = self.configuration.q.copy()
         if worst == 5 or not np.all(np.isfinite(q)):
             worst = 5

@@ -221,6 +221,28 @@ def _has_dofs_between(character, child: str, parent: str | None) -> bool:
     return False
 
 
+def _ankle_heights(S, valid, col, char_pts, floor, floor_s, present) -> tuple[float, float]:
+    """Ankle joint height above the floor in stance: ``(actor, character)`` in metres.
+
+    The actor's comes from contact detection's stance levels of the heel points
+    (the ankle joints) where available, else from the 5th percentile of the
+    ankles' heights over the clip; the character's from its rest pose (sole on
+    z = 0).
+    """
+    sides = [s for s in ("left", "right") if f"{s}_ankle" in present]
+    if not sides:
+        return 0.0, 0.0
+    ankle_c = float(np.mean([char_pts[f"{s}_ankle"][2] for s in sides]))
+    levels = getattr(floor, "levels", None) or {}
+    lv = [levels[f"{s}_heel"] for s in sides if f"{s}_heel" in levels]
+    if lv:
+        return float(np.mean(lv)), ankle_c
+    z = [S[valid[:, col[f"{s}_ankle"]], col[f"{s}_ankle"], 2] for s in sides]
+    z = np.concatenate(z)
+    ankle_a = float(np.percentile(z, 5) - floor_s) if z.size else ankle_c
+    return ankle_a, ankle_c
+
+
 def _first_child(name: str, present: set[str]) -> str | None:
     for c in CANONICAL_NAMES:
         if c in present and canonical_parent(c, present) == name:
@@ -234,6 +256,7 @@ def build_targets(
     character,
     options: TargetOptions | None = None,
     source_orientations: dict[str, np.ndarray] | None = None,
+    floor=None,
 ) -> Targets:
     """Build the character's IK targets from a motion.
 
@@ -247,6 +270,11 @@ def build_targets(
             ``(F, 4)`` world orientations built from positions, with the same
             construction applied to the character's rest pose under the key
             ``"<name>@rest"`` (``(4,)``).  Rotational sources need none.
+        floor: The actor's floor (:class:`physmocap.ik.contacts.FloorPlane`)
+            as estimated by contact detection.  A tilted capture floor is
+            levelled by the smallest rotation taking its normal to +Z about
+            the plane's origin, so the character walks on z = 0 throughout.
+            None estimates a level floor (``Motion.floor_height``).
 
     Returns:
         :class:`Targets` for every canonical joint mapped on both sides.
@@ -259,6 +287,16 @@ def build_targets(
     pset = set(present)
     idx = np.array([joint_indices[c] for c in present])
     pos_all, rot_all = motion.forward_kinematics()
+    level_info = {}
+    if floor is not None:
+        sx, sy = (float(v) for v in floor.slope)
+        ox, oy = (float(v) for v in floor.origin)
+        centre = np.array([ox, oy, float(floor.height)])
+        level = _min_rotation(np.array([-sx, -sy, 1.0]), np.array([0.0, 0.0, 1.0]))
+        pos_all = quat_apply(level, pos_all - centre) + np.array([ox, oy, 0.0])
+        if rot_all is not None:
+            rot_all = quat_mul(level, rot_all)
+        level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
     S = pos_all[:, idx]  # (F, N, 3) actor canonical positions
     F, N = S.shape[:2]
     valid = np.all(np.isfinite(S), axis=-1)
@@ -289,7 +327,12 @@ def build_targets(
     lc = [x for x in (leg_len(char_pts, s) for s in ("left", "right")) if x]
     scale = float(np.mean(lc) / np.mean(la)) if (la and lc and opt.scale_root) else 1.0
 
-    floor_s = opt.source_floor if opt.source_floor is not None else motion.floor_height()
+    if opt.source_floor is not None:
+        floor_s = opt.source_floor
+    elif floor is not None:
+        floor_s = 0.0  # levelled above
+    else:
+        floor_s = motion.floor_height()
 
     # --- orientations
     Q = np.zeros((F, N, 4))
@@ -351,11 +394,27 @@ def build_targets(
                 break
 
     # --- positions: root, then rigid children and limb chains in canonical order
+    # Root: anchored on the midpoint of the hip joint centres where both are known
+    # (vendors put their "pelvis" joint anywhere between the hips and the waist;
+    # the hip centres are anatomical), else on the pelvis joint.
     T = np.zeros((F, N, 3))
-    p0 = S[:, col["pelvis"]]
-    start_xy = p0[np.argmax(valid[:, col["pelvis"]]), :2]
-    T[:, col["pelvis"], :2] = start_xy + scale * (p0[:, :2] - start_xy)
-    T[:, col["pelvis"], 2] = scale * (p0[:, 2] - floor_s)
+    ip = col["pelvis"]
+    if "left_hip" in pset and "right_hip" in pset:
+        anchor_a = 0.5 * (S[:, col["left_hip"]] + S[:, col["right_hip"]])
+        anchor_c0 = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
+        ok = valid[:, col["left_hip"]] & valid[:, col["right_hip"]]
+    else:
+        anchor_a, anchor_c0, ok = S[:, ip], char_pts["pelvis"], valid[:, ip]
+    start_xy = anchor_a[np.argmax(ok), :2]
+    anchor = np.empty((F, 3))
+    anchor[:, :2] = start_xy + scale * (anchor_a[:, :2] - start_xy)
+    # Height: scale the part above the ankles by the leg ratio and stand it on the
+    # character's own ankle height (ankle heights above the sole do not scale with legs).
+    ankle_a, ankle_c = _ankle_heights(S, valid, col, char_pts, floor, floor_s, present)
+    anchor[:, 2] = scale * (anchor_a[:, 2] - floor_s - ankle_a) + ankle_c
+    pelvis_delta = delta.get("pelvis")
+    off = char_pts["pelvis"] - anchor_c0
+    T[:, ip] = anchor + (quat_apply(pelvis_delta, off) if pelvis_delta is not None else off)
     for c in present:
         if c == "pelvis":
             continue
@@ -390,6 +449,10 @@ def build_targets(
         fps=motion.fps,
         scale=scale,
         source_positions=S,
-        info={"source_floor": float(floor_s), "yaw_deg": float(np.degrees(Rotation.from_quat(yaw).magnitude()))},
+        info={
+            "source_floor": float(floor_s),
+            "yaw_deg": float(np.degrees(Rotation.from_quat(yaw).magnitude())),
+            **level_info,
+        },
     )
 

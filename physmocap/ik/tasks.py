@@ -24,10 +24,26 @@ class SitePositionTask(mink.Task):
     :math:`W = \mathrm{diag}(c_x, c_y, c_z)` (cost per metre).
     """
 
-    k: int = 3
-
-    def __init__(self, model: mujoco.MjModel, site: str, cost=(1.0, 1.0, 1.0), gain: float = 1.0) -> None:
-        super().__init__(cost=np.zeros(3), gain=gain, lm_damping=0.0)
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        site: str,
+        cost=1.0,
+        gain: float = 1.0,
+        axes: tuple[int, ...] = (0, 1, 2),
+    ) -> None:
+        """
+        Args:
+            model: The MuJoCo model.
+            site: Site name.
+            cost: Cost per metre, scalar or one per axis in ``axes``.
+            gain: Task gain (1 = dead-beat).
+            axes: World axes regulated (``(0, 1)`` for the horizontal position only);
+                as an equality constraint (mink ``constraints=``) only these rows count.
+        """
+        self.axes = tuple(int(a) for a in axes)
+        self.k = len(self.axes)
+        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
         self.model = model
         self.site_id = model.site(site).id
         self.site = site
@@ -36,7 +52,7 @@ class SitePositionTask(mink.Task):
         self.set_cost(cost)
 
     def set_cost(self, cost) -> None:
-        c = np.broadcast_to(np.asarray(cost, dtype=float), (3,))
+        c = np.broadcast_to(np.asarray(cost, dtype=float), (self.k,))
         if np.any(c < 0):
             raise ValueError("costs must be >= 0")
         self.cost[:] = c
@@ -45,8 +61,8 @@ class SitePositionTask(mink.Task):
         self.target = np.array(target, dtype=float)
 
     def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
-        return configuration.data.site_xpos[self.site_id] - self.target
+        return (configuration.data.site_xpos[self.site_id] - self.target)[list(self.axes)]
 
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
         mujoco.mj_jacSite(self.model, configuration.data, self._jacp, None, self.site_id)
-        return self._jacp.copy()
+        return self._jacp[list(self.axes)].copy()

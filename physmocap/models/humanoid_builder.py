@@ -301,13 +301,16 @@ class _Builder:
         sole = -p.ankle_z
         rc = self.r("contact")
         hw = p.foot_width / 2.0
-        # rear- and mid-foot: visual box from the heel to the ball, contact capsules across.
+        # rear- and mid-foot: contact capsules across the heel and the ball, and a visual
+        # box between their axes whose underside is at the capsules' axes, so the
+        # capsules (and the contact sites under them) are always the lowest points of
+        # the foot, however it pitches or rolls.
         fx0, fx1 = p.heel_x, p.ball_x
         fz1 = 0.6 * p.ankle_z
-        half = ((fx1 - fx0) / 2.0, hw, (fz1 - sole) / 2.0)
-        centre = ((fx0 + fx1) / 2.0, 0, (fz1 + sole) / 2.0)
-        self.box(foot, f"{pre}foot", centre, half, cls="visual")
         heel_x = fx0 + rc
+        half = ((fx1 - heel_x) / 2.0, hw, (fz1 - (sole + rc)) / 2.0)
+        centre = ((heel_x + fx1) / 2.0, 0, (fz1 + sole + rc) / 2.0)
+        self.box(foot, f"{pre}foot", centre, half, cls="visual")
         self.capsule(foot, f"{pre}heel", (heel_x, -hw + rc, sole + rc), (heel_x, hw - rc, sole + rc), rc, "foot_contact")
         self.capsule(foot, f"{pre}ball", (fx1, -hw + rc, sole + rc), (fx1, hw - rc, sole + rc), rc, "foot_contact")
         self.site(foot, f"{pre}heel", (heel_x, 0, sole), "contact_site")
@@ -325,10 +328,10 @@ class _Builder:
         self.site(toes, f"{pre}toe")
         tl = p.toe_x - p.ball_x
         self.site(toes, f"{pre}toe_end", (tl, 0, 0))
-        th = (tl / 2.0, hw, 0.75 * tj)
-        tc = (tl / 2.0, 0, -tj + th[2])
-        self.box(toes, f"{pre}toes", tc, th, cls="visual")
         tip_x = tl - rc
+        th = (tip_x / 2.0, hw, (1.5 * tj - rc) / 2.0)
+        tc = (tip_x / 2.0, 0, -tj + rc + th[2])
+        self.box(toes, f"{pre}toes", tc, th, cls="visual")
         self.capsule(toes, f"{pre}toe_tip", (tip_x, -hw + rc, -tj + rc), (tip_x, hw - rc, -tj + rc), rc, "foot_contact")
         self.site(toes, f"{pre}toe_tip", (tip_x, 0, -tj), "contact_site")
         m = seg.mass * M * TOES_SHARE_OF_FOOT

@@ -50,12 +50,18 @@ class PlantOptions:
             (:class:`FootAnchor`) fades back to the actor's motion after release.
         lock_low: Also hold a contact site horizontally while it is within
             ``engage_height`` of the floor, labelled or not.
-        engage_height: Height (metres) below which a site is held (just above
-            the 1 cm stance band of the quality metrics).
+        engage_height: Height (metres) below which a labelled site is held:
+            above the 1 cm stance band of the quality metrics and above
+            ``clearance``, so a swing foot held at its clearance is held as
+            soon as its contact begins.
         release_margin: A held site is let go only above ``engage_height`` plus this.
         clearance: Swing feet (contact sites neither labelled nor held) stay
             at least this high (metres), a hard inequality (0 disables): a foot
             skimming the floor would otherwise slide within the stance band.
+        max_descent_speed: Fastest a labelled site is pulled down (m/s).
+        root_follow_time: Time constant (s) with which the whole body follows
+            the mean offset of its planted feet from the actor's path (0: the
+            body keeps the actor's path and only the feet are offset).
     """
 
     plant: bool = True
@@ -65,9 +71,11 @@ class PlantOptions:
     release_time: float = 0.05
     anchor_release_time: float = 0.25
     lock_low: bool = True
-    engage_height: float = 0.012
+    engage_height: float = 0.014
     release_margin: float = 0.006
     clearance: float = 0.012
+    max_descent_speed: float = 1.0
+    root_follow_time: float = 0.15
 
 
 def _smooth(x: float) -> float:
@@ -101,6 +109,7 @@ class FootPlanter:
         self.labelled = np.zeros(n, dtype=bool)
         #: sites neither labelled nor held this frame (they get the swing clearance)
         self.free = np.zeros(n, dtype=bool)
+        self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
         self.release_frames = max(1, int(round(opt.release_time * fps)))
         self.anchor = np.zeros((n, 3))
@@ -174,7 +183,10 @@ class FootPlanter:
                 self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
                 ramp = _smooth((self.age[k] + 1) / self.onset_frames)
                 task.set_cost(opt.cost_z * ramp)
-                task.set_target(np.array([0.0, 0.0, self.floor]))
+                # descend at most max_descent_speed: a foot labelled down while still in
+                # the air lands over a few frames instead of slamming down in one
+                z_goal = max(self.floor, self.floor + z[k] - opt.max_descent_speed / self.fps)
+                task.set_target(np.array([0.0, 0.0, z_goal]))
                 soft.append(task)
             self.labelled[k] = flags[k]
         return soft, hard, engaged
@@ -207,6 +219,11 @@ class FootAnchor:
         self.toe_anchor: np.ndarray | None = None
         self._fade_from = np.zeros(2)
         self._fade_left = 0
+        self._was_held = False
+
+    @property
+    def held(self) -> bool:
+        return self.heel_anchor is not None or self.toe_anchor is not None
 
     def step(
         self,
@@ -216,6 +233,7 @@ class FootAnchor:
         toe_xy: np.ndarray,
         ankle_now: np.ndarray | None = None,
         toe_now: np.ndarray | None = None,
+        base: np.ndarray | None = None,
     ) -> np.ndarray:
         """Advance one frame; returns the offset to add to this foot's targets.
 
@@ -224,7 +242,9 @@ class FootAnchor:
             ankle_xy, toe_xy: This frame's (unshifted) ankle and toe targets.
             ankle_now, toe_now: The character's ankle and toe positions in the
                 previous frame's solution (None: use the shifted targets).
+            base: The offset a free foot returns to (the root offset; default 0).
         """
+        base = np.zeros(2) if base is None else np.asarray(base, dtype=float)
         free = self.heel_anchor is None and self.toe_anchor is None
         if heel and self.heel_anchor is None:
             self.heel_anchor = (ankle_now if free and ankle_now is not None else ankle_xy + self.offset).copy()
@@ -241,17 +261,19 @@ class FootAnchor:
         elif self.toe_anchor is not None:
             new = self.toe_anchor - toe_xy
         else:
-            if self._fade_left == 0 and np.any(self.offset):
-                self._fade_from = self.offset.copy()
+            if self._fade_left == 0 and self._was_held:
+                self._fade_from = self.offset - base  # hand back relative to the base
                 self._fade_left = self.release_frames
             if self._fade_left > 0:
                 self._fade_left -= 1
-                new = self._fade_from * _smooth(self._fade_left / self.release_frames)
+                new = base + self._fade_from * _smooth(self._fade_left / self.release_frames)
             else:
-                new = np.zeros(2)
+                new = base.copy()
+            self._was_held = False
             self.offset = new
             return new
         self._fade_left = 0
+        self._was_held = True
         self.offset = new
         return new
 
@@ -324,6 +346,12 @@ class Planting:
                     float(np.linalg.norm(rest[ankle] - rest[knee])),
                 )
         self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
+        #: horizontal offset of the whole body from the actor's (scaled) path, metres
+        self.root_offset = np.zeros(2)
+        self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
+        foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINT_SHARE}
+        foot_joints |= {f"{side}_knee" for side in ("left", "right")}
+        self._body = np.array([i for i, n in enumerate(self.names) if n not in foot_joints], dtype=int)
         self.feet = {}
         for side in ("left", "right"):
             ankle = f"{side}_ankle"
@@ -369,20 +397,31 @@ class Planting:
             ia, it, ra, rt, shares = self.feet[side]
             now_a = None if first else self._xy(data, ra)
             now_t = None if first else self._xy(data, rt)
-            o = self.anchors[side].step(
+            offsets[s] = self.anchors[side].step(
                 held[f"{side}_heel"],
                 held[f"{side}_toe"],
                 positions[ia, :2],
                 positions[it, :2],
                 now_a,
                 now_t,
+                base=self.root_offset,
             )
-            offsets[s] = o
-            if not np.any(o):
+        # The body follows its planted feet: the root offset relaxes towards the mean
+        # offset of the held feet (held in flight), so a source whose feet slide does
+        # not stretch the stance leg and drag the pelvis.
+        planted = [offsets[s] for s, side in enumerate(("left", "right")) if side in self.feet and self.anchors[side].held]
+        if planted and self._root_alpha > 0:
+            self.root_offset = self.root_offset + self._root_alpha * (np.mean(planted, axis=0) - self.root_offset)
+        out[self._body, :2] += self.root_offset
+        for s, side in enumerate(("left", "right")):
+            if side not in self.feet:
                 continue
+            _, _, _, _, shares = self.feet[side]
             for i, w in shares:
-                out[i, :2] += w * o
+                out[i, :2] += w * offsets[s] + (1.0 - w) * self.root_offset
             if side in self.lengths:
                 ih, ik, ia2, l1, l2 = self.lengths[side]
-                out[ik] = _knee_between(out[ih], out[ia2], positions[ik], l1, l2)
+                knee0 = positions[ik].copy()
+                knee0[:2] += self.root_offset
+                out[ik] = _knee_between(out[ih], out[ia2], knee0, l1, l2)
         return out, tasks, hard, offsets

@@ -41,6 +41,7 @@ import numpy as np
 
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit
+from .tasks import SitesPositionTask
 from .targets import weight_of
 
 __all__ = ["SolverOptions", "FrameSolver", "RELAXATION_LEVELS"]
@@ -77,7 +78,7 @@ class SolverOptions:
         solver: qpsolvers backend name.
     """
 
-    max_iterations: int = 3
+    max_iterations: int = 4
     first_frame_iterations: int = 150
     tolerance: float = 1e-3
     damping: float = 1e-4
@@ -117,29 +118,49 @@ class FrameSolver:
         self.model = model = character.model
         self.names = tuple(names)
         self.configuration = mink.Configuration(model, np.array(character.rest_qpos, dtype=float))
-        self.tasks: list[mink.FrameTask] = []
-        self.costs: list[tuple[float, float]] = []
-        for name, oriented in zip(self.names, has_orientation):
+        # Sites with an orientation target (and bodies) get a mink FrameTask each;
+        # position-only sites share one SitesPositionTask (same maths, one pass).
+        self.tasks: list[mink.Task] = []
+        self.frame_tasks: list[tuple[int, mink.FrameTask, float, float]] = []
+        point_idx, point_sites, point_costs = [], [], []
+        for k, (name, oriented) in enumerate(zip(self.names, has_orientation)):
             pc, oc = opt.weights.get(name, weight_of(name))
             oc = oc if oriented else 0.0
             tf = character.tracked[name]
-            task = mink.FrameTask(
-                frame_name=tf.name,
-                frame_type=tf.kind,
-                position_cost=pc,
-                orientation_cost=oc,
-                lm_damping=opt.task_lm_damping,
-            )
-            self.tasks.append(task)
-            self.costs.append((pc, oc))
-        self._task_on = [True] * len(self.tasks)
+            if oc > 0.0 or tf.kind != "site":
+                task = mink.FrameTask(
+                    frame_name=tf.name,
+                    frame_type=tf.kind,
+                    position_cost=pc,
+                    orientation_cost=oc,
+                    lm_damping=opt.task_lm_damping,
+                )
+                self.frame_tasks.append((k, task, pc, oc))
+                self.tasks.append(task)
+            else:
+                point_idx.append(k)
+                point_sites.append(tf.name)
+                point_costs.append(pc)
+        self._point_idx = np.array(point_idx, dtype=int)
+        self._point_costs = np.array(point_costs, dtype=float)
+        self.points = SitesPositionTask(model, point_sites, point_costs) if point_sites else None
+        if self.points is not None:
+            self.tasks.append(self.points)
+        self._task_on = [True] * len(self.frame_tasks)
+        self._points_on = np.ones(len(point_idx), dtype=bool)
         self.posture = mink.PostureTask(model, cost=opt.posture_cost)
         self.posture.set_target(np.array(character.rest_qpos, dtype=float))
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
         self.step_limit = FrameStepLimit(model, character.velocity_limits, 1.0 / fps)
         contact_sites = [model.site(s).id for side in character.contacts.values() for s in side]
+        # Points further above the floor than a fast foot travels in one frame
+        # (3 m/s) cannot reach it this frame: leave them out of the QP.
         self.floor_limit = FloorLimit(
-            model, sites=contact_sites, floor=opt.floor_height, margin=opt.floor_margin
+            model,
+            sites=contact_sites,
+            floor=opt.floor_height,
+            margin=opt.floor_margin,
+            activation=max(0.03, 3.0 / fps),
         )
         # hinge/slide joints with limits, for the final clamp
         lim = (model.jnt_limited.astype(bool)) & np.isin(
@@ -148,6 +169,7 @@ class FrameSolver:
         self._lim_qadr = model.jnt_qposadr[lim]
         self._lim_range = model.jnt_range[lim]
         self.q_prev: np.ndarray | None = None
+        self._residual: float | None = None
         self.constraints: list[mink.Task] = []
         self.extra_tasks: list[mink.Task] = []
 
@@ -155,17 +177,22 @@ class FrameSolver:
     def set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
         wxyz = xyzw_to_wxyz(orientations)
-        for k, task in enumerate(self.tasks):
+        for j, (k, task, pc, oc) in enumerate(self.frame_tasks):
             on = bool(valid[k])
             if on:
                 task.set_target(mink.SE3(wxyz_xyz=np.concatenate([wxyz[k], positions[k]])))
             else:
                 task.set_target_from_configuration(self.configuration)
-            if on != self._task_on[k]:
-                pc, oc = self.costs[k] if on else (0.0, 0.0)
-                task.set_position_cost(pc)
-                task.set_orientation_cost(oc)
-                self._task_on[k] = on
+            if on != self._task_on[j]:
+                task.set_position_cost(pc if on else 0.0)
+                task.set_orientation_cost(oc if on else 0.0)
+                self._task_on[j] = on
+        if self.points is not None:
+            self.points.set_targets(positions[self._point_idx])
+            on = np.asarray(valid, dtype=bool)[self._point_idx]
+            if np.any(on != self._points_on):
+                self.points.set_costs(np.where(on, self._point_costs, 0.0))
+                self._points_on = on
 
     def set_clearance(self, sites: dict[int, float]) -> None:
         """Swing-foot clearance for the next frame: site id -> height above the floor (m)."""
@@ -278,15 +305,18 @@ class FrameSolver:
             self.configuration.integrate_inplace(v, 1.0)
             return
         q0 = self.configuration.q.copy()
-        r0 = self._hard_residual()
+        r0 = self._residual if self._residual is not None else self._hard_residual()
         alpha = 1.0
         for _ in range(4):
             self.configuration.integrate_inplace(v, alpha)
-            if self._hard_residual() <= max(r0, tol):
+            r1 = self._hard_residual()
+            if r1 <= max(r0, tol):
+                self._residual = r1
                 return
             alpha *= 0.5
             self.configuration.update(q0)
         self.configuration.integrate_inplace(v, alpha)
+        self._residual = self._hard_residual()
 
     def _constraints_ok(self, tol: float = 5e-5) -> bool:
         """True if every equality constraint (planted contact) holds within ``tol`` metres.
@@ -325,6 +355,7 @@ class FrameSolver:
         worst = 0
         it = 0
         base = 0 if self.constraints else 1
+        self._residual = None  # hard-constraint residual, cached between line searches
         extra = opt.floor_iterations if opt.floor else 0
         extra = max(extra, opt.floor_iterations if self.constraints else 0)
         for it in range(1, iters + extra + 1):

@@ -1,0 +1,98 @@
+"""Foot planting (issue 5): acceptance on every shared BVH clip onto both characters, plus
+the behaviours the metrics cannot see (feasible double support, causal hand-back)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import SHARED_BVH, retargeted
+from physmocap import metrics
+
+CASES = [(clip, ch) for clip in SHARED_BVH for ch in ("humanoid", "robot")]
+
+
+@pytest.mark.parametrize("clip,character", CASES)
+def test_planted_feet_do_not_skate_sink_or_hover(clip, character):
+    _, traj = retargeted(clip, character)
+    contacts = traj.stats["contacts"]
+    assert contacts is not None and any(lab.any() for lab in contacts.labels.values())
+    skating = metrics.character_skating(traj)
+    assert skating["stance_samples"] > 0
+    assert skating["mean_cm_s"] < 1.0, skating
+    assert skating["p95_cm_s"] < 3.0, skating
+    pen = metrics.penetration(traj.model, traj.qpos)
+    assert pen["max_mm"] < 2.0, pen
+    hover = metrics.character_hovering(traj, contacts)
+    assert hover["median_mm"] < 5.0, hover
+
+
+def test_source_clips_do_slide(shared_bvh):
+    """The raw captures slide (so the figures above are the planting's doing)."""
+    from physmocap.ik.retarget import map_motion
+    from physmocap.sources import load_motion
+
+    motion = load_motion(shared_bvh)
+    src = metrics.source_skating(motion, map_motion(motion))
+    if "optitrack" in shared_bvh.name:
+        assert src["mean_cm_s"] >= 0.0
+    else:
+        assert src["mean_cm_s"] > 5.0, src
+
+
+def _standing_targets(character, frames: int, spread: float):
+    """Targets of the character's rest pose with the feet pulled apart by up to ``spread`` m."""
+    from physmocap.ik.targets import Targets, character_rest_frames
+
+    rest = character_rest_frames(character)
+    names = tuple(rest)
+    pos = np.array([rest[n][0] for n in names])
+    quat = np.array([rest[n][1] for n in names])
+    P = np.repeat(pos[None], frames, axis=0)
+    Q = np.repeat(quat[None], frames, axis=0)
+    ramp = np.linspace(0.0, spread, frames)
+    for k, n in enumerate(names):
+        if n.split("_", 1)[-1] in ("knee", "ankle", "toe", "toe_end"):
+            P[:, k, 1] += ramp if n.startswith("left_") else -ramp
+    has_q = np.array([n in ("pelvis", "chest", "head") for n in names])
+    return Targets(names, P, Q, has_q, np.ones((frames, len(names)), bool), fps=60.0)
+
+
+@pytest.mark.parametrize("character", ["humanoid", "robot"])
+def test_double_support_pulled_apart_stays_feasible_and_planted(character):
+    from physmocap.ik.retarget import solve_targets
+    from physmocap.models import load_character
+
+    ch = load_character(character)
+    frames = 60
+    targets = _standing_targets(ch, frames, spread=0.25)
+    labels = {k: np.ones(frames, bool) for k in ("left_heel", "left_toe", "right_heel", "right_toe")}
+    traj = solve_targets(targets, ch, labels=labels, progress=False)
+    assert np.all(traj.stats["relaxation"] == 0)  # every QP feasible with all constraints
+    sites = [s for side in ("left", "right") for s in ch.contacts[side]]
+    xy = traj.site_positions(sites)[:, :, :2]
+    drift = np.linalg.norm(xy - xy[0], axis=-1).max()
+    assert drift < 1e-3, f"a planted contact moved {drift * 1000:.2f} mm"
+    # the feet stayed: the ankles end far from the actor's spreading targets
+    raw = traj.targets.info["raw_positions"]
+    k = traj.targets.index("left_ankle")
+    ankle = traj.site_positions([ch.tracked["left_ankle"].name])[:, 0]
+    assert np.linalg.norm(ankle[-1] - raw[-1, k]) > 0.1
+
+
+def test_release_hands_back_without_a_pop():
+    """After a long slide the swing foot rejoins its target smoothly (bounded per-frame change)."""
+    from physmocap.ik.planting import FootAnchor
+
+    fps = 120.0
+    a = FootAnchor(fps, release_time=0.25)
+    offs = []
+    for t in range(120):
+        down = t < 60
+        target = np.array([0.01 * t, 0.0])  # the actor's foot slides 1.2 m/s while "down"
+        offs.append(a.step(down, down, target, target, target if t == 0 else None, None))
+    offs = np.array(offs)
+    assert np.linalg.norm(offs[59]) > 0.5  # a large offset was built up...
+    assert np.allclose(offs[-1], 0.0)  # ...and fully handed back,
+    jumps = np.linalg.norm(np.diff(offs, axis=0), axis=1)
+    assert jumps.max() < 0.6 * 1.2 * 2.5 / fps * 30  # smoothly: no single-frame pop

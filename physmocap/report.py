@@ -401,7 +401,29 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             path=p,
         )
     source = str(data["source"]) if "source" in data else "<unknown>"
-    return Trajectory(character=character, qpos=qpos, fps=fps, source=source)
+    traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
+    traj.targets = _stored_targets(data, qpos.shape[0], fps, p)
+    return traj
+
+
+def _stored_targets(data: dict, frames: int, fps: float, path: Path):
+    """The IK targets saved in a trajectory NPZ (``target_*`` arrays), or None."""
+    from .ik.targets import Targets
+
+    if "target_names" not in data:
+        return None
+    names = tuple(str(n) for n in data["target_names"])
+    N = len(names)
+    try:
+        pos = np.asarray(data["target_positions"], dtype=float).reshape(frames, N, 3)
+        quat = np.asarray(data["target_orientations"], dtype=float).reshape(frames, N, 4)
+        has_q = np.asarray(data["target_has_orientation"], dtype=bool).reshape(N)
+        valid = np.asarray(data["target_valid"], dtype=bool).reshape(frames, N)
+    except (KeyError, ValueError) as exc:
+        raise InputError(f"the stored IK targets are malformed: {exc}", path=path) from None
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
+        raise InputError("the stored IK targets have non-finite values", path=path)
+    return Targets(names, pos, quat, has_q, valid, fps=fps)
 
 
 def tracking_targets(motion, joint_indices: dict[str, int], character, contacts=None):

@@ -94,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
         contacts = detect_contacts(motion, joint_indices)
     else:
         contacts = None
-    if motion is not None:
+    if motion is not None and traj.targets is None:
+        # files without stored targets: rebuild them (planting adjustments not reproduced)
         traj.targets = tracking_targets(motion, joint_indices, traj.character, contacts)
     emit_report(
         traj,

@@ -36,6 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
     p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
     p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
+    p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
+    p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
+    p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -78,6 +82,14 @@ def run(args: argparse.Namespace) -> int:
                 path=out,
             )
         check_writable(out)
+    if args.report:
+        check_writable(args.report)
+    if args.plots:
+        from ..plots import require_matplotlib
+        from ..report import _check_plot_dir
+
+        require_matplotlib()
+        _check_plot_dir(args.plots)
     read_opts = {}
     if args.in_units:
         read_opts["units"] = args.in_units
@@ -92,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
         options["floor"] = False
     if args.no_velocity_limits:
         options["velocity_limits"] = False
+    if args.no_plant:
+        options["plant"] = False
     traj = retarget(
         motion,
         character,
@@ -101,7 +115,20 @@ def run(args: argparse.Namespace) -> int:
         end=args.end,
         fps=args.fps,
         progress=False if args.quiet else None,
+        contacts=args.contacts,
         **options,
     )
     write_outputs(traj, outputs, args)
+    if args.report or args.plots:
+        from ..report import emit_report
+
+        used = traj.stats.get("source_motion", motion)
+        emit_report(
+            traj,
+            used,
+            traj.stats.get("contacts"),
+            json_path=args.report,
+            plots_dir=args.plots,
+            joint_indices=traj.stats.get("joint_indices"),
+        )
     return 0

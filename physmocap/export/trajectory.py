@@ -17,6 +17,11 @@ NPZ contents (all plain arrays, loadable with ``np.load(path)`` and
 ``mjcf_path``       the character's MJCF file (absolute path)
 ``character``       the character's name
 ``source``          the input motion's path
+``target_*``        the IK targets (``target_names`` (N,), ``target_positions``
+                    (F, N, 3) metres, ``target_orientations`` (F, N, 4) x-y-z-w,
+                    ``target_has_orientation`` (N,), ``target_valid`` (F, N)),
+                    so ``physmocap report`` measures tracking against exactly
+                    what the retargeter tracked
 ==================  ==========================================================
 
 The file is a zip archive written with fixed timestamps, so the same
@@ -95,6 +100,20 @@ def trajectory_arrays(traj: Trajectory) -> dict[str, np.ndarray]:
         "mjcf_path": np.array(str(Path(ch.mjcf_path).resolve())),
         "character": np.array(str(ch.name)),
         "source": np.array(str(traj.source)),
+        **target_arrays(traj.targets),
+    }
+
+
+def target_arrays(targets) -> dict[str, np.ndarray]:
+    """The ``target_*`` arrays of a trajectory NPZ (empty without targets)."""
+    if targets is None:
+        return {}
+    return {
+        "target_names": np.array(list(targets.names)),
+        "target_positions": np.ascontiguousarray(targets.positions, dtype=np.float64),
+        "target_orientations": np.ascontiguousarray(targets.orientations, dtype=np.float64),
+        "target_has_orientation": np.asarray(targets.has_orientation, dtype=bool),
+        "target_valid": np.asarray(targets.valid, dtype=bool),
     }
 
 

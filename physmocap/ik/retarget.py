@@ -167,6 +167,8 @@ def retarget(
         plant=plant_opt,
     )
     traj.stats["contacts"] = found
+    traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
+    traj.stats["joint_indices"] = dict(joint_indices)
     return traj
 
 

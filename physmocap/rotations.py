@@ -125,40 +125,49 @@ def unwrap_euler(angles: np.ndarray, order: str, degrees: bool = False) -> np.nd
     sequences: ``(a, b, c)`` and ``(a + pi, pi - b, c + pi)``.  For every frame
     the solution closest to the previous frame is chosen, then each angle is
     shifted by a multiple of 2*pi to lie within pi of the previous frame's.  The
-    rotations encoded are unchanged; only their numbers move.
+    rotations encoded are unchanged; only their numbers move.  The first frame
+    is kept as given.
+
+    Vectorised over frames: the closest solution at frame ``t`` depends only on
+    which solution frame ``t - 1`` took (distances are taken modulo whole
+    turns), so each frame is a map from the previous choice to its own
+    (constant, keep or swap); the choices are composed with cumulative sums,
+    and the whole-turn shifts are a cumulative sum of rounded differences.
     """
     order = _check_order(order)
-    a = np.array(angles, dtype=float, copy=True)
-    if a.shape[0] == 0:
-        return a
+    v = np.array(angles, dtype=float, copy=True)
+    F = v.shape[0]
+    if F < 2:
+        return v
     full = 360.0 if degrees else 2.0 * np.pi
     half = full / 2.0
-    tait_bryan = len(set(order)) == 3
-    for t in range(1, a.shape[0]):
-        prev = a[t - 1]
-        cand = a[t]
-        best = cand + np.round((prev - cand) / full) * full
-        if tait_bryan:
-            alt = cand.copy()
-            alt[..., 0] += half
-            alt[..., 1] = half - alt[..., 1]
-            alt[..., 2] += half
-            alt = alt + np.round((prev - alt) / full) * full
-            d_best = np.abs(best - prev).sum(axis=-1)
-            d_alt = np.abs(alt - prev).sum(axis=-1)
-            pick = (d_alt < d_best)[..., None]
-            best = np.where(pick, alt, best)
-        else:
-            alt = cand.copy()
-            alt[..., 0] += half
-            alt[..., 1] = -alt[..., 1]
-            alt[..., 2] += half
-            alt = alt + np.round((prev - alt) / full) * full
-            d_best = np.abs(best - prev).sum(axis=-1)
-            d_alt = np.abs(alt - prev).sum(axis=-1)
-            best = np.where((d_alt < d_best)[..., None], alt, best)
-        a[t] = best
-    return a
+    alt = v.copy()
+    alt[..., 0] += half
+    alt[..., 1] = (half - v[..., 1]) if len(set(order)) == 3 else -v[..., 1]
+    alt[..., 2] += half
+
+    def dist(prev: np.ndarray, cand: np.ndarray) -> np.ndarray:
+        d = prev - cand
+        return np.abs(d - np.round(d / full) * full).sum(axis=-1)
+
+    # Choice at frame t (True: the alternative) if frame t-1 chose (0) the given
+    # solution or (1) the alternative.  Index u = t - 1.
+    after0 = dist(v[:-1], alt[1:]) < dist(v[:-1], v[1:])
+    after1 = dist(alt[:-1], alt[1:]) < dist(alt[:-1], v[1:])
+    const = after0 == after1
+    swap = ~const & after0
+    frame = np.arange(1, F).reshape((-1,) + (1,) * (const.ndim - 1))
+    last = np.maximum.accumulate(np.where(const, frame, 0), axis=0)  # last constant frame (0: frame 0)
+    parity = np.cumsum(swap, axis=0) % 2
+    r = np.maximum(last - 1, 0)
+    base = np.where(last > 0, np.take_along_axis(after0, r, axis=0), False)
+    base_parity = np.where(last > 0, np.take_along_axis(parity, r, axis=0), 0)
+    choice = np.zeros(v.shape[:-1], dtype=bool)
+    choice[1:] = base ^ ((parity - base_parity) % 2).astype(bool)
+    chosen = np.where(choice[..., None], alt, v)
+    turns = np.zeros_like(chosen)
+    turns[1:] = np.cumsum(np.round((chosen[:-1] - chosen[1:]) / full), axis=0)
+    return chosen + turns * full
 
 
 def quat_conj(q: np.ndarray) -> np.ndarray:

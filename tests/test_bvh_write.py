@@ -274,3 +274,65 @@ def test_write_bvh_channels_validates(tmp_path):
     with pytest.raises(OutputError, match="cannot be written"):
         write_bvh_channels(tmp_path / "x.bvh", data=np.zeros((1, 1)), **{**args, "names": ["a{b"]})
     assert not (tmp_path / "x.bvh").exists()
+
+
+def test_block_boundaries_do_not_change_the_output(tmp_path, monkeypatch):
+    """Frames are converted in blocks; tiny blocks give byte-identical files
+    (Euler continuity and 1-2 axis joints carried across blocks)."""
+    import physmocap.export.bvh as writer
+
+    for name, kw in (("edge_cases.bvh", {}), ("cmu_cgspeed.bvh", {"rotation_order": "XYZ"})):
+        src = read_bvh(FIXTURES / name)
+        # Make the motion long and spinning so continuity matters.
+        rot = np.concatenate([src.rotations] * 40)
+        spin = euler_to_quat(np.stack([np.linspace(0, 2000, len(rot)), np.zeros(len(rot)), np.zeros(len(rot))], -1),
+                             "YXZ", degrees=True)
+        rot[:, 0] = spin
+        m = src.replace(rotations=rot, translations=np.concatenate([src.translations] * 40))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PhysmocapWarning)
+            write_bvh(m, tmp_path / "big.bvh", **kw)
+            monkeypatch.setattr(writer, "_ROWS_PER_BLOCK", 7)
+            write_bvh(m, tmp_path / "small.bvh", **kw)
+            monkeypatch.undo()
+        assert (tmp_path / "big.bvh").read_bytes() == (tmp_path / "small.bvh").read_bytes(), name
+
+
+def _unwrap_reference(a: np.ndarray, order: str, degrees: bool) -> np.ndarray:
+    """The per-frame definition of rotations.unwrap_euler (closest of the two
+    Euler solutions to the previous frame, then whole turns)."""
+    a = np.array(a, dtype=float)
+    full = 360.0 if degrees else 2 * np.pi
+    half = full / 2
+    for t in range(1, len(a)):
+        prev, cand = a[t - 1], a[t]
+        best = cand + np.round((prev - cand) / full) * full
+        alt = cand.copy()
+        alt[..., 0] += half
+        alt[..., 1] = half - alt[..., 1] if len(set(order)) == 3 else -alt[..., 1]
+        alt[..., 2] += half
+        alt = alt + np.round((prev - alt) / full) * full
+        d_best = np.abs(best - prev).sum(-1)
+        d_alt = np.abs(alt - prev).sum(-1)
+        a[t] = np.where((d_alt < d_best)[..., None], alt, best)
+    return a
+
+
+def test_vectorised_unwrap_matches_per_frame_definition():
+    from physmocap.rotations import quat_to_euler, unwrap_euler
+
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        F = int(rng.integers(1, 50))
+        shape = (F,) + tuple(int(x) for x in rng.integers(1, 4, size=int(rng.integers(0, 3)))) + (3,)
+        degrees = bool(trial % 2)
+        full = 360.0 if degrees else 2 * np.pi
+        if trial % 3:
+            a = np.cumsum(rng.normal(0, 0.3, size=shape) * full, axis=0)
+        else:
+            a = rng.uniform(-full, full, size=shape)
+        order = ["ZXY", "XYZ", "ZXZ", "YZY"][trial % 4]
+        np.testing.assert_allclose(unwrap_euler(a, order, degrees), _unwrap_reference(a, order, degrees), atol=1e-9)
+    m = read_bvh(shared_file("cmu_01_01_jumps.bvh"))
+    e = quat_to_euler(m.rotations, "ZXY", degrees=True)
+    np.testing.assert_array_equal(unwrap_euler(e, "ZXY", True), _unwrap_reference(e, "ZXY", True))

@@ -29,6 +29,7 @@ non-finite values are refused before anything is written.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Sequence
 
@@ -160,6 +161,9 @@ def write_bvh(
     them, missing position components when its translation leaves the offset
     on them (e.g. after changing the up axis).
 
+    Frames are converted and written in blocks, so memory stays a few MB
+    above the motion itself however long the clip.
+
     Raises:
         OptionError: Bad options or a motion without rotations.
         OutputError: Non-finite values, or the path cannot be written.
@@ -190,98 +194,148 @@ def write_bvh(
 
     sk = motion.skeleton
     assert motion.rotations is not None and motion.translations is not None
-    _check_finite_motion(motion, path)
-    perm, sign = axis_permutation(up_axis_matrix("Z", up))
-    F, J = motion.num_frames, sk.num_joints
-    offsets = sk.offsets[:, perm] * sign / unit_scale
-    translated = {int(k): i for i, k in enumerate(motion.translated)}
-    tol = 0.5 * 10.0 ** (-precision)
-
-    layout = bvh_channel_layout(motion, rotation_order)
-    columns: list[np.ndarray] = []
-    widened: list[str] = []
-
-    # Euler angles for every rotating joint, grouped by (padded) order.
-    rot_orders: dict[int, str] = {}
-    for j, chans in enumerate(layout):
-        axes = [c[0] for c in chans if c.endswith("rotation")]
-        if axes:
-            rot_orders[j] = "".join(axes) + "".join(a for a in "XYZ" if a not in axes)
-    euler: dict[int, np.ndarray] = {}
-    by_order: dict[str, list[int]] = {}
-    for j, order in rot_orders.items():
-        by_order.setdefault(order, []).append(j)
-    for order, js in by_order.items():
-        q = motion.rotations[:, js]
-        q = np.concatenate([q[..., :3][..., perm] * sign, q[..., 3:]], axis=-1)
-        e = unwrap_euler(quat_to_euler(q, order, degrees=True), order, degrees=True)
-        for k, j in enumerate(js):
-            euler[j] = e[:, k]
-
-    # Joints whose layout has no rotation channels but which do rotate.
-    for j in range(J):
-        if j in rot_orders or (not layout[j] and sk.end_site[j]):
-            continue
-        q = motion.rotations[:, j]
-        angle = 2.0 * np.degrees(np.arccos(np.clip(np.abs(q[:, 3]), 0.0, 1.0))) if F else np.zeros(0)
-        if angle.size and angle.max() > tol:
-            order = rotation_order or DEFAULT_ROTATION_ORDER
-            layout[j] = layout[j] + [f"{a}rotation" for a in order]
-            rot_orders[j] = order
-            qj = np.concatenate([q[:, :3][:, perm] * sign, q[:, 3:]], axis=-1)
-            euler[j] = unwrap_euler(quat_to_euler(qj, order, degrees=True), order, degrees=True)
-            widened.append(f"{sk.names[j]} (rotation)")
-
-    for j, chans in enumerate(layout):
-        if not chans:
-            continue
-        # Rotation axes the layout lacks must stay at zero.
-        if j in rot_orders:
-            axes = [c[0] for c in chans if c.endswith("rotation")]
-            if len(axes) < 3 and F:
-                q = motion.rotations[:, j]
-                q = np.concatenate([q[:, :3][:, perm] * sign, q[:, 3:]], axis=-1)
-                sub = _subset_euler(q, rot_orders[j], len(axes), tol)
-                if sub is None:
-                    chans = chans + [f"{a}rotation" for a in rot_orders[j][len(axes):]]
-                    widened.append(f"{sk.names[j]} (rotation)")
-                else:
-                    euler[j] = sub
-        # Position components the layout lacks must stay at the offset.
-        if j in translated:
-            t = motion.translations[:, translated[j]][:, perm] * sign / unit_scale
-            present = {c[0] for c in chans if c.endswith("position")}
-            for a, axis in enumerate("XYZ"):
-                if axis not in present and F and np.abs(t[:, a] - offsets[j, a]).max() > tol:
-                    chans = chans + [f"{axis}position"]
-                    widened.append(f"{sk.names[j]} ({axis}position)")
-        else:
-            t = None
-        layout[j] = chans
-        for c in chans:
-            axis = "XYZ".index(c[0])
-            if c.endswith("position"):
-                columns.append(t[:, axis] if t is not None else np.full(F, offsets[j, axis]))
-            else:
-                columns.append(euler[j][:, rot_orders[j].index(c[0])])
+    if not np.all(np.isfinite(sk.offsets)):
+        j = int(np.flatnonzero(~np.isfinite(sk.offsets).all(axis=1))[0])
+        raise OutputError(f"offset of joint {sk.names[j]!r} is not finite; refusing to write it", path=path)
+    F = motion.num_frames
+    for s in range(0, F, 1 << 16):  # refuse non-finite values before anything else
+        _check_block(motion.rotations[s : s + (1 << 16)], motion.translations[s : s + (1 << 16)],
+                     motion.translated, sk.names, s, path)
+    conv = _Converter(motion, up, unit_scale, precision)
+    layout, plans, widened = conv.plan(bvh_channel_layout(motion, rotation_order), rotation_order)
     if widened:
         warn(
             f"{path}: the source channel layout cannot hold this motion for "
             + ", ".join(widened)
             + "; added those channels"
         )
-    data = np.stack(columns, axis=1) if columns else np.zeros((F, 0))
-    return write_bvh_channels(
-        path,
-        names=sk.names,
-        parents=sk.parents,
-        offsets=offsets,
-        end_site=sk.end_site,
-        channels=layout,
-        data=data,
-        frame_time=1.0 / motion.fps,
-        precision=precision,
-    )
+    header, dfs = _hierarchy(sk.names, sk.parents, conv.offsets, sk.end_site, layout, precision)
+    columns = [(j, c) for j in dfs for c in layout[j]]
+    with atomic_open(path, "w") as fh:
+        fh.write(_header_text(header, F, 1.0 / motion.fps))
+        for s in range(0, F, _ROWS_PER_BLOCK):
+            block = conv.block(s, min(F, s + _ROWS_PER_BLOCK), plans, columns)
+            fh.write(_format_rows(block, precision))
+    return path
+
+
+class _Converter:
+    """World-frame motion to file channels (units, axes, Euler angles), block by block."""
+
+    def __init__(self, motion: Motion, up: str, unit_scale: float, precision: int) -> None:
+        assert motion.rotations is not None and motion.translations is not None
+        self.m = motion
+        self.perm, self.sign = axis_permutation(up_axis_matrix("Z", up))
+        self.scale = unit_scale
+        self.offsets = motion.skeleton.offsets[:, self.perm] * self.sign / unit_scale
+        self.tol = 0.5 * 10.0 ** (-precision)
+        self.t_index = {int(k): i for i, k in enumerate(motion.translated)}
+        self.last: dict = {}  # continuity state between blocks
+
+    def quats(self, q: np.ndarray) -> np.ndarray:
+        """World-axis quaternions to file axes: ``(M v, w)``."""
+        return np.concatenate([q[..., :3][..., self.perm] * self.sign, q[..., 3:]], axis=-1)
+
+    def translations(self, s: int, e: int, k: int) -> np.ndarray:
+        return self.m.translations[s:e, k][:, self.perm] * self.sign / self.scale
+
+    def plan(self, layout: list[list[str]], rotation_order: str | None):
+        """Final channel lists (widened where the motion needs it) and, per joint,
+        ``(padded rotation order or None, number of rotation axes written)``."""
+        sk, F = self.m.skeleton, self.m.num_frames
+        rot = self.m.rotations
+        assert rot is not None
+        widened: list[str] = []
+        plans: list[tuple[str | None, int]] = []
+        out: list[list[str]] = []
+        for j, chans in enumerate(layout):
+            chans = list(chans)
+            name = sk.names[j]
+            axes = [c[0] for c in chans if c.endswith("rotation")]
+            if not axes and (chans or not sk.end_site[j]) and F:
+                w = np.clip(np.abs(rot[:, j, 3]) / np.linalg.norm(rot[:, j], axis=-1).clip(1e-300), 0.0, 1.0)
+                if np.degrees(2.0 * np.arccos(w.min())) > self.tol:
+                    axes = list(rotation_order or DEFAULT_ROTATION_ORDER)
+                    chans += [f"{a}rotation" for a in axes]
+                    widened.append(f"{name} (rotation)")
+            order = "".join(axes) + "".join(a for a in "XYZ" if a not in axes) if axes else None
+            k = len(axes)
+            if order is not None and k < 3 and F:
+                if _subset_euler(self.quats(rot[:, j]), order, k, self.tol) is None:
+                    chans += [f"{a}rotation" for a in order[k:]]
+                    widened.append(f"{name} (rotation)")
+                    k = 3
+            if j in self.t_index and F:
+                t = self.translations(0, F, self.t_index[j])
+                present = {c[0] for c in chans if c.endswith("position")}
+                for a, axis in enumerate("XYZ"):
+                    if axis not in present and np.abs(t[:, a] - self.offsets[j, a]).max() > self.tol:
+                        chans.append(f"{axis}position")
+                        widened.append(f"{name} ({axis}position)")
+            out.append(chans)
+            plans.append((order, k))
+        return out, plans, widened
+
+    def block(self, s: int, e: int, plans, columns) -> np.ndarray:
+        """Channel values of frames ``[s, e)``, columns in file (depth-first) order."""
+        rot = self.m.rotations[s:e]  # type: ignore[index]
+        tra = self.m.translations[s:e]  # type: ignore[index]
+        euler: dict[int, np.ndarray] = {}
+        groups: dict[str, list[int]] = {}
+        for j, (order, k) in enumerate(plans):
+            if order is None:
+                continue
+            if k == 3:
+                groups.setdefault(order, []).append(j)
+            else:
+                ang = _subset_euler(self.quats(rot[:, j]), order, k, np.inf)
+                assert ang is not None
+                prev = self.last.get(("sub", j))
+                if prev is not None:
+                    ang[:, :k] = np.unwrap(np.concatenate([prev[None, :k], ang[:, :k]]), period=360.0, axis=0)[1:]
+                self.last[("sub", j)] = ang[-1]
+                euler[j] = ang
+        for order, js in groups.items():
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message="Gimbal lock")  # both solutions are exact
+                ang = quat_to_euler(self.quats(rot[:, js]), order, degrees=True)
+            prev = self.last.get(("grp", order))
+            if prev is not None:
+                ang = unwrap_euler(np.concatenate([prev[None], ang]), order, degrees=True)[1:]
+            else:
+                ang = unwrap_euler(ang, order, degrees=True)
+            self.last[("grp", order)] = ang[-1]
+            for i, j in enumerate(js):
+                euler[j] = ang[:, i]
+        block = np.empty((e - s, len(columns)))
+        trans: dict[int, np.ndarray] = {}
+        for c, (j, ch) in enumerate(columns):
+            axis = "XYZ".index(ch[0])
+            if ch.endswith("position"):
+                if j not in self.t_index:
+                    block[:, c] = self.offsets[j, axis]
+                    continue
+                if j not in trans:
+                    trans[j] = tra[:, self.t_index[j]][:, self.perm] * self.sign / self.scale
+                block[:, c] = trans[j][:, axis]
+            else:
+                block[:, c] = euler[j][:, plans[j][0].index(ch[0])]
+        return block
+
+
+def _check_block(rot: np.ndarray, tra: np.ndarray, translated: np.ndarray, names, s: int, path: Path) -> None:
+    for what, arr, joints in (("rotation", rot, None), ("translation", tra, translated)):
+        bad = ~np.isfinite(arr).all(axis=-1)
+        if bad.any():
+            f, k = (int(v) for v in np.argwhere(bad)[0])
+            j = k if joints is None else int(joints[k])
+            raise OutputError(f"{what} of joint {names[j]!r} is not finite; refusing to write it",
+                              path=path, frame=s + f)
+    small = np.einsum("...i,...i->...", rot, rot) < 1e-12
+    if small.any():
+        f, j = (int(v) for v in np.argwhere(small)[0])
+        raise OutputError(f"rotation of joint {names[j]!r} is a zero quaternion; refusing to write it",
+                          path=path, frame=s + f)
 
 
 def _wrap180(a: np.ndarray) -> np.ndarray:
@@ -305,35 +359,6 @@ def _subset_euler(q: np.ndarray, order: str, k: int, tol: float) -> np.ndarray |
     out = np.zeros_like(pick)
     out[:, :k] = np.unwrap(_wrap180(pick[:, :k]), period=360.0, axis=0)
     return out
-
-
-def _check_finite_motion(motion: Motion, path: Path) -> None:
-    sk = motion.skeleton
-    if not np.all(np.isfinite(sk.offsets)):
-        j = int(np.flatnonzero(~np.isfinite(sk.offsets).all(axis=1))[0])
-        raise OutputError(f"offset of joint {sk.names[j]!r} is not finite; refusing to write it", path=path)
-    for what, arr, joints in (
-        ("rotation", motion.rotations, np.arange(sk.num_joints)),
-        ("translation", motion.translations, motion.translated),
-    ):
-        assert arr is not None
-        bad = ~np.isfinite(arr).all(axis=-1)
-        if bad.any():
-            f, k = (int(v) for v in np.argwhere(bad)[0])
-            raise OutputError(
-                f"{what} of joint {sk.names[int(joints[k])]!r} is not finite; refusing to write it",
-                path=path,
-                frame=f,
-            )
-    if motion.rotations is not None and motion.rotations.size:
-        norm = np.linalg.norm(motion.rotations, axis=-1)
-        if norm.min() < 1e-6:
-            f, j = (int(v) for v in np.argwhere(norm < 1e-6)[0])
-            raise OutputError(
-                f"rotation of joint {sk.names[j]!r} is a zero quaternion; refusing to write it",
-                path=path,
-                frame=f,
-            )
 
 
 def _fmt(x: float, precision: int) -> str:
@@ -419,10 +444,27 @@ def write_bvh_channels(
             f"{names[j]} {chans[j][c - start[j]]} is not finite; refusing to write it", path=path, frame=f
         )
 
-    # Hierarchy text, depth-first, and the column order it implies.
+    header, dfs = _hierarchy(names, parents, offsets, end_site, chans, precision)
+    cols = np.concatenate([np.arange(start[j], start[j + 1]) for j in dfs]) if dfs else np.zeros(0, int)
+    F = data.shape[0]
+    with atomic_open(path, "w") as fh:
+        fh.write(_header_text(header, F, frame_time))
+        for s in range(0, F, _ROWS_PER_BLOCK):
+            fh.write(_format_rows(data[s : s + _ROWS_PER_BLOCK][:, cols], precision))
+    return path
+
+
+def _hierarchy(names, parents, offsets, end_site, chans, precision: int) -> tuple[list[str], list[int]]:
+    """HIERARCHY lines, depth-first (children in index order), and the order in
+    which joints with channels appear (the order of the motion columns)."""
+    J = len(names)
+    children: list[list[int]] = [[] for _ in range(J)]
+    for j in range(J):
+        if parents[j] >= 0:
+            children[int(parents[j])].append(j)
     lines = ["HIERARCHY"]
     order: list[int] = []
-    stack: list[tuple[int, int, bool]] = [(r, 0, False) for r in reversed(np.flatnonzero(parents < 0).tolist())]
+    stack: list[tuple[int, int, bool]] = [(r, 0, False) for r in reversed(np.flatnonzero(np.asarray(parents) < 0).tolist())]
     while stack:
         j, depth, closing = stack.pop()
         ind = "\t" * depth
@@ -440,17 +482,19 @@ def write_bvh_channels(
         stack.append((j, depth, True))
         for c in reversed(children[j]):
             stack.append((c, depth + 1, False))
-    cols = np.concatenate([np.arange(start[j], start[j + 1]) for j in order]) if order else np.zeros(0, int)
-    F = data.shape[0]
-    lines += ["MOTION", f"Frames: {F}", f"Frame Time: {frame_time:.10g}"]
+    return lines, order
 
-    row_fmt = (" ".join([f"%.{precision}f"] * C) + "\n") if C else "\n"
-    with atomic_open(path, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-        for s in range(0, F, _ROWS_PER_BLOCK):
-            block = np.round(data[s : s + _ROWS_PER_BLOCK][:, cols], precision) + 0.0
-            if C:
-                fh.write((row_fmt * block.shape[0]) % tuple(block.ravel().tolist()))
-            else:
-                fh.write(row_fmt * block.shape[0])
-    return path
+
+def _header_text(hierarchy: list[str], frames: int, frame_time: float) -> str:
+    return "\n".join(hierarchy + ["MOTION", f"Frames: {frames}", f"Frame Time: {frame_time:.10g}"]) + "\n"
+
+
+def _format_rows(block: np.ndarray, precision: int) -> str:
+    """Rows of ``block`` as text, every number rounded to ``precision`` decimals
+    (negative zero printed as 0)."""
+    n, C = block.shape
+    if C == 0:
+        return "\n" * n
+    block = np.round(block, precision) + 0.0
+    row = " ".join([f"%.{precision}f"] * C) + "\n"
+    return (row * n) % tuple(block.ravel().tolist())

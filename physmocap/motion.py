@@ -179,15 +179,28 @@ def forward_kinematics(
         local_t[:, np.asarray(translated, dtype=int)] = translations
     pos = np.empty((F, J, 3))
     wrot = np.empty((F, J, 4))
-    for j in range(J):
-        p = int(skeleton.parents[j])
-        if p < 0:
-            pos[:, j] = local_t[:, j]
-            wrot[:, j] = rotations[:, j]
+    # one vectorised pass per tree depth (all joints of a depth at once)
+    for level, (idx, par) in enumerate(_depth_levels(skeleton)):
+        if level == 0:
+            pos[:, idx] = local_t[:, idx]
+            wrot[:, idx] = rotations[:, idx]
         else:
-            pos[:, j] = pos[:, p] + quat_apply(wrot[:, p], local_t[:, j])
-            wrot[:, j] = quat_mul(wrot[:, p], rotations[:, j])
+            pos[:, idx] = pos[:, par] + quat_apply(wrot[:, par], local_t[:, idx])
+            wrot[:, idx] = quat_mul(wrot[:, par], rotations[:, idx])
     return pos, wrot
+
+
+def _depth_levels(skeleton: Skeleton) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``[(joints, their parents)]`` per tree depth, roots first (cached on the skeleton)."""
+    cached = skeleton.__dict__.get("_levels")
+    if cached is None:
+        depth = skeleton.depth()
+        cached = []
+        for d in range(int(depth.max()) + 1 if depth.size else 0):
+            idx = np.flatnonzero(depth == d)
+            cached.append((idx, skeleton.parents[idx]))
+        object.__setattr__(skeleton, "_levels", cached)
+    return cached
 
 
 @dataclass(eq=False)

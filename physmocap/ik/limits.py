@@ -221,6 +221,8 @@ class FloorLimit(mink.Limit):
         self.enabled = True
         self._jacp = np.zeros((3, model.nv))
         self._cand = GeomCandidates(model, self.geoms)
+        self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
+        self._cache: tuple[bytes, tuple] | None = None
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
         self.max_rise = 0.004
@@ -232,11 +234,15 @@ class FloorLimit(mink.Limit):
         every corner of a box): constraining only the current lowest one lets
         a rolling foot swap which cap is lowest between iterations.
         """
+        key = data.qpos.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
         z_g, a_g = self._cand.points(data)
         z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
         a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
-        body = np.concatenate([self.model.geom_bodyid[self._cand.gid], self.model.site_bodyid[self.sites]])
-        return np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), body
+        out = (np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), self._bodies)
+        self._cache = (key, out)  # the same configuration is queried several times per iteration
+        return out
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt

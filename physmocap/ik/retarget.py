@@ -72,7 +72,10 @@ def map_motion(motion: Motion, profile: str | None = None, mapping=None) -> dict
     """Canonical joint -> source joint index, using the name-mapping profiles."""
     from ..sources.profiles import map_skeleton
 
-    jmap = map_skeleton(motion.skeleton, profile=profile, mapping=mapping)
+    if mapping is None and profile is None and isinstance(motion.meta.get("source_mapping"), dict):
+        # tracker readers record the mapping they used, synthesised joints (a NITE pelvis) included
+        mapping = motion.meta["source_mapping"]
+    jmap = map_skeleton(motion, profile=profile, mapping=mapping)
     return dict(jmap.indices)
 
 

@@ -318,7 +318,7 @@ class FrameSolver:
         self.configuration.integrate_inplace(v, alpha)
         self._residual = self._hard_residual()
 
-    def _constraints_ok(self, tol: float = 5e-5) -> bool:
+    def _constraints_ok(self, tol: float = 1e-4) -> bool:
         """True if every equality constraint (planted contact) holds within ``tol`` metres.
 
         The equalities are linearised too: a large last step leaves a

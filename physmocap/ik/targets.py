@@ -42,7 +42,7 @@ from ..errors import MappingError
 from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_conj, quat_mul
 
-__all__ = ["Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
+__all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
 #: Default task weights: (position cost per metre, orientation cost per radian).
 DEFAULT_WEIGHTS: dict[str, tuple[float, float]] = {
@@ -105,6 +105,30 @@ class TargetOptions:
 
 
 @dataclass(eq=False)
+class Calibration:
+    """The one-time quantities of :func:`build_targets`, reusable frame by frame.
+
+    A streaming retargeter calibrates on its first frame(s) and then builds
+    each frame's targets with the same values, so offline and streaming
+    targets follow the same maths.  All metres / quaternions x-y-z-w.
+    """
+
+    rest: dict
+    present: tuple[str, ...]
+    scale: float
+    floor: float
+    yaw: np.ndarray
+    movable: dict
+    orientation_offsets: dict
+    start_xy: np.ndarray
+    ankle_actor: float
+    ankle_character: float
+    level: np.ndarray | None = None
+    level_centre: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+
+@dataclass(eq=False)
 class Targets:
     """Per-frame targets for the character's tracked frames.
 
@@ -128,6 +152,7 @@ class Targets:
     scale: float = 1.0
     source_positions: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    calibration: Calibration | None = None
 
     @property
     def num_frames(self) -> int:
@@ -197,6 +222,44 @@ def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
     return fwd / n
 
 
+def _median_leg(S: np.ndarray, valid: np.ndarray, col: dict, side: str) -> float | None:
+    """Median over frames of hip-knee plus knee-ankle length (metres), or None."""
+    chain = [f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
+    if not all(c in col for c in chain):
+        return None
+    i, j, k = (col[c] for c in chain)
+    ok = valid[:, i] & valid[:, j] & valid[:, k]
+    if not ok.any():
+        return None
+    length = np.linalg.norm(S[ok, i] - S[ok, j], axis=-1) + np.linalg.norm(S[ok, j] - S[ok, k], axis=-1)
+    return float(np.median(length))
+
+
+def _positional_orientations(S: np.ndarray, col: dict, present: set, char_pts: dict) -> dict[str, np.ndarray]:
+    """Pelvis and chest orientations built from positions (:mod:`physmocap.frames`),
+    with the same construction on the character's rest pose under ``"<name>@rest"``."""
+    from ..frames import chest_frame, matrix_to_quat, pelvis_frame
+
+    out: dict[str, np.ndarray] = {}
+    spine = next((c for c in ("spine", "chest", "neck") if c in present), None)
+    if spine and "left_hip" in present and "right_hip" in present:
+        def pelvis(p):
+            return matrix_to_quat(pelvis_frame(p("left_hip"), p("right_hip"), p(spine)))
+
+        out["pelvis"] = pelvis(lambda c: S[:, col[c]])
+        out["pelvis@rest"] = pelvis(lambda c: char_pts[c])
+    top = next((c for c in ("neck", "head") if c in present), None)
+    # the long pelvis-to-neck axis: robust to where a tracker puts its "torso" joint
+    bottom = next((c for c in ("pelvis", "spine", "chest") if c in present), None)
+    if top and bottom and "left_shoulder" in present and "right_shoulder" in present:
+        def chest(p):
+            return matrix_to_quat(chest_frame(p("left_shoulder"), p("right_shoulder"), p(top), p(bottom)))
+
+        out["chest"] = chest(lambda c: S[:, col[c]])
+        out["chest@rest"] = chest(lambda c: char_pts[c])
+    return out
+
+
 def _frame_body(character, name: str) -> int:
     tf = character.tracked[name]
     m = character.model
@@ -257,6 +320,8 @@ def build_targets(
     options: TargetOptions | None = None,
     source_orientations: dict[str, np.ndarray] | None = None,
     floor=None,
+    calibration: Calibration | None = None,
+    kinematics: tuple[np.ndarray, np.ndarray | None] | None = None,
 ) -> Targets:
     """Build the character's IK targets from a motion.
 
@@ -275,28 +340,36 @@ def build_targets(
             levelled by the smallest rotation taking its normal to +Z about
             the plane's origin, so the character walks on z = 0 throughout.
             None estimates a level floor (``Motion.floor_height``).
+        calibration: Reuse the calibration of an earlier call (streaming: the
+            first frames calibrate, later frames reuse it); ``floor`` is then
+            ignored.
+        kinematics: ``motion.forward_kinematics()`` if the caller has it already.
 
     Returns:
-        :class:`Targets` for every canonical joint mapped on both sides.
+        :class:`Targets` for every canonical joint mapped on both sides, with
+        their :class:`Calibration`.
     """
     opt = options or TargetOptions()
-    rest_c = character_rest_frames(character)
-    present = [c for c in CANONICAL_NAMES if c in joint_indices and c in rest_c]
+    cal = calibration
+    rest_c = cal.rest if cal is not None else character_rest_frames(character)
+    present = list(cal.present) if cal is not None else [c for c in CANONICAL_NAMES if c in joint_indices and c in rest_c]
     if "pelvis" not in present:
         raise MappingError("the pelvis must be mapped in both the source and the character")
     pset = set(present)
     idx = np.array([joint_indices[c] for c in present])
-    pos_all, rot_all = motion.forward_kinematics()
-    level_info = {}
-    if floor is not None:
+    pos_all, rot_all = kinematics if kinematics is not None else motion.forward_kinematics()
+    level_info = {} if cal is None else dict(cal.info)
+    level, centre = (None, None) if cal is None else (cal.level, cal.level_centre)
+    if cal is None and floor is not None:
         sx, sy = (float(v) for v in floor.slope)
         ox, oy = (float(v) for v in floor.origin)
         centre = np.array([ox, oy, float(floor.height)])
         level = _min_rotation(np.array([-sx, -sy, 1.0]), np.array([0.0, 0.0, 1.0]))
-        pos_all = quat_apply(level, pos_all - centre) + np.array([ox, oy, 0.0])
+        level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
+    if level is not None:
+        pos_all = quat_apply(level, pos_all - centre) + np.array([centre[0], centre[1], 0.0])
         if rot_all is not None:
             rot_all = quat_mul(level, rot_all)
-        level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
     S = pos_all[:, idx]  # (F, N, 3) actor canonical positions
     F, N = S.shape[:2]
     valid = np.all(np.isfinite(S), axis=-1)
@@ -323,11 +396,19 @@ def build_targets(
 
     actor_pts = {c: S_rest[col[c]] for c in present}
     char_pts = {c: rest_c[c][0] for c in present}
-    la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
+    if motion.is_rotational:
+        la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
+    else:  # no rest pose: median leg length over the clip's valid frames
+        la = [x for x in (_median_leg(S, valid, col, s) for s in ("left", "right")) if x]
     lc = [x for x in (leg_len(char_pts, s) for s in ("left", "right")) if x]
-    scale = float(np.mean(lc) / np.mean(la)) if (la and lc and opt.scale_root) else 1.0
+    if cal is not None:
+        scale = cal.scale
+    else:
+        scale = float(np.mean(lc) / np.mean(la)) if (la and lc and opt.scale_root) else 1.0
 
-    if opt.source_floor is not None:
+    if cal is not None:
+        floor_s = cal.floor
+    elif opt.source_floor is not None:
         floor_s = opt.source_floor
     elif floor is not None:
         floor_s = 0.0  # levelled above
@@ -338,13 +419,19 @@ def build_targets(
     Q = np.zeros((F, N, 4))
     Q[..., 3] = 1.0
     has_q = np.zeros(N, dtype=bool)
-    yaw = np.array([0.0, 0.0, 0.0, 1.0])
-    if "left_hip" in pset and "right_hip" in pset:
+    yaw = np.array([0.0, 0.0, 0.0, 1.0]) if cal is None else cal.yaw
+    if cal is None and "left_hip" in pset and "right_hip" in pset:
         f_a = _facing(actor_pts["left_hip"], actor_pts["right_hip"])
         f_c = _facing(char_pts["left_hip"], char_pts["right_hip"])
         yaw = _yaw_between(f_c, f_a)
     # which character sites can turn relative to their canonical parent's site
-    movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
+    if cal is not None:
+        movable = cal.movable
+    else:
+        movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
+    offsets = {} if cal is None else cal.orientation_offsets
+    if not motion.is_rotational and source_orientations is None:
+        source_orientations = _positional_orientations(S, col, pset, char_pts)
     for c in opt.oriented:
         if c not in pset or not movable.get(c, True):
             continue  # e.g. a wrist site on the forearm body of a robot without wrists
@@ -352,15 +439,16 @@ def build_targets(
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
             R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
-            M = np.array([0.0, 0.0, 0.0, 1.0])
-            child = _first_child(c, pset)
-            if child is not None and c not in RIGID_PARENTS:
-                d_a = actor_pts[child] - actor_pts[c]
-                d_c = quat_apply(yaw, char_pts[child] - char_pts[c])
-                if np.linalg.norm(d_a) > 1e-6 and np.linalg.norm(d_c) > 1e-6:
-                    M = _min_rotation(d_c, d_a)
-            offset = quat_mul(quat_mul(M, yaw), q_c0)
-            Q[:, i] = quat_mul(R_a, offset)
+            if c not in offsets:
+                M = np.array([0.0, 0.0, 0.0, 1.0])
+                child = _first_child(c, pset)
+                if child is not None and c not in RIGID_PARENTS:
+                    d_a = actor_pts[child] - actor_pts[c]
+                    d_c = quat_apply(yaw, char_pts[child] - char_pts[c])
+                    if np.linalg.norm(d_a) > 1e-6 and np.linalg.norm(d_c) > 1e-6:
+                        M = _min_rotation(d_c, d_a)
+                offsets[c] = quat_mul(quat_mul(M, yaw), q_c0)
+            Q[:, i] = quat_mul(R_a, offsets[c])
             has_q[i] = True
         elif source_orientations is not None and c in source_orientations:
             R_a = np.asarray(source_orientations[c], dtype=float)
@@ -405,12 +493,15 @@ def build_targets(
         ok = valid[:, col["left_hip"]] & valid[:, col["right_hip"]]
     else:
         anchor_a, anchor_c0, ok = S[:, ip], char_pts["pelvis"], valid[:, ip]
-    start_xy = anchor_a[np.argmax(ok), :2]
+    start_xy = anchor_a[np.argmax(ok), :2] if cal is None else cal.start_xy
     anchor = np.empty((F, 3))
     anchor[:, :2] = start_xy + scale * (anchor_a[:, :2] - start_xy)
     # Height: scale the part above the ankles by the leg ratio and stand it on the
     # character's own ankle height (ankle heights above the sole do not scale with legs).
-    ankle_a, ankle_c = _ankle_heights(S, valid, col, char_pts, floor, floor_s, present)
+    if cal is not None:
+        ankle_a, ankle_c = cal.ankle_actor, cal.ankle_character
+    else:
+        ankle_a, ankle_c = _ankle_heights(S, valid, col, char_pts, floor, floor_s, present)
     anchor[:, 2] = scale * (anchor_a[:, 2] - floor_s - ankle_a) + ankle_c
     pelvis_delta = delta.get("pelvis")
     off = char_pts["pelvis"] - anchor_c0
@@ -440,6 +531,22 @@ def build_targets(
             d = np.where(bad[:, None], fallback, d)
         T[:, i] = T[:, j] + length * d
 
+    if cal is None:
+        cal = Calibration(
+            rest=rest_c,
+            present=tuple(present),
+            scale=scale,
+            floor=float(floor_s),
+            yaw=yaw,
+            movable=movable,
+            orientation_offsets=offsets,
+            start_xy=np.array(start_xy, dtype=float),
+            ankle_actor=float(ankle_a),
+            ankle_character=float(ankle_c),
+            level=level,
+            level_centre=centre,
+            info=level_info,
+        )
     return Targets(
         names=tuple(present),
         positions=T,
@@ -454,5 +561,6 @@ def build_targets(
             "yaw_deg": float(np.degrees(Rotation.from_quat(yaw).magnitude())),
             **level_info,
         },
+        calibration=cal,
     )
 

@@ -72,7 +72,10 @@ class SolverOptions:
         floor_height: Height of the floor plane (metres).
         floor_margin: Clearance the linearised floor constraint aims for (metres).
         floor_iterations: Extra iterations allowed when the last step left a
-            point below the floor (linearisation error).
+            point below the floor or a planted contact off its anchor
+            (linearisation error).
+        constraint_tolerance: Planted contacts further than this (metres) from
+            their anchor trigger those extra iterations.
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: qpsolvers backend name.
@@ -89,6 +92,7 @@ class SolverOptions:
     floor_height: float = 0.0
     floor_margin: float = 2e-4
     floor_iterations: int = 4
+    constraint_tolerance: float = 5e-5
     limit_gain: float = 0.95
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
@@ -318,12 +322,13 @@ class FrameSolver:
         self.configuration.integrate_inplace(v, alpha)
         self._residual = self._hard_residual()
 
-    def _constraints_ok(self, tol: float = 1e-4) -> bool:
+    def _constraints_ok(self, tol: float | None = None) -> bool:
         """True if every equality constraint (planted contact) holds within ``tol`` metres.
 
         The equalities are linearised too: a large last step leaves a
         second-order residual, and the solver iterates again to remove it.
         """
+        tol = self.options.constraint_tolerance if tol is None else tol
         for task in self.constraints:
             if np.max(np.abs(task.compute_error(self.configuration))) > tol:
                 return False

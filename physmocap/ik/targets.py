@@ -222,6 +222,38 @@ def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
     return fwd / n
 
 
+#: The segment direction that calibrates each torso segment's rest posture.
+TORSO_UP = {"pelvis": ("spine", "chest", "neck"), "spine": ("chest", "neck"), "chest": ("neck", "head"), "head": ("head_end",)}
+
+
+def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking the character's rest segment direction (after the
+    facing yaw) onto the actor's rest segment direction, x-y-z-w.
+
+    The segment runs from ``c`` to its first canonical child (limbs) or up the
+    torso (:data:`TORSO_UP`; the pelvis from the hip centre).  It calibrates a
+    rest posture that differs between actor and character: T-pose arms against
+    arms down, a rest spine that leans.
+    """
+    ident = np.array([0.0, 0.0, 0.0, 1.0])
+    if c in TORSO_UP:
+        child = next((x for x in TORSO_UP[c] if x in present), None)
+    else:
+        child = _first_child(c, present)
+    if child is None:
+        return ident
+    if c == "pelvis" and "left_hip" in present and "right_hip" in present:
+        base_a = 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
+        base_c = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
+    else:
+        base_a, base_c = actor_pts[c], char_pts[c]
+    d_a = actor_pts[child] - base_a
+    d_c = quat_apply(yaw, char_pts[child] - base_c)
+    if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
+        return ident
+    return _min_rotation(d_c, d_a)
+
+
 def _median_leg(S: np.ndarray, valid: np.ndarray, col: dict, side: str) -> float | None:
     """Median over frames of hip-knee plus knee-ankle length (metres), or None."""
     chain = [f"{side}_hip", f"{side}_knee", f"{side}_ankle"]
@@ -440,14 +472,7 @@ def build_targets(
         if motion.is_rotational and rot_all is not None:
             R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
             if c not in offsets:
-                M = np.array([0.0, 0.0, 0.0, 1.0])
-                child = _first_child(c, pset)
-                if child is not None and c not in RIGID_PARENTS:
-                    d_a = actor_pts[child] - actor_pts[c]
-                    d_c = quat_apply(yaw, char_pts[child] - char_pts[c])
-                    if np.linalg.norm(d_a) > 1e-6 and np.linalg.norm(d_c) > 1e-6:
-                        M = _min_rotation(d_c, d_a)
-                offsets[c] = quat_mul(quat_mul(M, yaw), q_c0)
+                offsets[c] = quat_mul(quat_mul(_rest_alignment(c, pset, actor_pts, char_pts, yaw), yaw), q_c0)
             Q[:, i] = quat_mul(R_a, offsets[c])
             has_q[i] = True
         elif source_orientations is not None and c in source_orientations:
@@ -470,12 +495,14 @@ def build_targets(
     for seg in RIGID_PARENTS:
         if seg in pset and has_q[col[seg]]:
             delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
-        elif motion.is_rotational and rot_all is not None and seg in joint_indices:
-            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], yaw)
+        elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
+            A = _rest_alignment(seg, pset, actor_pts, char_pts, yaw)
+            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], quat_mul(A, yaw))
     if "chest" not in delta:  # the upper torso turns with the highest source torso joint
         for seg in ("spine", "pelvis"):
-            if motion.is_rotational and rot_all is not None and seg in joint_indices:
-                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], yaw)
+            if motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
+                A = _rest_alignment(seg, pset, actor_pts, char_pts, yaw)
+                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], quat_mul(A, yaw))
                 break
             if seg in delta:
                 delta["chest"] = delta[seg]

@@ -86,6 +86,7 @@ class StreamingRetargeter:
         self.fps = float(fps)
         self.translated = np.zeros(0, dtype=np.int64) if translated is None else np.asarray(translated, dtype=np.int64)
         # a live frame has a deadline: fewer clean-up iterations than offline by default
+        options.setdefault("max_iterations", 3)
         options.setdefault("floor_iterations", 2)
         options.setdefault("constraint_tolerance", 1e-4)
         self.target_options, self.solver_options, rest = split_options(options)

@@ -1,12 +1,17 @@
 #!/usr/bin/env python3
-"""Benchmark the retargeting IK: frames per second, per-frame latency, peak memory.
+"""Benchmark retargeting: frames per second, per-frame latency, peak memory.
 
-For each shared BVH file (../shared/data) and each bundled character, the
-targets are built once (file reading and target building are excluded, as
-metrics.md's throughput definition asks), then the per-frame IK is timed over
-the whole clip ``--runs`` times; the median run is reported.  Per-frame
-latency (median, p99) is taken over all frames of all runs.  Peak memory is the
-process's maximum resident set size after all runs (ru_maxrss).
+For each shared BVH clip (../shared/data) and each bundled character:
+
+* **retarget fps**: the whole of :func:`physmocap.ik.retarget.retarget` on an
+  already-read motion (name mapping, contact detection, targets, per-frame IK
+  with planting), i.e. everything but file reading (metrics.md's throughput);
+* **IK fps** and **per-frame latency** (median, p99): the per-frame loop alone
+  (:func:`physmocap.ik.retarget.solve_targets` with the contacts);
+
+each the median of ``--runs`` runs.  Peak memory is the process's maximum
+resident set size at the end (ru_maxrss).  Also prints the streaming
+retargeter's latency on the CMU walk.
 
 Usage:  python scripts/bench_retarget.py [--runs 3] [--frames N] [--characters humanoid robot]
 """
@@ -19,6 +24,7 @@ import resource
 import statistics
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -35,14 +41,19 @@ def main() -> int:
     ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
     ap.add_argument("--clips", nargs="+", default=CLIPS)
     args = ap.parse_args()
+    warnings.simplefilter("ignore")
 
-    from physmocap.ik.retarget import map_motion, split_options
-    from physmocap.ik.solver import FrameSolver
+    from physmocap.ik.contacts import detect_contacts
+    from physmocap.ik.retarget import map_motion, retarget, solve_targets
+    from physmocap.ik.stream import stream_motion
     from physmocap.ik.targets import build_targets
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
-    print(f"{'clip':28s} {'character':10s} {'frames':>6s} {'fps':>8s} {'lat med ms':>10s} {'lat p99 ms':>10s}")
+    print(
+        f"{'clip':27s} {'character':9s} {'frames':>6s} {'retarget fps':>12s} {'IK fps':>7s}"
+        f" {'lat med ms':>10s} {'lat p99 ms':>10s}"
+    )
     for clip in args.clips:
         path = DATA / clip
         if not path.exists():
@@ -51,25 +62,36 @@ def main() -> int:
         motion = load_motion(path)
         if args.frames:
             motion = motion.slice_frames(0, min(args.frames, motion.num_frames))
-        jidx = map_motion(motion)
         for name in args.characters:
             character = load_character(name)
-            t_opt, s_opt, _ = split_options({})
-            targets = build_targets(motion, jidx, character, t_opt)
-            run_fps, lat = [], []
+            full, ik, lat = [], [], []
             for _ in range(args.runs):
-                solver = FrameSolver(character, targets.names, targets.has_orientation, targets.fps, s_opt)
-                t_start = time.perf_counter()
-                for t in range(targets.num_frames):
-                    t0 = time.perf_counter()
-                    solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
-                    solver.solve_frame(first=(t == 0))
-                    lat.append(time.perf_counter() - t0)
-                run_fps.append(targets.num_frames / (time.perf_counter() - t_start))
+                t0 = time.perf_counter()
+                retarget(motion, character, progress=False)
+                full.append(motion.num_frames / (time.perf_counter() - t0))
+                idx = map_motion(motion)
+                contacts = detect_contacts(motion, idx)
+                targets = build_targets(motion, idx, character, floor=contacts.floor)
+                t0 = time.perf_counter()
+                traj = solve_targets(targets, character, labels=contacts.labels, progress=False)
+                ik.append(motion.num_frames / (time.perf_counter() - t0))
+                lat.extend(traj.stats["latency"][1:])
             lat_ms = np.array(lat) * 1000.0
             print(
-                f"{clip:28s} {name:10s} {targets.num_frames:6d} {statistics.median(run_fps):8.0f} "
-                f"{np.median(lat_ms):10.2f} {np.percentile(lat_ms, 99):10.2f}"
+                f"{clip:27s} {name:9s} {motion.num_frames:6d} {statistics.median(full):12.0f}"
+                f" {statistics.median(ik):7.0f} {np.median(lat_ms):10.2f} {np.percentile(lat_ms, 99):10.2f}"
+            )
+    walk = DATA / "cmu_12_01_walk.bvh"
+    if walk.exists():
+        motion = load_motion(walk)
+        for name in args.characters:
+            lat = []
+            for _ in range(args.runs):
+                lat.extend(stream_motion(motion, load_character(name)).stats["latency"][1:])
+            lat_ms = np.array(lat) * 1000.0
+            print(
+                f"streaming {walk.name} onto {name}: latency median {np.median(lat_ms):.2f} ms,"
+                f" p99 {np.percentile(lat_ms, 99):.2f} ms (first frame excluded)"
             )
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f"peak memory (max RSS): {peak:.0f} MB")

@@ -10,6 +10,7 @@ returns a :class:`~physmocap.trajectory.Trajectory`.
 from __future__ import annotations
 
 import dataclasses
+import time
 from typing import Any
 
 import numpy as np
@@ -204,8 +205,10 @@ def solve_targets(
     qpos = np.empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
+    latency = np.zeros(F)
     with Progress(F, "retarget", enabled=progress) as bar:
         for t in range(F):
+            t_frame = time.perf_counter()
             if planting is not None:
                 if t == 0:
                     solver.set_targets(targets.positions[0], targets.orientations[0], targets.valid[0])
@@ -221,6 +224,7 @@ def solve_targets(
             solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
             q, it, level = solver.solve_frame(first=(t == 0 and planting is None))
             qpos[t] = q
+            latency[t] = time.perf_counter() - t_frame
             iterations[t] = it
             relaxation[t] = level
             bar.update(1)
@@ -235,5 +239,5 @@ def solve_targets(
         fps=targets.fps,
         source=source,
         targets=targets,
-        stats={"iterations": iterations, "relaxation": relaxation},
+        stats={"iterations": iterations, "relaxation": relaxation, "latency": latency},
     )

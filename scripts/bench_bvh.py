@@ -15,8 +15,8 @@ each as the median wall-clock time over ``--runs`` runs, frames per second, and
 peak memory.  "traced MB" is the tracemalloc peak of the operation alone (every
 numpy buffer and Python object it allocates; measured in a separate run);
 "rss MB" is the peak resident size of a fresh process doing only that
-operation (after reading the input, for fk and write), including the
-interpreter and imported libraries (about 90 MB).
+operation (after reading the input, for fk and write, so at least the read's
+peak), including the interpreter and imported libraries (about 90 MB).
 
 Usage:  python scripts/bench_bvh.py [--runs 5] [--hour-runs 3] [--minutes 60] [--no-hour]
 """
@@ -44,7 +44,17 @@ WINDOW = 1200
 
 
 def _maxrss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+    """Peak resident size of this process.  Linux's VmHWM (reset by exec, unlike
+    ru_maxrss, which a child inherits from a large parent); ru_maxrss elsewhere."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    scale = 1024.0 if sys.platform.startswith("linux") else 2**20  # KiB on Linux, bytes on macOS
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / scale
 
 
 def _operation(op: str, path: Path, out_dir: Path):

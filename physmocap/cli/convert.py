@@ -20,8 +20,12 @@ def register(subparsers) -> None:  # noqa: ANN001
     p = subparsers.add_parser(
         "convert",
         help="rewrite a motion file (BVH ...), optionally changing units, axes, rate or range",
-        description=__doc__.split("\n\n", 1)[1] if __doc__ else None,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=(
+            "Read IN (any supported format, chosen by suffix; 'example' is the bundled walk) and write "
+            "OUT (by suffix). In order: cut the frame range [--start, --end), resample to --fps (slerp "
+            "for rotations, linear for translations), then write with the requested rotation order, "
+            "units, up axis and precision (by default those of the input)."
+        ),
     )
     p.add_argument("input", metavar="IN", help="input motion file, or 'example' for the bundled walk")
     p.add_argument("output", metavar="OUT", help="output file (.bvh)")

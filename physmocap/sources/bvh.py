@@ -33,15 +33,21 @@ End sites become joints with ``end_site=True`` named ``<parent>_End`` (then
 Bad files raise one :class:`~physmocap.errors.InputError` naming the file, the
 1-based line and what was expected.  Where the only problem is a ``Frames:``
 count that disagrees with the rows present, the rows present are read and a
-warning is issued.  If the file ends in the middle of a row while ``Frames:``
+warning is issued.  If the file ends in the middle of a row (fewer numbers
+than channels, or a last number cut to ``-`` or ``1e``) while ``Frames:``
 promises more rows than are complete (an interrupted copy or export), that
-partial row is dropped with a warning; a short row anywhere else is an error.
+partial row is dropped with a warning; a short row anywhere else, or one that
+``Frames:`` does not promise, is an error.  (A last number cut to a shorter
+valid number, ``12.3`` from ``12.34``, cannot be told from a complete row.)
+Numbers are decimal (``-1``, ``.5``, ``2.``, ``1e-3``); ``nan``, ``inf`` and
+magnitudes above :data:`MAX_ABS_VALUE` are errors.  Duplicate joint names are
+made unique with a warning.
 
-Speed and memory: the ``MOTION`` block is read in chunks of a few MB, each
-parsed in bulk by numpy's C text parser (a pure-Python pass re-reads a chunk
-only to locate and describe an error exactly) and converted to quaternions
-with vectorised numpy, so memory is the output arrays plus a few chunk-sized
-buffers.
+Speed and memory: the ``MOTION`` block is read in 1 MB chunks, each parsed in
+bulk by numpy's C text parser (a pure-Python pass re-reads a chunk only to
+locate and describe an error exactly) and converted to quaternions with
+vectorised numpy, so memory is the output arrays (``F x J x 4`` float64
+rotations: 32 bytes per joint and frame, end sites included) plus about 30 MB.
 """
 
 from __future__ import annotations

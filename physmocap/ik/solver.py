@@ -174,6 +174,7 @@ class FrameSolver:
         self._lim_range = model.jnt_range[lim]
         self.q_prev: np.ndarray | None = None
         self._residual: float | None = None
+        self._res_cache: tuple[bytes, tuple[float, float]] | None = None
         self.constraints: list[mink.Task] = []
         self.extra_tasks: list[mink.Task] = []
 
@@ -285,17 +286,27 @@ class FrameSolver:
             if self._floor_ok():
                 return
 
-    def _hard_residual(self) -> float:
-        """Largest violation of the hard constraints that are linearised: planted
-        contacts (metres off their anchor) and the floor (metres below it)."""
-        r = 0.0
+    def _residuals(self) -> tuple[float, float]:
+        """``(contacts, floor)``: how far the planted contacts are off their anchors
+        and the lowest point below the floor (metres), cached per configuration."""
+        key = self.configuration.data.qpos.tobytes()
+        if self._res_cache is not None and self._res_cache[0] == key:
+            return self._res_cache[1]
+        rc = 0.0
         for task in self.constraints:
-            r = max(r, float(np.max(np.abs(task.compute_error(self.configuration)))))
+            rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        rf = 0.0
         if self.options.floor:
             z, _, _ = self.floor_limit.heights(self.configuration.data)
             if z.size:
-                r = max(r, float(self.options.floor_height - z.min()))
-        return r
+                rf = max(0.0, float(self.options.floor_height - z.min()))
+        self._res_cache = (key, (rc, rf))
+        return rc, rf
+
+    def _hard_residual(self) -> float:
+        """Largest violation of the hard constraints that are linearised: planted
+        contacts (metres off their anchor) and the floor (metres below it)."""
+        return max(self._residuals())
 
     def _line_search(self, v: np.ndarray, tol: float = 5e-5) -> None:
         """Take the step ``v``, halving it while it makes the hard constraints worse.
@@ -329,22 +340,16 @@ class FrameSolver:
         second-order residual, and the solver iterates again to remove it.
         """
         tol = self.options.constraint_tolerance if tol is None else tol
-        for task in self.constraints:
-            if np.max(np.abs(task.compute_error(self.configuration))) > tol:
-                return False
-        return True
+        return not self.constraints or self._residuals()[0] <= tol
 
     def _floor_ok(self) -> bool:
-        """True if no constrained point is below the floor by more than the solver's tolerance.
+        """True if no constrained point is below the floor by more than 0.1 mm.
 
         The floor constraint is linearised, so a large last step can leave a
         point a few millimetres below the floor (second-order error); the
         solver then iterates again, up to ``floor_iterations`` more times.
         """
-        if not self.options.floor:
-            return True
-        z, _, _ = self.floor_limit.heights(self.configuration.data)
-        return bool(z.size == 0 or z.min() >= self.options.floor_height - 1e-4)
+        return not self.options.floor or self._residuals()[1] <= 1e-4
 
     def solve_frame(self, first: bool = False) -> tuple[np.ndarray, int, int]:
         """Iterate the QP for the current targets; returns ``(q, iterations, relaxation level)``.
@@ -361,6 +366,7 @@ class FrameSolver:
         it = 0
         base = 0 if self.constraints else 1
         self._residual = None  # hard-constraint residual, cached between line searches
+        self._res_cache = None  # the constraints may have changed since the last frame
         extra = opt.floor_iterations if opt.floor else 0
         extra = max(extra, opt.floor_iterations if self.constraints else 0)
         for it in range(1, iters + extra + 1):

@@ -244,14 +244,14 @@ class Motion:
         if (self.rotations is None) == (self.positions is None):
             raise ValueError("a Motion has either rotations or positions (exactly one)")
         if self.rotations is not None:
-            self.rotations = np.asarray(self.rotations, dtype=float)
+            self.rotations = _floats(self.rotations)
             if self.rotations.ndim != 3 or self.rotations.shape[1:] != (J, 4):
                 raise ValueError(f"rotations must be (F, {J}, 4), got {self.rotations.shape}")
             F = self.rotations.shape[0]
             if self.translations is None:
                 self.translations = np.zeros((F, 0, 3))
                 self.translated = np.zeros(0, dtype=np.int64)
-            self.translations = np.asarray(self.translations, dtype=float)
+            self.translations = _floats(self.translations)
             K = len(self.translated)
             if self.translations.shape != (F, K, 3):
                 raise ValueError(
@@ -370,6 +370,12 @@ class Motion:
         assert self.positions is not None
         conf = None if self.confidence is None else lerp(self.confidence)
         return self.replace(fps=float(fps), positions=lerp(self.positions), confidence=conf)
+
+
+def _floats(a) -> np.ndarray:
+    """A float array, keeping float32 (long clips are stored compactly) and float64."""
+    a = np.asarray(a)
+    return a if a.dtype in (np.float32, np.float64) else a.astype(np.float64)
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
     ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
     ap.add_argument("--clips", nargs="+", default=CLIPS)
+    ap.add_argument("--no-plant", action="store_true", help="pure tracking: no contact detection or planting")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
 
@@ -67,13 +68,14 @@ def main() -> int:
             full, ik, lat = [], [], []
             for _ in range(args.runs):
                 t0 = time.perf_counter()
-                retarget(motion, character, progress=False)
+                retarget(motion, character, progress=False, plant=not args.no_plant)
                 full.append(motion.num_frames / (time.perf_counter() - t0))
                 idx = map_motion(motion)
                 contacts = detect_contacts(motion, idx)
                 targets = build_targets(motion, idx, character, floor=contacts.floor)
                 t0 = time.perf_counter()
-                traj = solve_targets(targets, character, labels=contacts.labels, progress=False)
+                labels = None if args.no_plant else contacts.labels
+                traj = solve_targets(targets, character, labels=labels, progress=False)
                 ik.append(motion.num_frames / (time.perf_counter() - t0))
                 lat.extend(traj.stats["latency"][1:])
             lat_ms = np.array(lat) * 1000.0

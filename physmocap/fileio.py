@@ -55,3 +55,34 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator[
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict, str]:
+    """Read a TOML file: ``(data, text)``; clear :class:`InputError` naming the file and line.
+
+    ``kind`` names the file in messages (``"mapping file"``...).  Uses the standard
+    library's ``tomllib`` (Python 3.11+) or ``tomli`` on 3.10.
+    """
+    import re
+
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+
+    from .errors import InputError
+
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{kind} not found", path=p) from None
+    except IsADirectoryError:
+        raise InputError(f"is a directory, expected a {kind} (TOML)", path=p) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read {kind}: {exc}", path=p) from None
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"at line (\d+)", str(exc))
+        raise InputError(f"not valid TOML: {exc}", path=p, line=int(m.group(1)) if m else None) from None

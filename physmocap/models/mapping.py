@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,6 +45,7 @@ import mujoco
 
 from ..canonical import CANONICAL_NAMES
 from ..errors import InputError, MappingError
+from ..fileio import read_toml
 
 __all__ = ["TrackedFrame", "Mapping", "read_mapping", "implicit_mapping", "AXES"]
 
@@ -139,19 +139,7 @@ def _number(mapping: Mapping, section: str, key: str, value: object) -> float:
 def read_mapping(path: str | os.PathLike) -> Mapping:
     """Parse a mapping file's syntax and types (not yet checked against a model)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("mapping file not found", path=p) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read mapping file: {exc}", path=p) from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"at line (\d+)", str(exc))
-        raise InputError(
-            f"not valid TOML: {exc}", path=p, line=int(m.group(1)) if m else None
-        ) from None
+    raw, text = read_toml(p, "mapping file")
     mp = Mapping(path=p, text=text)
     known = {"character", "joints", "contacts", "rest", "velocity_limits", "joint_limits"}
     for key in raw:

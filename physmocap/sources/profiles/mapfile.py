@@ -27,11 +27,7 @@ from typing import Any, Mapping
 
 from ...canonical import CANONICAL_NAMES
 from ...errors import InputError, MappingError
-
-try:  # Python >= 3.11
-    import tomllib
-except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+from ...fileio import read_toml
 
 __all__ = ["load_mapping_file", "check_mapping", "UserMapping"]
 
@@ -142,19 +138,5 @@ def load_mapping_file(path: str | os.PathLike) -> UserMapping:
         MappingError: An entry is wrong (the message names the entry and line).
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("mapping file not found", path=p) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a mapping file (TOML)", path=p) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read mapping file: {exc}", path=p) from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"at line (\d+)", str(exc))
-        raise InputError(
-            f"not valid TOML: {exc}", path=p, line=int(m.group(1)) if m else None
-        ) from None
+    raw, text = read_toml(p, "mapping file")
     return check_mapping(raw, p, text)

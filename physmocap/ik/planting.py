@@ -1,25 +1,40 @@
-"""Foot planting: contact points hold still on the floor while they are in contact.
+"""Foot planting: contact points hold still on the floor while their foot is in contact.
 
-A causal state machine per contact site (it only looks at the current frame's
-contact label and the previous frame's solution, so the streaming retargeter
-uses it as is):
+Three causal pieces (each frame uses only its own contact labels and the
+previous frame's solution, so offline and streaming retargeting share them),
+combined by :class:`Planting`:
 
-* **Contact begins** (label turns on): the site is *locked* at its horizontal
-  position in the previous frame's solution, and its height target is the
-  floor.  The height cost ramps in over ``onset_time`` so a foot that lands a
-  few millimetres high settles instead of popping.
-* **In contact**: a :class:`~physmocap.ik.tasks.SitePositionTask` with costs
-  ``(cost_xy, cost_xy, cost_z)`` per metre holds the lock.  These costs are
-  orders of magnitude above the tracking costs, so the residual is far below a
-  millimetre (the benchmark and tests measure it), while the QP stays feasible
-  when targets pull planted feet apart: the pelvis and the other soft
-  tracking tasks give way, not the feet.  Hard limits (joint limits, velocity,
-  floor) still come first.
-* **Release** (label turns off): the lock's cost fades to zero along a smooth
-  ramp over ``release_time`` seconds, handing the site back to tracking
-  without a pop.
+* :class:`FootPlanter`, per contact site (heel, ball, toe tip ...):
 
-All positions are metres in the character's world (Z-up, floor at ``floor``).
+  - a labelled site is pulled onto the floor by a soft height task
+    (``cost_z``, ramped in over ``onset_time``, descending at most
+    ``max_descent_speed``), so a foot labelled down while still in the air
+    lands over a few frames instead of slamming down;
+  - a site is *held* (its horizontal position a hard equality of the QP,
+    mink ``constraints=``) from the frame a labelled site touches down
+    (within ``engage_height`` of the floor) until it has lifted clear again
+    (``engage_height + release_margin``), label or not, so a foot rises before
+    it moves: that is what keeps the stance-band speed near zero;
+  - sites of a foot that is neither labelled nor held get a swing clearance
+    (a hard inequality, :class:`~physmocap.ik.limits.FloorLimit`), so a swing
+    foot does not skim, and slide within, the stance band.
+
+* :class:`FootAnchor`, per foot: the foot's *targets* are offset so that they
+  stand still while it is in contact (the actor's own feet slide, and so do
+  targets built for other proportions), anchored where the character's foot
+  actually landed, and the offset is handed back along a smoothstep over
+  ``anchor_release_time`` after release.  The knee target is re-solved by
+  two-bone IK so thigh and shank keep their lengths.
+
+* The body follows its planted feet: a root offset relaxes (time constant
+  ``root_follow_time``) towards the mean offset of the held feet, so a source
+  whose feet slide does not stretch the stance leg and drag the pelvis.  Swing
+  feet hand back to this root offset rather than to zero.
+
+If holding a site makes a QP infeasible (velocity limits, joint limits), the
+solver's first relaxation softens the equalities into tasks of cost
+``cost_xy`` (see :mod:`physmocap.ik.solver`).  All positions are metres in the
+character's world (Z-up, floor at ``floor``).
 """
 
 from __future__ import annotations
@@ -45,11 +60,10 @@ class PlantOptions:
             soften it (it is a hard equality otherwise).
         cost_z: Cost per metre of the height task pulling a labelled site onto the floor.
         onset_time: Seconds over which the height cost ramps in at contact start.
-        release_time: Seconds over which the lock fades out after contact ends.
         anchor_release_time: Seconds over which a foot's target offset
             (:class:`FootAnchor`) fades back to the actor's motion after release.
-        lock_low: Also hold a contact site horizontally while it is within
-            ``engage_height`` of the floor, labelled or not.
+        lock_low: Keep holding a site after its label ends until it has lifted
+            clear of ``engage_height + release_margin`` (False: let go with the label).
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -68,7 +82,6 @@ class PlantOptions:
     cost_xy: float = 400.0
     cost_z: float = 400.0
     onset_time: float = 0.03
-    release_time: float = 0.05
     anchor_release_time: float = 0.25
     lock_low: bool = True
     engage_height: float = 0.014
@@ -105,13 +118,11 @@ class FootPlanter:
         n = len(self.sites)
         self.locked = np.zeros(n, dtype=bool)
         self.age = np.zeros(n, dtype=int)
-        self.release_left = np.zeros(n, dtype=int)
         self.labelled = np.zeros(n, dtype=bool)
         #: sites neither labelled nor held this frame (they get the swing clearance)
         self.free = np.zeros(n, dtype=bool)
         self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
-        self.release_frames = max(1, int(round(opt.release_time * fps)))
         self.anchor = np.zeros((n, 3))
 
     def reset(self) -> None:
@@ -119,7 +130,6 @@ class FootPlanter:
         self.labelled[:] = False
         self._prev_z = None
         self.age[:] = 0
-        self.release_left[:] = 0
 
     def update(
         self, in_contact: Mapping[str, bool] | np.ndarray, data: mujoco.MjData

@@ -132,7 +132,7 @@ def retarget(
             :class:`~physmocap.ik.solver.SolverOptions` and
             :class:`~physmocap.ik.planting.PlantOptions` (e.g.
             ``max_iterations=8``, ``floor=False``, ``scale_root=False``,
-            ``plant=False``, ``release_time=0.2``).
+            ``plant=False``, ``anchor_release_time=0.4``).
 
     Returns:
         The character's :class:`~physmocap.trajectory.Trajectory`.

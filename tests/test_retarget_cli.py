@@ -1,0 +1,122 @@
+"""`physmocap retarget` from the command line: outputs, and one clear error per bad input."""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from physmocap.cli import main
+from physmocap.resources import mjcf_dir
+
+TINY_BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 10 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.033333
+0 90 0 0 0 0 0 0 0
+0 90 0 0 0 0 0 0 0
+"""
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("physmocap: error:")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+def test_retarget_writes_every_format(tmp_path, capsys):
+    out = tmp_path / "w.bvh"
+    args = ["retarget", "example", "-o", str(out), "--qpos", str(tmp_path / "w.npz"), "--csv", str(tmp_path / "w.csv")]
+    assert main(args + ["--end", "60", "--quiet"]) == 0
+    for name in ("w.bvh", "w.npz", "w.csv"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert main(["retarget", "example", "-o", str(tmp_path / "w.mcap"), "--end", "30", "--quiet"]) == 0
+    assert (tmp_path / "w.mcap").read_bytes()[:5] == b"\x89MCAP"
+
+
+def test_unmappable_skeleton(tmp_path, capsys):
+    clip = tmp_path / "tiny.bvh"
+    clip.write_text(TINY_BVH)
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", str(clip), "-o", str(out)]) == 2
+    line = _error(capsys)
+    assert "tiny.bvh" in line and "knee" in line  # names the missing joints
+    assert list(tmp_path.iterdir()) == [clip]
+
+
+def test_character_without_contacts(tmp_path, capsys):
+    src = mjcf_dir()
+    for name in os.listdir(src):
+        if name.startswith("robot"):
+            shutil.copy(src / name, tmp_path / name)
+    mapping = (tmp_path / "robot.map.toml").read_text()
+    start = mapping.index("[contacts]")
+    end = mapping.index("[", start + 1)
+    (tmp_path / "robot.map.toml").write_text(mapping[:start] + mapping[end:])
+    out = tmp_path / "out.bvh"
+    code = main(["retarget", "example", "-o", str(out), "--character", str(tmp_path / "robot.xml")])
+    assert code == 2
+    line = _error(capsys)
+    assert "contact" in line and "robot" in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("rng", [["--start", "600"], ["--start", "10", "--end", "5"], ["--end", "9999"]])
+def test_frame_range_outside_the_clip(tmp_path, capsys, rng):
+    out = tmp_path / "out.bvh"
+    assert main(["retarget", "example", "-o", str(out), *rng]) == 2
+    assert "outside the clip" in _error(capsys)
+    assert not out.exists()
+
+
+def test_unwritable_output(tmp_path, capsys):
+    assert main(["retarget", "example", "-o", str(tmp_path / "missing" / "out.bvh")]) == 2
+    assert "does not exist" in _error(capsys)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a directory")
+    assert main(["retarget", "example", "-o", str(blocker / "out.bvh")]) == 2
+    line = _error(capsys)
+    assert "a_file" in line
+    assert blocker.read_text() == "not a directory"
+
+
+def test_failure_leaves_no_partial_file_and_keeps_an_old_one(tmp_path, capsys, monkeypatch):
+    """A failure while writing leaves the previous file untouched and no temporary file."""
+    out = tmp_path / "out.npz"
+    out.write_bytes(b"old")
+    import physmocap.export.trajectory as tj
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(tj.np.lib.format, "write_array", boom)
+    with pytest.raises(RuntimeError):
+        main(["retarget", "example", "-o", str(out), "--end", "20", "--quiet"])
+    assert out.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.npz"]
+
+
+def test_npz_loads_without_pickle(tmp_path):
+    out = tmp_path / "w.npz"
+    assert main(["retarget", "example", "-o", str(out), "--end", "40", "--quiet"]) == 0
+    with np.load(out, allow_pickle=False) as z:
+        assert z["qpos"].shape[0] == 40 and np.all(np.isfinite(z["qpos"]))
+        assert z["target_positions"].shape[0] == 40

@@ -71,7 +71,7 @@ RIGID_SEGMENT = {
     "spine": "pelvis",
     "left_hip": "pelvis",
     "right_hip": "pelvis",
-    "neck": "chest",
+    # the neck follows the actor's chest-to-neck direction (a rotating neck joint may sit between)
     "left_clavicle": "chest",
     "right_clavicle": "chest",
     "left_shoulder": "chest",

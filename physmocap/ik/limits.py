@@ -267,3 +267,55 @@ class FloorLimit(mink.Limit):
             G[row] = -self._jacp[2]
             h[row] = zs - min(self.floor + c, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
+
+
+class RootStepLimit(mink.Limit):
+    r"""The floating root's motion from the previous frame, bounded in motion time.
+
+    Joints have velocity limits (:class:`FrameStepLimit`); the free root has
+    none in mink, so an ill-conditioned QP could throw the whole body away in
+    one step.  With :math:`T` the frame interval, per axis:
+
+    .. math::
+
+        |p + \Delta p - p^{prev}| \le v_{max} T, \qquad |\Delta\omega| \le \omega_{max} T
+
+    (translation cumulative over the frame's iterations, rotation per
+    iteration).  Defaults (15 m/s, 40 rad/s) are beyond any human motion: a
+    safety bound, not a style choice.
+    """
+
+    def __init__(self, model: mujoco.MjModel, frame_interval: float, v_max: float = 15.0, w_max: float = 40.0) -> None:
+        free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)]
+        self.qadr = int(model.jnt_qposadr[free[0]]) if free else -1
+        self.dadr = int(model.jnt_dofadr[free[0]]) if free else -1
+        self.step_lin = float(v_max) * float(frame_interval)
+        self.step_ang = float(w_max) * float(frame_interval)
+        self.q_prev: np.ndarray | None = None
+        if free:
+            G = np.zeros((12, model.nv))
+            for k in range(6):
+                G[k, self.dadr + k] = 1.0
+                G[6 + k, self.dadr + k] = -1.0
+            self._G = G
+
+    def set_previous(self, q_prev: np.ndarray | None) -> None:
+        self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        if self.qadr < 0:
+            return mink.Constraint()
+        p = configuration.q[self.qadr : self.qadr + 3]
+        if self.q_prev is None:
+            hi_lin = np.full(3, np.inf)
+            lo_lin = np.full(3, np.inf)
+        else:
+            prev = self.q_prev[self.qadr : self.qadr + 3]
+            hi_lin = np.maximum(prev + self.step_lin - p, 0.0)
+            lo_lin = np.maximum(p - (prev - self.step_lin), 0.0)
+        ang = np.full(3, self.step_ang)
+        h = np.concatenate([hi_lin, ang, lo_lin, ang])
+        keep = np.isfinite(h)
+        return mink.Constraint(G=self._G[keep], h=h[keep])
+

@@ -38,9 +38,10 @@ from typing import Sequence
 import mink
 import mujoco
 import numpy as np
+import qpsolvers
 
 from ..rotations import xyzw_to_wxyz
-from .limits import FloorLimit, FrameStepLimit
+from .limits import FloorLimit, FrameStepLimit, RootStepLimit
 from .tasks import SitesPositionTask
 from .targets import weight_of
 
@@ -76,6 +77,7 @@ class SolverOptions:
             (linearisation error).
         constraint_tolerance: Planted contacts further than this (metres) from
             their anchor trigger those extra iterations.
+        trust_region: Largest change of any coordinate in one QP step (rad or m).
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: qpsolvers backend name.
@@ -93,6 +95,7 @@ class SolverOptions:
     floor_margin: float = 2e-4
     floor_iterations: int = 4
     constraint_tolerance: float = 5e-5
+    trust_region: float = 0.5
     limit_gain: float = 0.95
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
@@ -156,6 +159,8 @@ class FrameSolver:
         self.posture.set_target(np.array(character.rest_qpos, dtype=float))
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
         self.step_limit = FrameStepLimit(model, character.velocity_limits, 1.0 / fps)
+        self.root_limit = RootStepLimit(model, 1.0 / fps)
+        self._trust = np.full(model.nv, float(opt.trust_region))
         contact_sites = [model.site(s).id for side in character.contacts.values() for s in side]
         # Points further above the floor than a fast foot travels in one frame
         # (3 m/s) cannot reach it this frame: leave them out of the QP.
@@ -211,7 +216,7 @@ class FrameSolver:
 
     # -- solving ----------------------------------------------------------------
     def _limits(self, level: int) -> list[mink.Limit]:
-        limits: list[mink.Limit] = [self.config_limit]
+        limits: list[mink.Limit] = [self.config_limit, self.root_limit]
         if level <= 2 and self.options.velocity_limits and self.q_prev is not None:
             limits.append(self.step_limit)
         if level <= 3 and self.options.floor:
@@ -225,16 +230,21 @@ class FrameSolver:
         if level >= 1:  # equalities softened into high-cost tasks
             tasks += self.constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
-        v = mink.solve_ik(
+        # mink builds the QP; the trust region goes in as simple bounds, which daqp
+        # handles natively (cheaper than 2 nv inequality rows)
+        problem = mink.build_ik(
             self.configuration,
             tasks,
             1.0,
-            opt.solver,
             damping=damping,
             limits=self._limits(level),
             constraints=constraints or None,
         )
-        if not np.all(np.isfinite(v)):
+        problem.lb = -self._trust
+        problem.ub = self._trust
+        result = qpsolvers.solve_problem(problem, solver=opt.solver)
+        v = result.x
+        if not result.found or v is None or not np.all(np.isfinite(v)):
             raise mink.NoSolutionFound(opt.solver)
         return v
 
@@ -331,7 +341,11 @@ class FrameSolver:
             alpha *= 0.5
             self.configuration.update(q0)
         self.configuration.integrate_inplace(v, alpha)
-        self._residual = self._hard_residual()
+        r1 = self._hard_residual()
+        if r1 > max(r0, tol) + 1e-3:  # still clearly worse: reject the step
+            self.configuration.update(q0)
+            r1 = r0
+        self._residual = r1
 
     def _constraints_ok(self, tol: float | None = None) -> bool:
         """True if every equality constraint (planted contact) holds within ``tol`` metres.
@@ -359,6 +373,7 @@ class FrameSolver:
         """
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
+        self.root_limit.set_previous(self.q_prev)
         iters = opt.first_frame_iterations if first else opt.max_iterations
         if first:
             self._settle_from_rest()

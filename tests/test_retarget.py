@@ -70,3 +70,28 @@ def test_result_is_deterministic(tmp_path):
         write_trajectory_npz(traj, tmp_path / f"a{k}.npz")
         outs.append(((tmp_path / f"a{k}.bvh").read_bytes(), (tmp_path / f"a{k}.npz").read_bytes()))
     assert outs[0] == outs[1]
+
+
+@pytest.mark.parametrize("character", CHARACTERS)
+def test_garbage_motion_still_respects_every_hard_constraint(character):
+    """Random, jumpy joint rotations and a teleporting root: the output stays finite,
+    inside the joint and velocity limits, above the floor, and keeps every frame."""
+    from physmocap.ik.retarget import retarget
+    from physmocap.models import load_character
+    from physmocap.motion import Motion
+    from physmocap.rotations import Rotation, quat_mul
+    from physmocap.sources import load_motion
+
+    walk = load_motion("example").slice_frames(1, 61)
+    rng = np.random.default_rng(7)
+    F, J = walk.rotations.shape[:2]
+    noise = Rotation.from_rotvec(rng.normal(scale=0.8, size=(F * J, 3))).as_quat().reshape(F, J, 4)
+    rot = quat_mul(walk.rotations, noise)
+    tra = walk.translations + rng.normal(scale=0.3, size=walk.translations.shape)
+    bad = Motion(walk.skeleton, walk.fps, rotations=rot, translations=tra, translated=walk.translated)
+    ch = load_character(character)
+    traj = retarget(bad, ch, progress=False)
+    assert traj.num_frames == F and np.all(np.isfinite(traj.qpos))
+    assert metrics.joint_limit_violations(ch.model, traj.qpos)["count"] == 0
+    assert metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"] == 0
+    assert metrics.lowest_heights(ch.model, traj.qpos).min() > -1e-3

@@ -1,0 +1,83 @@
+#!/usr/bin/env python3
+"""Quality of the retargeting on the shared clips: the figures the README quotes.
+
+For every shared BVH clip (../shared/data) and bundled character, retargets
+with the default options and prints, with physmocap.metrics (definitions in
+shared/design/metrics.md): stance foot skating (mean, p95 cm/s), floor
+penetration (max mm), hovering in contact (median, p95 mm), joint-limit and
+velocity-limit violations, and the tracking error of ankles, knees, wrists and
+elbows (feet counted outside their contacts), next to the source's own
+skating.
+
+Usage:  python scripts/evaluate.py [--characters humanoid robot] [--clips ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
+CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"]
+
+
+def outside_stance(traj) -> np.ndarray:
+    contacts = traj.stats["contacts"]
+    names = traj.targets.names
+    mask = np.ones((traj.num_frames, len(names)), dtype=bool)
+    for side in ("left", "right"):
+        swing = ~contacts.foot(side)
+        for k, n in enumerate(names):
+            if n.startswith(side + "_") and n.split("_", 1)[1] in ("knee", "ankle", "toe", "toe_end"):
+                mask[:, k] = swing
+    return mask
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
+    ap.add_argument("--clips", nargs="+", default=CLIPS)
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+
+    from physmocap import metrics
+    from physmocap.ik.retarget import map_motion, retarget
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    head = (
+        f"{'clip':26s} {'character':9s} {'src skate':>9s} {'skate mean':>10s} {'p95':>5s} {'pen max':>7s}"
+        f" {'hover med':>9s} {'p95':>5s} {'lim':>3s} {'vel':>3s} {'track cm':>8s}"
+    )
+    print(head)
+    for clip in args.clips:
+        path = DATA / clip
+        if not path.exists():
+            print(f"skip {clip}: {path} not found", file=sys.stderr)
+            continue
+        motion = load_motion(path)
+        src = metrics.source_skating(motion, map_motion(motion))["mean_cm_s"]
+        for name in args.characters:
+            ch = load_character(name)
+            traj = retarget(motion, ch, progress=False)
+            sk = metrics.character_skating(traj)
+            hv = metrics.character_hovering(traj, traj.stats["contacts"])
+            pen = metrics.penetration(ch.model, traj.qpos)["max_mm"]
+            lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
+            vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]
+            trk = metrics.tracking_errors(traj, outside_stance(traj))["key_joints_mean_cm"]
+            print(
+                f"{clip:26s} {name:9s} {src:9.1f} {sk['mean_cm_s']:10.2f} {sk['p95_cm_s']:5.2f} {pen:7.2f}"
+                f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {lim:3d} {vel:3d} {trk:8.2f}"
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

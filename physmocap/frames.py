@@ -84,7 +84,8 @@ def frame_from_axes(
     s_norm = np.linalg.norm(s, axis=-1, keepdims=True)
     r = s - np.sum(s * a, axis=-1, keepdims=True) * a
     # Secondary (nearly) parallel to the primary: its remainder is rounding noise.
-    degenerate = np.linalg.norm(r, axis=-1, keepdims=True) <= 1e-6 * np.maximum(s_norm, _EPS)
+    # (or too short to normalise at all: then any perpendicular will do)
+    degenerate = np.linalg.norm(r, axis=-1, keepdims=True) <= np.maximum(1e-6 * s_norm, _EPS)
     b = np.where(degenerate, _any_perpendicular(a), _unit(r, np.zeros(3)))
     b = _unit(b - np.sum(b * a, axis=-1, keepdims=True) * a, np.zeros(3))  # second Gram-Schmidt pass
     if axes == "zy":

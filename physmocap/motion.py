@@ -36,7 +36,10 @@ import numpy as np
 
 from .rotations import quat_apply, quat_mul
 
-__all__ = ["Skeleton", "Motion", "forward_kinematics"]
+__all__ = ["Skeleton", "Motion", "forward_kinematics", "MAX_FPS"]
+
+#: Highest frame rate a motion may be resampled to (capture systems top out well below).
+MAX_FPS = 2000.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -345,8 +348,10 @@ class Motion:
 
         The new clip covers the same time span ``[0, (F-1)/fps_old]``.
         """
-        if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be positive and finite, got {fps}")
+        if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
+            from .errors import OptionError
+
+            raise OptionError(f"the frame rate must be a number in (0, {MAX_FPS:g}] frames/s, got {fps:g}", path=self.source)
         F = self.num_frames
         t_old = np.arange(F) / self.fps
         n_new = int(np.floor((F - 1) * fps / self.fps + 1e-9)) + 1

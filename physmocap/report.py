@@ -38,6 +38,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import zipfile
 import os
 import sys
 from pathlib import Path
@@ -127,6 +128,10 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
     source_info = None
     source_metrics = None
     if source_motion is not None:
+        start = int(traj.stats.get("source_start", 0)) if isinstance(getattr(traj, "stats", None), dict) else 0
+        if start and source_motion.num_frames == F + start and abs(source_motion.fps - traj.fps) < 1e-6 * traj.fps:
+            # the whole clip, of which retarget skipped a reference first frame
+            source_motion = source_motion.slice_frames(start, source_motion.num_frames)
         if source_motion.num_frames != F:
             raise OptionError(
                 f"the source has {source_motion.num_frames} frames but the trajectory {F}; pass the "
@@ -366,11 +371,18 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
     p = Path(path)
     if not p.exists():
         raise InputError("trajectory file not found", path=p)
+    if p.is_dir():
+        raise InputError("is a directory, expected a trajectory .npz file", path=p)
     try:
         with np.load(p, allow_pickle=False) as z:
+            if not hasattr(z, "files"):
+                raise ValueError("a single array")
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise InputError(f"not a trajectory .npz file: {exc}", path=p) from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        why = "empty" if p.stat().st_size == 0 else "not an NPZ archive" if "pickle" in str(exc) else str(exc) or type(exc).__name__
+        raise InputError(
+            f"not a trajectory .npz file ({why}); expected the file written by physmocap retarget --qpos", path=p
+        ) from None
     for key in ("qpos", "fps"):
         if key not in data:
             raise InputError(f"trajectory file has no {key!r} array (expected a physmocap retarget --qpos file)", path=p)
@@ -403,6 +415,8 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
     source = str(data["source"]) if "source" in data else "<unknown>"
     traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
     traj.targets = _stored_targets(data, qpos.shape[0], fps, p)
+    if "source_start" in data:
+        traj.stats["source_start"] = int(np.asarray(data["source_start"]).reshape(-1)[0])
     return traj
 
 

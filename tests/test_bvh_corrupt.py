@@ -163,13 +163,11 @@ def test_huge_frames_count_does_not_allocate(tmp_path):
 
 
 @pytest.mark.parametrize("newline", [b"", b"\n", b"\r\n"])
-def test_truncated_file_drops_partial_last_row(tmp_path, newline):
-    """The file ends in the middle of a row and Frames: promises more: the file was
-    cut short, so the partial row is dropped with a warning."""
+def test_truncated_file_is_an_error_naming_the_line(tmp_path, newline):
+    """The file ends in the middle of a row (a truncated row): one clear error."""
     body = b"\n".join(LINES[: FIRST_ROW + 4]) + b"\n" + LINES[FIRST_ROW + 4][:57] + newline
-    with pytest.warns(PhysmocapWarning, match=r"ends in the middle of frame 4 .* read the 4 complete frames of the 5"):
-        m = read_bvh(_write(tmp_path, body))
-    assert m.num_frames == 4
+    with pytest.raises(InputError, match=rf":{FIRST_ROW + 5}: frame 4: expected {NCH} numbers.*truncated"):
+        read_bvh(_write(tmp_path, body))
 
 
 def test_short_last_row_beyond_frames_is_an_error(tmp_path):

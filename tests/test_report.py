@@ -31,7 +31,7 @@ FIXTURE = __import__("pathlib").Path(__file__).parent / "fixtures" / "contacts" 
 
 
 def _walk():
-    motion, traj = retargeted(WALK)
+    motion, traj = retargeted(WALK, start=0)  # keep CMU's reference frame 0: compare with the whole clip
     return motion, traj
 
 
@@ -41,7 +41,7 @@ def _contacts(motion):
 
 def _short(frames: int = 90, character: str = "humanoid"):
     """A short slice of the retargeted walk: (motion, traj, contacts)."""
-    motion, traj = retargeted(WALK, character, end=frames)
+    motion, traj = retargeted(WALK, character, start=0, end=frames)
     return motion.slice_frames(0, frames), traj, _contacts(motion.slice_frames(0, frames))
 
 
@@ -138,7 +138,7 @@ def test_missing_matplotlib_names_the_extra(monkeypatch):
 
 @pytest.fixture(scope="module")
 def walk_npz(tmp_path_factory):
-    motion, traj = retargeted(WALK)
+    motion, traj = retargeted(WALK, start=0)
     return write_trajectory_npz(traj, tmp_path_factory.mktemp("traj") / "walk.npz")
 
 

@@ -116,7 +116,7 @@ def test_failure_leaves_no_partial_file_and_keeps_an_old_one(tmp_path, capsys, m
 
 def test_npz_loads_without_pickle(tmp_path):
     out = tmp_path / "w.npz"
-    assert main(["retarget", "example", "-o", str(out), "--end", "40", "--quiet"]) == 0
+    assert main(["retarget", "example", "-o", str(out), "--start", "0", "--end", "40", "--quiet"]) == 0
     with np.load(out, allow_pickle=False) as z:
         assert z["qpos"].shape[0] == 40 and np.all(np.isfinite(z["qpos"]))
         assert z["target_positions"].shape[0] == 40

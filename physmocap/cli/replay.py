@@ -60,8 +60,9 @@ def run(args: argparse.Namespace) -> int:
         skeleton=motion.skeleton,
         fps=motion.fps,
         translated=motion.translated,
-        mapping=args.source_map,
+        mapping=args.source_map or motion.meta.get("source_mapping"),
         floor=floor,
+        source=str(motion.source),
     )
     F = motion.num_frames
     qpos = np.empty((F, character.model.nq))
@@ -113,7 +114,9 @@ def run(args: argparse.Namespace) -> int:
     }
     traj = Trajectory(character, qpos, motion.fps, source=str(motion.source))
     if args.compare:
-        offline = retarget(motion, character, mapping=args.source_map, progress=False)
+        offline = retarget(  # frame for frame, as streamed (no reference-frame skipping)
+            motion, character, mapping=args.source_map or motion.meta.get("source_mapping"), start=0, progress=False
+        )
         a, _ = offline.body_poses()
         b, _ = traj.body_poses()
         d = np.linalg.norm(a[:, 1:] - b[:, 1:], axis=-1) * 100.0

@@ -31,7 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", help="override the source's length unit (as for retarget)")
     p.add_argument(
-        "--start", type=int, default=0, help="source frame the trajectory starts at (retarget --start; default 0)"
+        "--start", type=int, default=None,
+        help="source frame the trajectory starts at (retarget --start; default: stored in the file, else 0)"
     )
     p.set_defaults(func=run)
 
@@ -59,9 +60,11 @@ def run(args: argparse.Namespace) -> int:
         from ..plots import require_matplotlib
 
         require_matplotlib()
-    if args.start < 0:
+    if args.start is not None and args.start < 0:
         raise OptionError(f"--start must be >= 0, got {args.start}")
     traj = load_trajectory(args.trajectory, args.character, args.map)
+    if args.start is None:
+        args.start = int(traj.stats.get("source_start", 0))
     F = traj.num_frames
     motion = None
     joint_indices = None

@@ -17,6 +17,7 @@ NPZ contents (all plain arrays, loadable with ``np.load(path)`` and
 ``mjcf_path``       the character's MJCF file (absolute path)
 ``character``       the character's name
 ``source``          the input motion's path
+``source_start``    the source frame the trajectory's frame 0 came from
 ``target_*``        the IK targets (``target_names`` (N,), ``target_positions``
                     (F, N, 3) metres, ``target_orientations`` (F, N, 4) x-y-z-w,
                     ``target_has_orientation`` (N,), ``target_valid`` (F, N)),
@@ -100,6 +101,7 @@ def trajectory_arrays(traj: Trajectory) -> dict[str, np.ndarray]:
         "mjcf_path": np.array(str(Path(ch.mjcf_path).resolve())),
         "character": np.array(str(ch.name)),
         "source": np.array(str(traj.source)),
+        "source_start": np.int64(traj.stats.get("source_start", 0)),
         **target_arrays(traj.targets),
     }
 

@@ -80,8 +80,37 @@ def map_motion(motion: Motion, profile: str | None = None, mapping=None) -> dict
     return dict(jmap.indices)
 
 
+def reference_first_frame(motion: Motion, window: int = 30) -> float | None:
+    """If frame 0 is a reference pose (a T-pose or calibration frame that the
+    capture jumps away from), the jump in metres; else None.
+
+    Frame 0 counts as a reference pose when its joints move, on average, more
+    than 5 cm and more than eight times the clip's typical frame-to-frame
+    motion (median over the next ``window`` frames) into frame 1.  CMU's BVH
+    exports start this way.
+    """
+    F = motion.num_frames
+    if F < 4:
+        return None
+    head = motion.slice_frames(0, min(F, window + 2)).world_positions()
+    step = np.nanmean(np.linalg.norm(np.diff(head, axis=0), axis=-1), axis=1)
+    typical = float(np.nanmedian(step[1:]))
+    jump = float(step[0])
+    if np.isfinite(jump) and jump > 0.05 and jump > 8.0 * max(typical, 1e-4):
+        return jump
+    return None
+
+
 def _frame_range(motion: Motion, start: int | None, end: int | None) -> Motion:
     F = motion.num_frames
+    if start is None:
+        jump = reference_first_frame(motion)
+        if jump is not None:
+            warn(
+                f"{motion.source}: frame 0 looks like a reference pose (the joints jump {jump * 100:.0f} cm "
+                f"on average into frame 1): skipped it; pass --start 0 (start=0) to keep it"
+            )
+            start = 1
     s = 0 if start is None else int(start)
     e = F if end is None else int(end)
     if s < 0 or e > F or s >= e:
@@ -150,10 +179,11 @@ def retarget(
             "the character declares no foot contact points; add [contacts] to its mapping file",
             path=getattr(character, "map_path", None) or getattr(character, "mjcf_path", None),
         )
+    source_start = start
+    if source_start is None:
+        source_start = 1 if reference_first_frame(motion) is not None else 0
     motion = _frame_range(motion, start, end)
     if fps is not None:
-        if not (np.isfinite(fps) and fps > 0):
-            raise OptionError(f"--fps must be a positive number, got {fps}")
         motion = motion.resample(float(fps))
     if joint_indices is None:
         joint_indices = map_motion(motion, profile=profile, mapping=mapping)
@@ -173,6 +203,7 @@ def retarget(
     traj.stats["contacts"] = found
     traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
     traj.stats["joint_indices"] = dict(joint_indices)
+    traj.stats["source_start"] = int(source_start)
     return traj
 
 

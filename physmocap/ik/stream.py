@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, OptionError
+from ..errors import InputError, MappingError, OptionError
 from ..motion import Motion, Skeleton
 from ..trajectory import Trajectory
 from .contacts import ContactOptions, ContactStream, FloorPlane, contact_points
@@ -73,6 +73,7 @@ class StreamingRetargeter:
         floor: float | None = None,
         contact_options: ContactOptions | None = None,
         translated: np.ndarray | None = None,
+        source: str = "<stream>",
         **options: Any,
     ) -> None:
         from ..models import load_character
@@ -96,6 +97,7 @@ class StreamingRetargeter:
         if self.target_options.source_floor is None and floor is not None:
             self.target_options.source_floor = float(floor)
         self.contact_options = contact_options
+        self.source = str(source)
         self._profile, self._mapping = profile, mapping
         self.joint_indices = None if joint_indices is None else dict(joint_indices)
         self.points: dict[str, int] = {}
@@ -117,7 +119,7 @@ class StreamingRetargeter:
                 ok = np.all(np.isfinite(pos), axis=-1)
                 conf = np.where(ok, 1.0 if conf is None else conf, 0.0)
                 pos = np.where(ok[..., None], pos, 0.0)
-            return Motion(self.skeleton, self.fps, positions=pos, confidence=conf)
+            return Motion(self.skeleton, self.fps, positions=pos, confidence=conf, source=self.source)
         if rotations is None:
             raise InputError("a frame needs rotations (rotational sources) or positions", frame=self.frame)
         rot = np.asarray(rotations, dtype=float).reshape(1, J, 4)
@@ -125,12 +127,17 @@ class StreamingRetargeter:
         tr = np.zeros((1, K, 3)) if translations is None else np.asarray(translations, dtype=float).reshape(1, K, 3)
         if not (np.all(np.isfinite(rot)) and np.all(np.isfinite(tr))):
             raise InputError("non-finite rotation or translation", frame=self.frame)
-        return Motion(self.skeleton, self.fps, rotations=rot, translations=tr, translated=self.translated)
+        return Motion(
+            self.skeleton, self.fps, rotations=rot, translations=tr, translated=self.translated, source=self.source
+        )
 
     # -- the loop ---------------------------------------------------------------
     def _start(self, motion: Motion) -> None:
         if self.joint_indices is None:  # names first, the first frame's shape if needed
-            self.joint_indices = map_motion(motion, profile=self._profile, mapping=self._mapping)
+            try:
+                self.joint_indices = map_motion(motion, profile=self._profile, mapping=self._mapping)
+            except MappingError as exc:
+                raise MappingError(exc.message, path=self.source) from None
         self.points = contact_points(self.joint_indices)
         targets = build_targets(motion, self.joint_indices, self.character, self.target_options)
         self.calibration = targets.calibration
@@ -209,6 +216,8 @@ def stream_motion(motion: Motion, character=None, **options: Any) -> Trajectory:
         fps=motion.fps,
         translated=motion.translated,
         floor=options.pop("floor", motion.meta.get("floor_z")),
+        mapping=options.pop("mapping", None) or motion.meta.get("source_mapping"),
+        source=motion.source,
         **options,
     )
     qpos = np.empty((motion.num_frames, retargeter.character.model.nq))

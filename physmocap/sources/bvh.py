@@ -906,18 +906,13 @@ def read_bvh(
     rows = store.n
     declared = header.frames_declared
     if pending is not None:
-        if declared > rows:
-            warn(
-                f"{path}:{pending.line}: the file ends in the middle of frame {rows} "
-                f"({pending.count} of {C} numbers; the file looks truncated): ignored that partial row "
-                f"and read the {rows} complete frames of the {declared} declared"
-            )
-        else:
-            raise InputError(
-                f"frame {rows}: expected {C} numbers (one per channel), found {pending.count}",
-                path=path,
-                line=pending.line,
-            )
+        truncated = " (the file looks truncated)" if declared > rows else ""
+        raise InputError(
+            f"frame {rows}: expected {C} numbers (one per channel), found {pending.count}{truncated}; "
+            f"the {rows} complete frames before it can be kept by cutting the file at this line",
+            path=path,
+            line=pending.line,
+        )
     elif rows != declared:
         warn(
             f"{path}:{header.frames_line}: 'Frames: {declared}' but the file has {rows} frame rows; "

@@ -296,7 +296,7 @@ def map_skeleton(
             f"cannot map the required canonical joint(s) {', '.join(missing)} "
             f"(tried {mapped_by}). The skeleton's joints are: {_offered(src)}. "
             "Name the source joint for each in a mapping file, e.g. "
-            f'[joints] {missing[0]} = "<joint name>", and pass it with --map '
+            f'[joints] {missing[0]} = "<joint name>", and pass it with --source-map (retarget, replay) or --map (inspect) '
             "(physmocap inspect FILE --emit-map writes a starting file)",
             path=where,
         )

@@ -120,3 +120,26 @@ def test_npz_loads_without_pickle(tmp_path):
     with np.load(out, allow_pickle=False) as z:
         assert z["qpos"].shape[0] == 40 and np.all(np.isfinite(z["qpos"]))
         assert z["target_positions"].shape[0] == 40
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["retarget", "example", "-o", "x.bvh", "--up", "X"],
+        ["retarget"],
+        ["convert", "example", "x.bvh", "--fps", "abc"],
+        ["nosuch"],
+    ],
+)
+def test_usage_errors_are_one_line(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("physmocap: error:") and "--help" in err
+
+
+def test_fps_is_bounded(tmp_path, capsys):
+    assert main(["retarget", "example", "-o", str(tmp_path / "x.bvh"), "--fps", "1e9"]) == 2
+    assert "frame rate" in _error(capsys)
+    assert list(tmp_path.iterdir()) == []

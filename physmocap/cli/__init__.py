@@ -32,15 +32,24 @@ def _format_warning(message, category, filename, lineno, line=None):  # noqa: AN
     return f"{category.__name__}: {message}\n"
 
 
+class _Parser(argparse.ArgumentParser):
+    """Usage errors as one line on stderr (like every other physmocap error), status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        where = f"{self.prog.split(' ', 1)[1]}: " if " " in self.prog else ""
+        sys.stderr.write(f"physmocap: error: {where}{message} (see {self.prog} --help)\n")
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="physmocap",
         description="Turn solved motion capture into clean, physically valid character motion.",
     )
     from .. import __version__
 
     parser.add_argument("--version", action="version", version=f"physmocap {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMAND_MODULES:
         try:
             module = importlib.import_module(f"{__name__}.{name}")

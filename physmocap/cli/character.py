@@ -202,8 +202,15 @@ def _parse_segment(text: str) -> tuple[tuple[str, str], float]:
 
 
 def run_scale(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from ..errors import OptionError
     from ..models.scaling import write_scaled_humanoid
+
+    if Path(args.output).suffix.lower() != ".xml":
+        raise OptionError("the scaled character is an MJCF file: give it a .xml name", path=args.output)
+    if args.height is not None and not (0.5 <= args.height <= 2.5):
+        raise OptionError(f"--height must be a human stature in metres (0.5 to 2.5), got {args.height:g}")
 
     if args.height is None and not args.segment:
         raise OptionError("give --height and/or --segment PARENT:CHILD=M")

@@ -3,7 +3,9 @@
 A :class:`StreamingRetargeter` serves one tracked actor on one character.
 Everything it does looks only at the current frame and a short, bounded past:
 
-* **Calibration on the first frame.** The target builder's one-time
+* **Calibration on the first frame** (on frame 1 if frame 0 turns out to be a
+  reference pose the capture jumps away from, as offline retargeting skips it).
+  The target builder's one-time
   quantities (root scale, facing, orientation offsets, root start, floor and
   ankle heights; :class:`~physmocap.ik.targets.Calibration`) come from the
   skeleton's rest pose (rotational sources) and the first frame; the floor is
@@ -30,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, MappingError, OptionError
+from ..errors import InputError, MappingError, OptionError, warn
 from ..motion import Motion, Skeleton
 from ..trajectory import Trajectory
 from .contacts import ContactOptions, ContactStream, FloorPlane, contact_points
@@ -107,6 +109,9 @@ class StreamingRetargeter:
         self.planting: Planting | None = None
         self.contacts: ContactStream | None = None
         self.latencies: list[float] = []
+        #: mean joint speed (m/s) into frame 1 above which frame 0 is taken for a reference pose
+        self.reference_speed = 4.0
+        self._first_world: np.ndarray | None = None
         self.labels: list[dict[str, bool]] = []
 
     # -- input ----------------------------------------------------------------
@@ -132,7 +137,7 @@ class StreamingRetargeter:
         )
 
     # -- the loop ---------------------------------------------------------------
-    def _start(self, motion: Motion) -> None:
+    def _start(self, motion: Motion, keep_solver: bool = False) -> None:
         if self.joint_indices is None:  # names first, the first frame's shape if needed
             try:
                 self.joint_indices = map_motion(motion, profile=self._profile, mapping=self._mapping)
@@ -153,9 +158,10 @@ class StreamingRetargeter:
         self.contacts = ContactStream(
             list(self.points), self.fps, FloorPlane(height=floor, levels=levels), self.contact_options
         )
-        self.solver = FrameSolver(
-            self.character, targets.names, targets.has_orientation, self.fps, self.solver_options
-        )
+        if not (keep_solver and self.solver is not None and self.solver.names == targets.names):
+            self.solver = FrameSolver(
+                self.character, targets.names, targets.has_orientation, self.fps, self.solver_options
+            )
         self.planting = Planting(
             self.character, targets.names, self.fps, self.plant_options, floor=self.solver.options.floor_height
         )
@@ -178,10 +184,23 @@ class StreamingRetargeter:
         t0 = time.perf_counter()
         motion = self._motion(rotations, translations, positions, confidence)
         first = self.frame == 0
+        fk = motion.forward_kinematics()
+        if self.frame == 1 and self._first_world is not None:
+            # frame 0 was a reference pose (a T-pose the capture jumps away from): calibrate again here
+            jump = float(np.nanmean(np.linalg.norm(fk[0][0] - self._first_world, axis=-1)))
+            if np.isfinite(jump) and jump * self.fps > self.reference_speed:
+                warn(
+                    f"{self.source}: frame 0 looks like a reference pose (the joints jump {jump * 100:.0f} cm "
+                    f"into frame 1): calibrated again on frame 1"
+                )
+                # new calibration; the solver carries on (velocity limits hold across)
+                self._start(motion, keep_solver=True)
         if first:
             self._start(motion)
+            self._first_world = fk[0][0].copy()
+        elif self.frame == 1:
+            self._first_world = None
         assert self.solver is not None and self.planting is not None and self.contacts is not None
-        fk = motion.forward_kinematics()
         targets = build_targets(
             motion, self.joint_indices, self.character, calibration=self.calibration, kinematics=fk
         )

@@ -223,7 +223,7 @@ def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
 
 
 #: The segment direction that calibrates each torso segment's rest posture.
-TORSO_UP = {"pelvis": ("spine", "chest", "neck"), "spine": ("chest", "neck"), "chest": ("neck", "head"), "head": ("head_end",)}
+TORSO_UP = {"spine": ("chest", "neck"), "chest": ("neck", "head"), "head": ("head_end",)}
 
 
 def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
@@ -231,22 +231,23 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     facing yaw) onto the actor's rest segment direction, x-y-z-w.
 
     The segment runs from ``c`` to its first canonical child (limbs) or up the
-    torso (:data:`TORSO_UP`; the pelvis from the hip centre).  It calibrates a
+    torso (:data:`TORSO_UP`; the pelvis is not aligned).  It calibrates a
     rest posture that differs between actor and character: T-pose arms against
     arms down, a rest spine that leans.
     """
     ident = np.array([0.0, 0.0, 0.0, 1.0])
+    if c == "pelvis":
+        # Skeletons place the hip centres differently relative to the lumbar joint (CMU's
+        # sit 6 cm in front of it, as in real anatomy; the humanoid's straight below):
+        # that is geometry, not posture, so the pelvis keeps the upright rest assumption.
+        return ident
     if c in TORSO_UP:
         child = next((x for x in TORSO_UP[c] if x in present), None)
     else:
         child = _first_child(c, present)
     if child is None:
         return ident
-    if c == "pelvis" and "left_hip" in present and "right_hip" in present:
-        base_a = 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
-        base_c = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
-    else:
-        base_a, base_c = actor_pts[c], char_pts[c]
+    base_a, base_c = actor_pts[c], char_pts[c]
     d_a = actor_pts[child] - base_a
     d_c = quat_apply(yaw, char_pts[child] - base_c)
     if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:

@@ -509,3 +509,21 @@ def source_labelled_skating(motion, joint_indices: dict[str, int], contacts) -> 
         side, joint = n.split("_", 1)
         lab[:, k] = contacts.labels[f"{side}_{'heel' if joint == 'ankle' else 'toe'}"]
     return skating(pos, motion.fps, source_stance(pos[..., 2]) & lab)
+
+
+def outside_stance_mask(traj) -> np.ndarray:
+    """``(F, N)`` mask over the trajectory's targets: a foot's knee, ankle and toes
+    count only on frames where that foot is not in contact (everything else always).
+
+    For "tracking outside stance": while a foot is planted its joints follow the
+    plant, not the actor.
+    """
+    contacts = traj.stats["contacts"]
+    names = traj.targets.names
+    mask = np.ones((traj.num_frames, len(names)), dtype=bool)
+    for side in ("left", "right"):
+        swing = ~contacts.foot(side)
+        for k, n in enumerate(names):
+            if n.startswith(side + "_") and n.split("_", 1)[1] in ("knee", "ankle", "toe", "toe_end"):
+                mask[:, k] = swing
+    return mask

@@ -27,18 +27,6 @@ DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "da
 CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"]
 
 
-def outside_stance(traj) -> np.ndarray:
-    contacts = traj.stats["contacts"]
-    names = traj.targets.names
-    mask = np.ones((traj.num_frames, len(names)), dtype=bool)
-    for side in ("left", "right"):
-        swing = ~contacts.foot(side)
-        for k, n in enumerate(names):
-            if n.startswith(side + "_") and n.split("_", 1)[1] in ("knee", "ankle", "toe", "toe_end"):
-                mask[:, k] = swing
-    return mask
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
@@ -71,7 +59,7 @@ def main() -> int:
             pen = metrics.penetration(ch.model, traj.qpos)["max_mm"]
             lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
             vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]
-            trk = metrics.tracking_errors(traj, outside_stance(traj))["key_joints_mean_cm"]
+            trk = metrics.tracking_errors(traj, metrics.outside_stance_mask(traj))["key_joints_mean_cm"]
             print(
                 f"{clip:26s} {name:9s} {src:9.1f} {sk['mean_cm_s']:10.2f} {sk['p95_cm_s']:5.2f} {pen:7.2f}"
                 f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {lim:3d} {vel:3d} {trk:8.2f}"

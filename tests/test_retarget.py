@@ -27,24 +27,11 @@ def test_hard_constraints_hold_on_every_frame(clip, character):
     assert low.min() > -1e-3, f"a geom is {-low.min() * 1000:.2f} mm below the floor on frame {int(np.argmin(low))}"
 
 
-def outside_stance_mask(traj) -> np.ndarray:
-    """(F, N) mask: a foot's knee, ankle and toes count only while that foot is not in contact."""
-    contacts = traj.stats["contacts"]
-    names = traj.targets.names
-    mask = np.ones((traj.num_frames, len(names)), dtype=bool)
-    for side in ("left", "right"):
-        swing = ~contacts.foot(side)
-        for k, n in enumerate(names):
-            if n.startswith(side + "_") and n.split("_", 1)[1] in ("knee", "ankle", "toe", "toe_end"):
-                mask[:, k] = swing
-    return mask
-
-
 @pytest.mark.parametrize("clip,character", [(c, ch) for c in WALKS for ch in CHARACTERS])
 def test_walks_track_limbs_within_3cm(clip, character):
     """Ankles, knees, wrists and elbows within 3 cm of their targets (feet outside stance)."""
     _, traj = retargeted(clip, character)
-    tracking = metrics.tracking_errors(traj, outside_stance_mask(traj))
+    tracking = metrics.tracking_errors(traj, metrics.outside_stance_mask(traj))
     assert tracking["key_joints_mean_cm"] < 3.0, tracking["position_cm"]
 
 

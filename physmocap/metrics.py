@@ -118,39 +118,16 @@ def geom_lowest_heights(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.nd
     :math:`c_z - h |r_2| - \\rho`; cylinder :math:`c_z - h |r_2| - \\rho
     \\sqrt{1 - r_2^2}`; box :math:`c_z - \\sum_i s_i |r_i|`; ellipsoid
     :math:`c_z - \\lVert (s_i r_i)_i \\rVert`; mesh: its lowest vertex.  Planes,
-    height fields and SDFs give ``+inf``.  This is computed independently of the
-    solver's floor constraint, so the metric checks it.
+    height fields and SDFs give ``+inf``.  The formulas are the characters
+    layer's (:func:`physmocap.models.geometry.geom_z_extent`), independent of the
+    solver's floor constraint (:class:`physmocap.ik.limits.GeomCandidates`), so
+    the metric checks the solver.
     """
+    from .models.geometry import geom_z_extent
+
     if geoms is None:
         geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
-    out = np.full(len(geoms), np.inf)
-    G = mujoco.mjtGeom
-    kind = {int(G.mjGEOM_SPHERE): "sphere", int(G.mjGEOM_CAPSULE): "capsule", int(G.mjGEOM_CYLINDER): "cylinder",
-            int(G.mjGEOM_BOX): "box", int(G.mjGEOM_ELLIPSOID): "ellipsoid", int(G.mjGEOM_MESH): "mesh"}
-    for k, g in enumerate(geoms):
-        t = kind.get(int(model.geom_type[g]))
-        if t is None:
-            continue
-        c = data.geom_xpos[g]
-        R = data.geom_xmat[g].reshape(3, 3)
-        rz = R[2]
-        size = model.geom_size[g]
-        if t == "sphere":
-            out[k] = c[2] - size[0]
-        elif t == "capsule":
-            out[k] = c[2] - size[1] * abs(rz[2]) - size[0]
-        elif t == "cylinder":
-            out[k] = c[2] - size[1] * abs(rz[2]) - size[0] * np.sqrt(max(0.0, 1.0 - rz[2] ** 2))
-        elif t == "box":
-            out[k] = c[2] - float(np.abs(rz) @ size)
-        elif t == "ellipsoid":
-            out[k] = c[2] - float(np.linalg.norm(rz * size))
-        else:
-            mid = model.geom_dataid[g]
-            a, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
-            v = model.mesh_vert[a : a + n].astype(float)
-            out[k] = c[2] + float((v @ rz).min()) if n else np.inf
-    return out
+    return np.array([geom_z_extent(model, data, int(g))[0] for g in geoms], dtype=float)
 
 
 def lowest_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ import mink
 import mujoco
 import numpy as np
 
-__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "geom_lowest_points"]
+__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit"]
 
 
 class FrameStepLimit(mink.Limit):
@@ -160,19 +160,6 @@ class GeomCandidates:
         idx = np.flatnonzero(is_min)
         first[self.owner[idx[::-1]]] = idx[::-1]
         return z_low, pts[first]
-
-
-def geom_lowest_points(
-    model: mujoco.MjModel, data: mujoco.MjData, geoms: Sequence[int]
-) -> tuple[np.ndarray, np.ndarray]:
-    """World height of each geom's lowest point and the world point to differentiate.
-
-    Returns ``(z_low (n,), anchor (n, 3))`` where ``z_low`` is the lowest height
-    of the geom surface (``+inf`` for planes) and ``anchor`` the candidate point
-    (centre of the lowest cap for capsules) whose vertical velocity equals that
-    of the lowest point.
-    """
-    return GeomCandidates(model, geoms).lowest(data)
 
 
 class FloorLimit(mink.Limit):

@@ -288,9 +288,9 @@ class FootAnchor:
         return new
 
 
-#: Share of a foot's offset applied to each of its canonical joints (the knee
-#: is then re-solved by :func:`_knee_between`).
-FOOT_JOINT_SHARE = {"ankle": 1.0, "toe": 1.0, "toe_end": 1.0}
+#: The canonical joints a foot's offset moves (the knee is then re-solved by
+#: :func:`_knee_between`).
+FOOT_JOINTS = ("ankle", "toe", "toe_end")
 
 
 def _knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float) -> np.ndarray:
@@ -359,7 +359,7 @@ class Planting:
         #: horizontal offset of the whole body from the actor's (scaled) path, metres
         self.root_offset = np.zeros(2)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
-        foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINT_SHARE}
+        foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
         self._body = np.array([i for i, n in enumerate(self.names) if n not in foot_joints], dtype=int)
         self.feet = {}
@@ -372,8 +372,8 @@ class Planting:
             for j in (ankle, toe):
                 tf = character.tracked[j]
                 ref[j] = (tf.kind, model.site(tf.name).id if tf.kind == "site" else model.body(tf.name).id)
-            shares = [(self.names.index(f"{side}_{j}"), w) for j, w in FOOT_JOINT_SHARE.items() if f"{side}_{j}" in self.names]
-            self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], shares)
+            moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
+            self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
 
     def clearance_sites(self) -> dict[int, float]:
         """Site id -> clearance height for this frame's swing sites (after :meth:`step`)."""
@@ -404,7 +404,7 @@ class Planting:
         for s, side in enumerate(("left", "right")):
             if side not in self.feet:
                 continue
-            ia, it, ra, rt, shares = self.feet[side]
+            ia, it, ra, rt, _ = self.feet[side]
             now_a = None if first else self._xy(data, ra)
             now_t = None if first else self._xy(data, rt)
             offsets[s] = self.anchors[side].step(
@@ -426,9 +426,7 @@ class Planting:
         for s, side in enumerate(("left", "right")):
             if side not in self.feet:
                 continue
-            _, _, _, _, shares = self.feet[side]
-            for i, w in shares:
-                out[i, :2] += w * offsets[s] + (1.0 - w) * self.root_offset
+            out[self.feet[side][4], :2] += offsets[s]
             if side in self.lengths:
                 ih, ik, ia2, l1, l2 = self.lengths[side]
                 knee0 = positions[ik].copy()

@@ -101,17 +101,22 @@ def reference_first_frame(motion: Motion, window: int = 30) -> float | None:
     return None
 
 
-def _frame_range(motion: Motion, start: int | None, end: int | None) -> Motion:
+def default_start(motion: Motion) -> int:
+    """First frame to retarget when none is given: 1 if frame 0 is a reference pose
+    (said on stderr), else 0."""
+    jump = reference_first_frame(motion)
+    if jump is None:
+        return 0
+    warn(
+        f"{motion.source}: frame 0 looks like a reference pose (the joints jump {jump * 100:.0f} cm "
+        f"on average into frame 1): skipped it; pass --start 0 (start=0) to keep it"
+    )
+    return 1
+
+
+def _frame_range(motion: Motion, start: int, end: int | None) -> Motion:
     F = motion.num_frames
-    if start is None:
-        jump = reference_first_frame(motion)
-        if jump is not None:
-            warn(
-                f"{motion.source}: frame 0 looks like a reference pose (the joints jump {jump * 100:.0f} cm "
-                f"on average into frame 1): skipped it; pass --start 0 (start=0) to keep it"
-            )
-            start = 1
-    s = 0 if start is None else int(start)
+    s = int(start)
     e = F if end is None else int(end)
     if s < 0 or e > F or s >= e:
         raise OptionError(
@@ -179,10 +184,8 @@ def retarget(
             "the character declares no foot contact points; add [contacts] to its mapping file",
             path=getattr(character, "map_path", None) or getattr(character, "mjcf_path", None),
         )
-    source_start = start
-    if source_start is None:
-        source_start = 1 if reference_first_frame(motion) is not None else 0
-    motion = _frame_range(motion, start, end)
+    source_start = default_start(motion) if start is None else int(start)
+    motion = _frame_range(motion, source_start, end)
     if fps is not None:
         motion = motion.resample(float(fps))
     if joint_indices is None:

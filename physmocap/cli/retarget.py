@@ -23,6 +23,20 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output file: .bvh, .npz, .csv or .mcap")
     p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
     p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
+    add_retarget_arguments(p)
+    p.add_argument("--fps", dest="resample", type=float, help="resample the source to this frame rate first")
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
+    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
+    p.add_argument(
+        "--preview", metavar="OUT.mp4", help="also render a preview: .mp4, .gif or .png sheet (needs physmocap[render])"
+    )
+    p.set_defaults(func=run)
+
+
+def add_retarget_arguments(p: argparse.ArgumentParser) -> None:
+    """The retargeting options, shared by every command that retargets a source."""
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
@@ -30,18 +44,48 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--in-units", help="override the input's length unit (m, cm, inch, cmu or metres per unit)")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
-    p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
-    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
-    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
     p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
     p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
-    p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
-    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
+
+
+def retarget_inputs(args: argparse.Namespace) -> tuple:
+    """``(motion, character, keyword options of physmocap.ik.retarget)`` from the arguments
+    of :func:`add_retarget_arguments` (and ``--fps``, stored as ``resample``, where the
+    command has it)."""
+    from ..models import load_character
+    from ..sources import load_motion
+
+    read_opts = {}
+    if args.in_units:
+        read_opts["units"] = args.in_units
+    motion = load_motion(args.input, **read_opts)
+    character = load_character(args.character, args.map)
+    options = {}
+    if args.max_iterations is not None:
+        if args.max_iterations < 1:
+            raise OptionError("--max-iterations must be at least 1")
+        options["max_iterations"] = args.max_iterations
+    if args.no_floor:
+        options["floor"] = False
+    if args.no_velocity_limits:
+        options["velocity_limits"] = False
+    if args.no_plant:
+        options["plant"] = False
+    options.update(
+        profile=args.profile,
+        mapping=args.source_map,
+        start=args.start,
+        end=args.end,
+        progress=False if args.quiet else None,
+        contacts=args.contacts,
+    )
+    if getattr(args, "resample", None) is not None:
+        options["fps"] = args.resample
+    return motion, character, options
 
 
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
@@ -71,8 +115,6 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..ik.retarget import retarget
-    from ..models import load_character
-    from ..sources import load_motion
 
     outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
     for out in outputs:
@@ -90,35 +132,19 @@ def run(args: argparse.Namespace) -> int:
 
         require_matplotlib()
         _check_plot_dir(args.plots)
-    read_opts = {}
-    if args.in_units:
-        read_opts["units"] = args.in_units
-    motion = load_motion(args.input, **read_opts)
-    character = load_character(args.character, args.map)
-    options = {}
-    if args.max_iterations is not None:
-        if args.max_iterations < 1:
-            raise OptionError("--max-iterations must be at least 1")
-        options["max_iterations"] = args.max_iterations
-    if args.no_floor:
-        options["floor"] = False
-    if args.no_velocity_limits:
-        options["velocity_limits"] = False
-    if args.no_plant:
-        options["plant"] = False
-    traj = retarget(
-        motion,
-        character,
-        profile=args.profile,
-        mapping=args.source_map,
-        start=args.start,
-        end=args.end,
-        fps=args.fps,
-        progress=False if args.quiet else None,
-        contacts=args.contacts,
-        **options,
-    )
+    if args.preview:
+        from ..preview.output import check_preview_path
+
+        check_preview_path(args.preview)
+    motion, character, options = retarget_inputs(args)
+    traj = retarget(motion, character, **options)
     write_outputs(traj, outputs, args)
+    if args.preview:
+        from ..preview.clip import result_clip
+        from ..preview.output import write_preview
+
+        write_preview(result_clip(traj, motion), args.preview, progress=False if args.quiet else None)
+        print(f"wrote {args.preview}", file=sys.stderr)
     if args.report or args.plots:
         from ..report import emit_report
 

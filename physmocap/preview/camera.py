@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import OptionError
 
-__all__ = ["CameraSpec", "follow", "heading_degrees"]
+__all__ = ["CameraSpec", "beside_offset", "follow", "heading_degrees"]
 
 #: view -> (azimuth relative to the facing, elevation), degrees.
 VIEWS = {"side": (90.0, -12.0), "front": (180.0, -12.0), "back": (0.0, -12.0), "top": (90.0, -89.0)}
@@ -67,6 +67,13 @@ def heading_degrees(model: mujoco.MjModel, root_body: int, qpos: np.ndarray, res
         mats.append(data.xmat[root_body].reshape(3, 3).copy())
     forward = mats[1] @ mats[0].T @ np.array([1.0, 0.0, 0.0])
     return math.degrees(math.atan2(forward[1], forward[0]))
+
+
+def beside_offset(azimuth: float, size: float) -> np.ndarray:
+    """Where the source skeleton goes beside the character: ``0.8 size`` metres to the
+    right of a camera at ``azimuth`` degrees (horizontal)."""
+    a = math.radians(azimuth)
+    return np.array([math.sin(a), -math.cos(a), 0.0]) * 0.8 * size
 
 
 def follow(points: np.ndarray, fps: float, window: float = 0.5) -> np.ndarray:

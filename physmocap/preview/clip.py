@@ -1,8 +1,9 @@
 """What a preview shows: the character's trajectory and the source skeleton beside it.
 
-:func:`retarget_clip` is the **one** place where the preview touches the
-retargeter (:func:`physmocap.ik.retarget` and what it returns); everything else
-works on the :class:`PreviewClip` built here.
+:func:`retarget_clip` (which calls :func:`physmocap.ik.retarget`) and
+:func:`result_clip` (which reads what it returns) are the only places where the
+preview touches the retargeter; everything else works on the
+:class:`PreviewClip` built here.
 
 The source skeleton is drawn where the retargeter put the actor: the source
 joints' world positions :math:`p` (metres, Z-up, from the motion's forward
@@ -19,16 +20,20 @@ character's:
 
 from __future__ import annotations
 
+import os
+import zipfile
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import quat_apply
 from ..trajectory import Trajectory
 
-__all__ = ["CENTRE", "LEFT", "RIGHT", "Placement", "PreviewClip", "SourceSkeleton", "retarget_clip", "tree_sides"]
+__all__ = ["CENTRE", "LEFT", "RIGHT", "Placement", "PreviewClip", "SourceSkeleton", "result_clip", "retarget_clip", "trajectory_clip", "tree_sides"]
 
 CENTRE, LEFT, RIGHT = 0, 1, 2
 
@@ -140,6 +145,18 @@ class PreviewClip:
     def num_frames(self) -> int:
         return self.trajectory.num_frames
 
+    def between(self, start: int | None, end: int | None) -> "PreviewClip":
+        """The frames whose source frame number is in ``[start, end)`` (None: open)."""
+        n = self.frame_numbers
+        keep = (n >= (n[0] if start is None else start)) & (n < (n[-1] + 1 if end is None else end))
+        if not keep.any():
+            raise OptionError(
+                f"frame range [{start}, {end}) selects no frame; this clip has frames {n[0]} to {n[-1]} "
+                f"(--start is inclusive, --end exclusive)",
+                path=self.trajectory.source,
+            )
+        return self if keep.all() else self.take(np.flatnonzero(keep))
+
     def take(self, frames: np.ndarray) -> "PreviewClip":
         """The clip restricted to trajectory frames ``frames`` (indices, in order)."""
         frames = np.asarray(frames, dtype=np.int64)
@@ -174,13 +191,18 @@ def source_skeleton(motion: Motion, joint_indices: dict[str, int], placement: Pl
 
 def retarget_clip(motion: Motion, character, **retarget_options) -> PreviewClip:
     """Retarget ``motion`` onto ``character`` (``physmocap.ik.retarget`` options)
-    and gather what the preview draws.
-
-    This is the only function that calls the retargeter or reads its results.
-    """
+    and gather what the preview draws."""
     from ..ik.retarget import retarget
 
-    traj = retarget(motion, character, **retarget_options)
+    return result_clip(retarget(motion, character, **retarget_options), motion)
+
+
+def result_clip(result: Trajectory, motion: Motion) -> PreviewClip:
+    """What the preview draws, from the retargeter's result for ``motion`` (as read).
+
+    With :func:`retarget_clip`, the only code that knows the retargeter's API.
+    """
+    traj = result
     used: Motion = traj.stats["source_motion"]
     start = int(traj.stats["source_start"])
     contacts = traj.stats.get("contacts")
@@ -202,6 +224,19 @@ def retarget_clip(motion: Motion, character, **retarget_options) -> PreviewClip:
         skeleton=source_skeleton(used, traj.stats["joint_indices"], placement),
         planted=planted_sites(traj.character, None if contacts is None else contacts.labels),
     )
+
+
+def is_trajectory_file(path: str | os.PathLike) -> bool:
+    """True for an ``.npz`` holding a ``qpos`` array (``physmocap retarget --qpos``),
+    as opposed to a joint-position recording."""
+    p = Path(path)
+    if p.suffix.lower() != ".npz" or not p.is_file():
+        return False
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            return "qpos" in getattr(z, "files", ())
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        return False
 
 
 def trajectory_clip(path, character=None) -> PreviewClip:

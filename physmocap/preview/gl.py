@@ -18,7 +18,7 @@ import mujoco
 
 from ..errors import PhysmocapError
 
-__all__ = ["BackendError", "make_renderer", "select_backend"]
+__all__ = ["BackendError", "has_display", "make_renderer", "select_backend"]
 
 #: Headless backends in order of preference: (MUJOCO_GL value, library, Debian package).
 HEADLESS = (("egl", "EGL", "libegl1"), ("osmesa", "OSMesa", "libosmesa6"))
@@ -29,7 +29,8 @@ class BackendError(PhysmocapError):
     """No OpenGL backend to render with."""
 
 
-def _has_display() -> bool:
+def has_display() -> bool:
+    """True when a window can be opened (X11 or Wayland display set)."""
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
@@ -40,7 +41,7 @@ def select_backend() -> str:
     chosen = os.environ.get("MUJOCO_GL", "").strip().lower()
     if chosen:
         return chosen
-    if _has_display():
+    if has_display():
         return "glfw"
     for name, library, _package in HEADLESS:
         if ctypes.util.find_library(library):

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from ..errors import OptionError
-from .camera import CameraSpec, follow, heading_degrees
+from .camera import CameraSpec, beside_offset, follow, heading_degrees
 from .clip import PreviewClip
 from .draw import coloured_model, draw_floor, draw_planted, draw_skeleton
 from .gl import make_renderer
@@ -73,13 +73,12 @@ class ClipRenderer:
         self.camera = cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         cam.azimuth, cam.elevation = az, el
-        right = np.array([math.sin(math.radians(az)), -math.cos(math.radians(az)), 0.0])
         beside = clip.skeleton is not None and not opt.overlay
-        self.offset = right * 0.8 * self.size if beside else np.zeros(3)
+        self.offset = beside_offset(az, self.size) if beside else np.zeros(3)
         roots = clip.trajectory.body_poses()[0][:, root_body] if qpos.shape[0] else np.zeros((0, 3))
         self._lookat = follow(roots + 0.5 * self.offset, clip.trajectory.fps)
         self._lookat[:, 2] = 0.5 * self.size
-        span = 0.5 * self.size + (0.8 * self.size if beside else 0.35 * self.size)
+        span = (0.75 if beside else 0.4) * self.size  # half the width to show, m
         half = max(0.55 * self.size, span / (opt.width / opt.height))
         cam.distance = half / math.tan(math.radians(self.model.vis.global_.fovy) / 2)
         self._planted = [(self.model.site(s).id, on) for s, on in clip.planted.items()]

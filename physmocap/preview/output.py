@@ -163,6 +163,8 @@ def _write_mp4(iio2, path: Path, images: Iterator[np.ndarray], fps: float) -> No
         )
     except (ImportError, RuntimeError) as exc:
         raise OutputError(f"cannot start the MP4 encoder ({exc}); {_INSTALL} (imageio-ffmpeg)") from None
-    with writer:
+    try:  # not ``with writer``: imageio's writers skip close() when an exception is raised
         for image in images:
             writer.append_data(image)
+    finally:
+        writer.close()  # waits for ffmpeg, so the file is complete (or removable) afterwards

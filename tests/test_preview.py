@@ -186,7 +186,10 @@ def test_failed_render_leaves_no_file(clip, tmp_path, monkeypatch, name):
             raise RuntimeError("boom")
         return np.zeros((48, 64, 3), np.uint8)
 
-    monkeypatch.setattr(ClipRenderer, "__init__", lambda self, clip, options=None: setattr(self, "options", options))
+    def init(self, clip, options=None):
+        self.clip, self.options = clip, options
+
+    monkeypatch.setattr(ClipRenderer, "__init__", init)
     monkeypatch.setattr(ClipRenderer, "close", lambda self: None)
     monkeypatch.setattr(ClipRenderer, "frame", broken)
     with pytest.raises(RuntimeError):

@@ -89,7 +89,7 @@ def test_source_skeleton_sits_where_the_retargeter_put_the_actor(clip):
     source = traj.stats["joint_indices"]
     placed = clip.skeleton.positions[:, [source["left_hip"], source["right_hip"]]].mean(axis=1)
     anchor = raw[:, [targets.index("left_hip"), targets.index("right_hip")]].mean(axis=1)
-    np.testing.assert_allclose(placed, anchor, atol=1e-9)
+    np.testing.assert_allclose(placed, anchor, atol=1e-5)  # float32 skeleton
     assert list(clip.frame_numbers[:3]) == [1, 2, 3]
     sides = set(clip.skeleton.sides.tolist())
     assert sides == {CENTRE, LEFT, RIGHT}

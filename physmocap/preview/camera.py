@@ -57,15 +57,29 @@ class CameraSpec:
         return heading + az, el
 
 
-def heading_degrees(model: mujoco.MjModel, root_body: int, qpos: np.ndarray, rest_qpos: np.ndarray) -> float:
-    """World heading (degrees about +Z) of the character's forward axis (+X at rest) in pose ``qpos``."""
+def heading_degrees(character, qpos: np.ndarray) -> float:
+    """World heading (degrees about +Z) the character faces in pose ``qpos``.
+
+    Facing is :math:`(l - r) \\times \\hat z` from the left and right hip joints
+    (robust to a bent torso), else the root body's rotation of the rest
+    forward axis (+X).
+    """
+    model = character.model
     data = mujoco.MjData(model)
-    mats = []
-    for q in (rest_qpos, qpos):
-        data.qpos[:] = q
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    if "left_hip" in character.tracked and "right_hip" in character.tracked:
+        def where(canon: str) -> np.ndarray:
+            i = character.frame_id(canon)
+            return data.site_xpos[i] if character.tracked[canon].kind == "site" else data.xpos[i]
+
+        forward = np.cross(where("left_hip") - where("right_hip"), [0.0, 0.0, 1.0])
+    else:
+        root = int(model.jnt_bodyid[model.joint(character.root_joint).id])
+        now = data.xmat[root].reshape(3, 3).copy()
+        data.qpos[:] = character.rest_qpos
         mujoco.mj_kinematics(model, data)
-        mats.append(data.xmat[root_body].reshape(3, 3).copy())
-    forward = mats[1] @ mats[0].T @ np.array([1.0, 0.0, 0.0])
+        forward = now @ data.xmat[root].reshape(3, 3).T @ np.array([1.0, 0.0, 0.0])
     return math.degrees(math.atan2(forward[1], forward[0]))
 
 

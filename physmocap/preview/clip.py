@@ -110,7 +110,8 @@ class SourceSkeleton:
     """The actor's skeleton per frame, placed in the character's world.
 
     Attributes:
-        positions: ``(F, J, 3)`` joint positions, metres (NaN where the joint is lost).
+        positions: ``(F, J, 3)`` joint positions, metres (NaN where the joint is lost);
+            float32 is plenty for drawing.
         parents: ``(J,)`` parent index, ``-1`` for a root; bones join joint and parent.
         sides: ``(J,)`` :data:`CENTRE` / :data:`LEFT` / :data:`RIGHT`.
     """
@@ -183,10 +184,19 @@ def planted_sites(character, labels: dict[str, np.ndarray] | None) -> dict[str, 
 
 
 def source_skeleton(motion: Motion, joint_indices: dict[str, int], placement: Placement) -> SourceSkeleton:
-    """The actor's joints from ``motion``'s forward kinematics, placed like the retargeter."""
+    """The actor's joints from ``motion``'s forward kinematics, placed like the retargeter.
+
+    Joints above the mapped pelvis (a vendor's wrapper root on the floor, such as
+    Bandai's ``joint_Root``) are left out (NaN): they are not part of the body.
+    """
     seeds = {int(j): canonical_side(c) for c, j in joint_indices.items() if canonical_side(c) != CENTRE}
     parents = motion.skeleton.parents
-    return SourceSkeleton(placement.apply(motion.world_positions()), parents, tree_sides(parents, seeds))
+    positions = placement.apply(motion.world_positions()).astype(np.float32)  # half the memory of a long clip
+    j = int(parents[joint_indices["pelvis"]]) if "pelvis" in joint_indices else -1
+    while j >= 0:
+        positions[:, j] = np.nan
+        j = int(parents[j])
+    return SourceSkeleton(positions, parents, tree_sides(parents, seeds))
 
 
 def retarget_clip(motion: Motion, character, **retarget_options) -> PreviewClip:

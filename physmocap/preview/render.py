@@ -66,20 +66,21 @@ class ClipRenderer:
         self._renderer = make_renderer(self.model, opt.width, opt.height)
         self._has_plane = bool(np.any(self.model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE))
         self.size = float(character.height)
-        root_body = int(self.model.jnt_bodyid[self.model.joint(character.root_joint).id])
         qpos = clip.trajectory.qpos
-        heading = heading_degrees(self.model, root_body, qpos[0], character.rest_qpos)
+        heading = heading_degrees(character, qpos[0])
         az, el = opt.camera.angles(heading)
         self.camera = cam = mujoco.MjvCamera()
         cam.type = mujoco.mjtCamera.mjCAMERA_FREE
         cam.azimuth, cam.elevation = az, el
         beside = clip.skeleton is not None and not opt.overlay
         self.offset = beside_offset(az, self.size) if beside else np.zeros(3)
-        roots = clip.trajectory.body_poses()[0][:, root_body] if qpos.shape[0] else np.zeros((0, 3))
+        adr = int(self.model.jnt_qposadr[self.model.joint(character.root_joint).id])
+        roots = qpos[:, adr : adr + 3]  # a free joint's position is its body's world position
+        # follow the pelvis, vertically too (jumps), keeping the standing body in frame
         self._lookat = follow(roots + 0.5 * self.offset, clip.trajectory.fps)
-        self._lookat[:, 2] = 0.5 * self.size
+        self._lookat[:, 2] += 0.5 * self.size - character.rest_qpos[adr + 2]
         span = (0.75 if beside else 0.4) * self.size  # half the width to show, m
-        half = max(0.55 * self.size, span / (opt.width / opt.height))
+        half = max(0.62 * self.size, span / (opt.width / opt.height))
         cam.distance = half / math.tan(math.radians(self.model.vis.global_.fovy) / 2)
         self._planted = [(self.model.site(s).id, on) for s, on in clip.planted.items()]
 

@@ -9,6 +9,9 @@ target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
 
 * the plant location is the median of that point's (scaled) target over the
   interval horizontally, :math:`A_k = \operatorname{median}_{t \in k} x_p(t)`,
+  for the point that touches down first; the other points of the same contact
+  get the location the same foot translation gives them (so heel and toe
+  agree, :func:`_consistent_anchors`),
   and vertically the height at which the character's joint carrying the point
   stands when the point rests on the floor (from its rest pose);
 * the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it and is held
@@ -48,14 +51,29 @@ def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def ease_weights(num_frames: int, start: int, end: int, ease_frames: int) -> np.ndarray:
-    """``(F,)`` weight of interval ``[start, end]``: 1 inside, smoothstep tails of ``ease_frames``."""
+def ease_weights(
+    num_frames: int, start: int, end: int, ease_frames: int, inside: tuple[bool, bool] = (False, False)
+) -> np.ndarray:
+    """``(F,)`` weight of interval ``[start, end]``: 1 inside, smoothstep ramps of ``ease_frames``.
+
+    A ramp lies outside the interval (before ``start``, after ``end``) unless
+    ``inside`` says otherwise for that end: then it lies within the interval,
+    so the weight is 0 outside it (used where another contact point of the foot
+    is down across that end and must not be disturbed).
+    """
     t = np.arange(num_frames, dtype=float)
-    gap = np.maximum(start - t, 0.0) + np.maximum(t - end, 0.0)
     if ease_frames <= 0:
-        return (gap == 0).astype(float)
+        return ((t >= start) & (t <= end)).astype(float)
+    s0 = start + ease_frames if inside[0] else start
+    e0 = end - ease_frames if inside[1] else end
+    gap = np.maximum(s0 - t, 0.0) + np.maximum(t - e0, 0.0)
     x = np.clip(1.0 - gap / (ease_frames + 1), 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
+    w = x * x * (3.0 - 2.0 * x)
+    if inside[0]:
+        w[t < start] = 0.0
+    if inside[1]:
+        w[t > end] = 0.0
+    return w
 
 
 @dataclass(frozen=True)
@@ -99,24 +117,69 @@ def foot_offsets(
     num = np.zeros((F, 2))
     den = np.zeros(F)
     z: dict[str, np.ndarray] = {}
+    anchors = _consistent_anchors(points, labels)
+    down = {name: np.asarray(labels[name], dtype=bool) for name in points}
     for name, x in points.items():
         x = np.asarray(x, dtype=float)
         z_num = np.zeros(F)
         z_den = np.zeros(F)
         for a, b in contact_intervals(labels[name]):
-            anchor = np.median(x[a : b + 1, :2], axis=0)
+            anchor = anchors[(name, a)]
             o = np.empty((F, 3))
             o[a : b + 1, :2] = anchor - x[a : b + 1, :2]
             o[a : b + 1, 2] = heights[name] - x[a : b + 1, 2]
             o[:a] = o[a]
             o[b + 1 :] = o[b]
-            w = ease_weights(F, a, b, ease)
+            # another point of the foot already down at the start (still down at the end):
+            # ease in (out) within the interval so the planted point is not disturbed
+            others = [v for k, v in down.items() if k != name]
+            before = any(v[a - 1] for v in others) if a > 0 else False
+            after = any(v[b + 1] for v in others) if b + 1 < F else False
+            w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
             num += w[:, None] * o[:, :2]
             den += w
             z_num += w * o[:, 2]
             z_den += w
         z[name] = z_num / np.maximum(z_den, 1.0)
     return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
+
+
+def _consistent_anchors(
+    points: Mapping[str, np.ndarray], labels: Mapping[str, np.ndarray]
+) -> dict[tuple[str, int], np.ndarray]:
+    """``(point, interval start) -> (2,)`` plant location of every contact interval.
+
+    Within one contact of the foot (overlapping intervals of its points), the
+    point that touches down first is planted at its median position over its
+    interval; every other point at the median of where the same foot translation
+    puts it over the frames both are down (its own median where they never
+    overlap).  So the points' offsets agree while both are down, and a heel
+    lifting off hands over to the toe without a slide.
+    """
+    F = next(iter(points.values())).shape[0]
+    down = np.zeros(F, dtype=bool)
+    for name in points:
+        down |= np.asarray(labels[name], dtype=bool)
+    out: dict[tuple[str, int], np.ndarray] = {}
+    for ea, eb in contact_intervals(down):
+        spans = [
+            (a, b, name)
+            for name in points
+            for a, b in contact_intervals(labels[name])
+            if a <= eb and b >= ea
+        ]
+        spans.sort(key=lambda s: (s[0], list(points).index(s[2])))
+        a0, b0, ref = spans[0]
+        x0 = np.asarray(points[ref], dtype=float)[:, :2]
+        out[(ref, a0)] = np.median(x0[a0 : b0 + 1], axis=0)
+        for a, b, name in spans[1:]:
+            x = np.asarray(points[name], dtype=float)[:, :2]
+            lo, hi = max(a, a0), min(b, b0)
+            if lo <= hi:
+                out[(name, a)] = np.median(x[lo : hi + 1] + out[(ref, a0)] - x0[lo : hi + 1], axis=0)
+            else:
+                out[(name, a)] = np.median(x[a : b + 1], axis=0)
+    return out
 
 
 def pelvis_drop(

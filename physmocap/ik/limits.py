@@ -179,6 +179,8 @@ class FloorLimit(mink.Limit):
 
     Swing clearance: for the contact sites in :attr:`clearance` (set per frame
     by the planting: sites of a foot that is neither in contact nor planted),
+    and for every geom point of the bodies in :attr:`swing_bodies` (a foot with
+    no contact at all: heel, sole, toes, every corner of a box foot),
     :math:`z_s + J_{z,s} \Delta q \ge \min(z_{floor} + c, z_s + r)`, so a
     swing foot clears the stance band, rising at most ``max_rise`` per frame
     when it starts below it.
@@ -212,6 +214,8 @@ class FloorLimit(mink.Limit):
         self._cache: tuple[bytes, tuple] | None = None
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
+        #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
+        self.swing_bodies: dict[int, float] = {}
         self.max_rise = 0.004
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -246,7 +250,11 @@ class FloorLimit(mink.Limit):
         for row, k in enumerate(active):
             mujoco.mj_jac(self.model, data, self._jacp, None, anchor[k], int(body[k]))
             G[row] = -self._jacp[2]
-            h[row] = z[k] - self.floor - self.margin
+            c = self.swing_bodies.get(int(body[k]))
+            if c is None:
+                h[row] = z[k] - self.floor - self.margin
+            else:
+                h[row] = z[k] - min(self.floor + max(c, self.margin), z[k] + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
         for row, (sid, c) in enumerate(self.clearance.items(), start=len(active)):
             zs = data.site_xpos[sid, 2]

@@ -39,6 +39,7 @@ character's world (Z-up, floor at ``floor``).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -63,8 +64,10 @@ class PlantOptions:
         onset_time: Seconds over which the height cost ramps in at contact start.
         anchor_release_time: Seconds over which a foot's target offset
             (:class:`FootAnchor`) fades back to the actor's motion after release.
-        lock_low: Keep holding a site after its label ends until it has lifted
-            clear of ``engage_height + release_margin`` (False: let go with the label).
+        lock_low: Streaming only: keep holding a site after its label ends until it
+            has lifted clear of ``engage_height + release_margin`` (False: let go with
+            the label).  Offline the labels are final and sites are held exactly
+            while labelled.
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -332,7 +335,15 @@ class Planting:
         for side in ("left", "right"):
             for k, site in enumerate(character.contacts.get(side, ())):
                 self.site_label[site] = f"{side}_heel" if k == 0 else f"{side}_toe"
-        self.locks = FootPlanter(model, self.sites, fps, opt, floor=floor)
+        # Offline the labels are final and the targets planned (.footplan): a site is held
+        # exactly while labelled (no hold-until-lifted hysteresis).
+        lock_opt = opt if self.anchored else dataclasses.replace(opt, lock_low=False)
+        self.locks = FootPlanter(model, self.sites, fps, lock_opt, floor=floor)
+        #: per site, its role while only the toes are down (offline; :meth:`_toe_roles`)
+        self._foot_bodies = {side: self._subtree_bodies(model, character, side) for side in ("left", "right")}
+        roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
+        self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
+        self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
         self.lengths: dict[str, tuple[int, int, int, float, float]] = {}
         rest = {c: character.rest_positions()[c] for c in self.names if c in character.rest_positions()}
         for side in ("left", "right"):
@@ -365,6 +376,43 @@ class Planting:
             moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
 
+    @staticmethod
+    def _subtree_bodies(model: mujoco.MjModel, character, side: str) -> list[int]:
+        """The bodies of a foot's contact sites and every body below them (toes)."""
+        roots = {int(model.site(s).bodyid[0]) for s in character.contacts.get(side, ())}
+        out = []
+        for b in range(1, model.nbody):
+            a = b
+            while a > 0 and a not in roots:
+                a = int(model.body_parentid[a])
+            if a > 0:
+                out.append(b)
+        return out
+
+    @staticmethod
+    def _toe_roles(model: mujoco.MjModel, character, side: str) -> dict[str, str]:
+        """How each toe-group contact site acts while only the toes are down (offline).
+
+        ``"hold"``: on a toe segment (a body below the heel's): held and pulled down,
+        the toes stay flat.  ``"release"``: on the heel's body of a foot that has a toe
+        segment: the foot rolls over its toes and the site lifts.  ``"pivot"``: on the
+        heel's body of a rigid foot: held horizontally but free to rise, so the foot
+        rolls over its front edge.
+        """
+        sites = list(character.contacts.get(side, ()))
+        if len(sites) < 2:
+            return {}
+
+        def depth(name: str) -> int:
+            b, d = int(model.site(name).bodyid[0]), 0
+            while b > 0:
+                b, d = int(model.body_parentid[b]), d + 1
+            return d
+
+        heel = depth(sites[0])
+        has_toes = any(depth(s) > heel for s in sites[1:])
+        return {s: "hold" if depth(s) > heel else ("release" if has_toes else "pivot") for s in sites[1:]}
+
     def stance_heights(self) -> dict[str, float]:
         """Canonical ankle/toe joint -> its height above the floor in the character's rest pose."""
         rest = self.character.rest_positions()
@@ -373,6 +421,21 @@ class Planting:
     def leg_lengths(self) -> dict[str, tuple[float, float]]:
         """Side -> (thigh, shank) length of the character (metres)."""
         return {side: (v[3], v[4]) for side, v in self.lengths.items()}
+
+    def clearance_bodies(self) -> dict[int, float]:
+        """Body id -> clearance height for the bodies of feet with no contact at all this
+        frame (after :meth:`step`): every collision geom of a swing foot clears the floor."""
+        c = self.options.clearance
+        if not self.options.plant or c <= 0:
+            return {}
+        model = self.character.model
+        out: dict[int, float] = {}
+        for side in ("left", "right"):
+            ks = [k for k, site in enumerate(self.sites) if site in self.character.contacts.get(side, ())]
+            if ks and all(self.locks.free[k] for k in ks):
+                for b in self._foot_bodies[side]:
+                    out[b] = c
+        return out
 
     def clearance_sites(self) -> dict[int, float]:
         """Site id -> clearance height for this frame's swing sites (after :meth:`step`)."""
@@ -396,8 +459,17 @@ class Planting:
         if not self.options.plant:
             return out, [], [], offsets
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
+        toes_only = np.zeros(len(self.sites), dtype=bool)
+        if not self.anchored:
+            for k, site in enumerate(self.sites):
+                side = "left" if site in self.character.contacts.get("left", ()) else "right"
+                toes_only[k] = bool(labels.get(f"{side}_toe", False)) and not labels.get(f"{side}_heel", False)
+            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
         tasks, hard, engaged = self.locks.update(flags, data)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
+            self.locks.free[toes_only & self._release] = False  # rolling, not swinging
+            pivots = {self.locks.tasks[k].site_id for k in np.flatnonzero(toes_only & self._pivot)}
+            tasks = [t for t in tasks if t.site_id not in pivots]  # a pivot may rise as the foot rolls
             return out, tasks, hard, offsets
         held = {name: bool(labels.get(name, False)) for name in ("left_heel", "left_toe", "right_heel", "right_toe")}
         for site, e in zip(self.sites, engaged):

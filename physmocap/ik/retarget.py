@@ -260,7 +260,7 @@ def solve_targets(
                 _, solver.extra_tasks, solver.constraints, _ = planting.step(
                     targets.positions[t], frame_labels, solver.configuration.data
                 )
-                solver.set_clearance(planting.clearance_sites())
+                solver.set_clearance(planting.clearance_sites(), planting.clearance_bodies())
             solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
             q, it, level = solver.solve_frame(first=(t == 0 and planting is None))
             qpos[t] = q

@@ -49,6 +49,8 @@ __all__ = [
     "path_deviation",
     "vertical_speed_p99",
     "velocity_saturation",
+    "GeomFloorContact",
+    "geom_floor_contact",
     "fidelity",
     "SEGMENT_WARN_DEG",
     "FACING_WARN_DEG",
@@ -114,6 +116,7 @@ class Fidelity:
     actor_vz_p99_scaled: float | None
     saturated_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     saturated_share: float = 0.0
+    floor: "GeomFloorContact | None" = None
 
     @property
     def worst_segment_median_deg(self) -> float:
@@ -137,6 +140,7 @@ class Fidelity:
                 "frames": int(self.saturated_frames.size),
                 "share": self.saturated_share,
             },
+            "geoms_on_floor": None if self.floor is None else self.floor.as_dict(),
         }
 
 
@@ -271,6 +275,116 @@ def velocity_saturation(model: mujoco.MjModel, qpos: np.ndarray, fps: float, lim
     return np.flatnonzero(np.any(speed >= SATURATION_RATIO * vmax, axis=1))
 
 
+#: A collision geom whose lowest point is within this of the floor rests on it (metres).
+RESTING_HEIGHT = 0.002
+#: A collision geom whose lowest point is within this of the floor is near it (metres).
+NEAR_FLOOR_HEIGHT = 0.01
+#: A near-floor geom moving horizontally faster than this scuffs (m/s).
+SCUFF_SPEED = 0.30
+
+
+@dataclass(frozen=True)
+class GeomFloorContact:
+    """Skating and scuffing measured on the character's collision geoms.
+
+    Attributes:
+        slip_mean_cm_s, slip_p95_cm_s: Horizontal speed of the centre of geoms
+            resting on the floor (lowest point within :data:`RESTING_HEIGHT` on
+            both frames of a transition), cm/s.
+        resting_samples: Geom-transitions counted there.
+        scuff_share: Share of near-floor geom-transitions (lowest point within
+            :data:`NEAR_FLOOR_HEIGHT`) moving faster than :data:`SCUFF_SPEED`.
+        near_samples: Near-floor geom-transitions.
+    """
+
+    slip_mean_cm_s: float
+    slip_p95_cm_s: float
+    resting_samples: int
+    scuff_share: float
+    near_samples: int
+
+    def as_dict(self) -> dict:
+        return {
+            "slip_mean_cm_s": self.slip_mean_cm_s,
+            "slip_p95_cm_s": self.slip_p95_cm_s,
+            "resting_samples": self.resting_samples,
+            "scuff_share": self.scuff_share,
+            "near_samples": self.near_samples,
+        }
+
+
+_BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+
+
+def _lowest_material_point(model: mujoco.MjModel, data: mujoco.MjData, g: int, tie: float = 1e-3) -> np.ndarray:
+    """The geom's lowest point in its own frame (metres): for a face or edge lying
+    flat, the centroid of its points within ``tie`` of the lowest."""
+    R = data.geom_xmat[g].reshape(3, 3)
+    size = model.geom_size[g]
+    gtype = int(model.geom_type[g])
+    G = mujoco.mjtGeom
+    down = R.T @ np.array([0.0, 0.0, -1.0])  # world down in geom coordinates
+    if gtype == G.mjGEOM_SPHERE:
+        return size[0] * down
+    if gtype == G.mjGEOM_CAPSULE:
+        ends = np.array([[0.0, 0.0, size[1]], [0.0, 0.0, -size[1]]])
+        pts = ends
+    elif gtype == G.mjGEOM_BOX:
+        pts = _BOX_CORNERS * size
+    elif gtype == G.mjGEOM_MESH:
+        mesh = int(model.geom_dataid[g])
+        start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+        pts = np.asarray(model.mesh_vert[start : start + n], dtype=float)
+    else:  # cylinders, ellipsoids: the point under the centre
+        return np.zeros(3)
+    z = pts @ R[2]
+    low = pts[z <= z.min() + tie].mean(axis=0)
+    return low + (size[0] * down if gtype == G.mjGEOM_CAPSULE else 0.0)
+
+
+def geom_floor_contact(model: mujoco.MjModel, qpos: np.ndarray, fps: float, floor: float = 0.0) -> GeomFloorContact:
+    """:class:`GeomFloorContact` of a trajectory ``qpos (F, nq)`` on a floor at height ``floor``.
+
+    Slip is the horizontal speed of the *material* point of a resting geom that
+    touches the floor (its lowest point on the first frame of a transition,
+    followed to the next frame): a foot rolling over its toe edge or a capsule
+    rolling does not slip; a foot sliding does.  Scuffing uses the same
+    material point of near-floor geoms.
+    """
+    from ..models.geometry import character_geoms, geom_z_extent
+
+    geoms = character_geoms(model, collision_only=True)
+    F = qpos.shape[0]
+    if F < 2 or not geoms:
+        return GeomFloorContact(0.0, 0.0, 0, 0.0, 0)
+    data = mujoco.MjData(model)
+    low = np.empty((F, len(geoms)))
+    local = np.empty((F, len(geoms), 3))
+    pos = np.empty((F, len(geoms), 3))
+    mat = np.empty((F, len(geoms), 3, 3))
+    for t in range(F):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        for k, g in enumerate(geoms):
+            low[t, k] = geom_z_extent(model, data, g)[0] - floor
+            local[t, k] = _lowest_material_point(model, data, g)
+        pos[t] = data.geom_xpos[geoms]
+        mat[t] = data.geom_xmat[geoms].reshape(-1, 3, 3)
+    before = pos[:-1] + np.einsum("fkij,fkj->fki", mat[:-1], local[:-1])
+    after = pos[1:] + np.einsum("fkij,fkj->fki", mat[1:], local[:-1])
+    speed = np.linalg.norm((after - before)[..., :2], axis=-1) * fps
+    resting = (low[1:] < RESTING_HEIGHT) & (low[:-1] < RESTING_HEIGHT)
+    near = (low[1:] < NEAR_FLOOR_HEIGHT) | (low[:-1] < NEAR_FLOOR_HEIGHT)
+    slip = speed[resting] * 100.0
+    return GeomFloorContact(
+        slip_mean_cm_s=float(slip.mean()) if slip.size else 0.0,
+        slip_p95_cm_s=float(np.percentile(slip, 95)) if slip.size else 0.0,
+        resting_samples=int(slip.size),
+        scuff_share=float(np.mean(speed[near] > SCUFF_SPEED)) if near.any() else 0.0,
+        near_samples=int(near.sum()),
+    )
+
+
 def _nan_stats(x: np.ndarray) -> tuple[float, float]:
     x = x[np.isfinite(x)]
     if x.size == 0:
@@ -326,6 +440,7 @@ def fidelity(
     if model is not None and qpos is not None and velocity_limits:
         sat = velocity_saturation(model, qpos, fps, velocity_limits)
     transitions = max(1, (qpos.shape[0] - 1) if qpos is not None else 1)
+    floor_contact = geom_floor_contact(model, qpos, fps) if model is not None and qpos is not None else None
     return Fidelity(
         segments=segments,
         share_any_over_45=float(frames_over.size / n),
@@ -340,6 +455,7 @@ def fidelity(
         actor_vz_p99_scaled=vz_a,
         saturated_frames=sat,
         saturated_share=float(sat.size / transitions),
+        floor=floor_contact,
     )
 
 

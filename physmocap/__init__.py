@@ -8,6 +8,10 @@ character (``physmocap.models``) with mink differential IK; exporters
 
 from __future__ import annotations
 
+from .render.backend import select_backend_env
+
+select_backend_env()  # MuJoCo reads MUJOCO_GL when it is first imported: choose before that
+
 from .errors import InputError, MappingError, OptionError, OutputError, PhysmocapError
 from .motion import Motion, Skeleton, forward_kinematics
 

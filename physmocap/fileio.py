@@ -29,32 +29,42 @@ def check_writable(path: str | os.PathLike) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator[IO]:
-    """Open a temporary file for writing; rename it over ``path`` on success.
-
-    ``mode`` is ``"w"`` (text, UTF-8, ``\\n`` newlines unless ``newline`` given)
-    or ``"wb"``.  On any exception the temporary file is removed and ``path``
-    is left untouched.
-    """
-    if mode not in ("w", "wb"):
-        raise ValueError("atomic_open supports modes 'w' and 'wb'")
+def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[Path]:
+    """A temporary file beside ``path`` (with the same suffix, for writers that pick a
+    format from the name, such as video encoders), renamed over ``path`` when the
+    ``with`` block succeeds and removed on any exception, leaving ``path`` untouched."""
     p = check_writable(path)
+    suffix = f".tmp{p.suffix}" if keep_suffix else ".tmp"
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=p.parent or ".")
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=p.parent or ".")
     except OSError as exc:
         raise OutputError(f"cannot create a file here: {exc.strerror}", path=p) from None
+    os.close(fd)
     try:
-        if mode == "w":
-            kwargs.setdefault("encoding", "utf-8")
-            kwargs.setdefault("newline", "\n")
-        with os.fdopen(fd, mode, **kwargs) as fh:
-            yield fh
+        yield Path(tmp)
         os.chmod(tmp, 0o644)
         os.replace(tmp, p)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator[IO]:
+    """Open a temporary file for writing; rename it over ``path`` on success.
+
+    ``mode`` is ``"w"`` (text, UTF-8, ``\\n`` newlines unless ``newline`` given)
+    or ``"wb"``.  On any exception the temporary file is removed and ``path``
+    is left untouched (:func:`atomic_path`).
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError("atomic_open supports modes 'w' and 'wb'")
+    if mode == "w":
+        kwargs.setdefault("encoding", "utf-8")
+        kwargs.setdefault("newline", "\n")
+    with atomic_path(path, keep_suffix=False) as tmp, open(tmp, mode, **kwargs) as fh:
+        yield fh
 
 
 def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict, str]:

@@ -23,6 +23,8 @@ COMMAND_MODULES = (
     "retarget",
     "report",
     "replay",
+    "preview",
+    "view",
 )
 
 

@@ -23,6 +23,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output file: .bvh, .npz, .csv or .mcap")
     p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
     p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
+    add_retarget_options(p)
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
+    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
+    p.add_argument("--preview", metavar="OUT.mp4", help="also render a preview (.mp4, .gif or .png sheet; see physmocap preview)")
+    p.set_defaults(func=run)
+
+
+def add_retarget_options(p: argparse.ArgumentParser) -> None:
+    """The options that say how to retarget (shared by ``retarget`` and ``preview``)."""
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
@@ -31,17 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
-    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
-    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
     p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
     p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
-    p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
-    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=run)
 
 
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
@@ -69,27 +75,13 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
         print(f"wrote {out}", file=sys.stderr)
 
 
-def run(args: argparse.Namespace) -> int:
+def retarget_from_args(args: argparse.Namespace):
+    """Load the input and the character and retarget with the options of
+    :func:`add_retarget_options`; returns the trajectory."""
     from ..ik.retarget import retarget
     from ..models import load_character
     from ..sources import load_motion
 
-    outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
-    for out in outputs:
-        if out.suffix.lower() not in WRITERS:
-            raise OptionError(
-                f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",
-                path=out,
-            )
-        check_writable(out)
-    if args.report:
-        check_writable(args.report)
-    if args.plots:
-        from ..plots import require_matplotlib
-        from ..report import _check_plot_dir
-
-        require_matplotlib()
-        _check_plot_dir(args.plots)
     read_opts = {}
     if args.in_units:
         read_opts["units"] = args.in_units
@@ -106,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         options["velocity_limits"] = False
     if args.no_plant:
         options["plant"] = False
-    traj = retarget(
+    return retarget(
         motion,
         character,
         profile=args.profile,
@@ -118,11 +110,36 @@ def run(args: argparse.Namespace) -> int:
         contacts=args.contacts,
         **options,
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
+    for out in outputs:
+        if out.suffix.lower() not in WRITERS:
+            raise OptionError(
+                f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",
+                path=out,
+            )
+        check_writable(out)
+    if args.report:
+        check_writable(args.report)
+    if args.plots:
+        from ..plots import require_matplotlib
+        from ..report import _check_plot_dir
+
+        require_matplotlib()
+        _check_plot_dir(args.plots)
+    if args.preview:
+        from ..render.output import check_output, require_imageio
+
+        check_output(args.preview)
+        require_imageio()
+    traj = retarget_from_args(args)
     write_outputs(traj, outputs, args)
     if args.report or args.plots:
         from ..report import emit_report
 
-        used = traj.stats.get("source_motion", motion)
+        used = traj.stats.get("source_motion")
         emit_report(
             traj,
             used,
@@ -131,4 +148,8 @@ def run(args: argparse.Namespace) -> int:
             plots_dir=args.plots,
             joint_indices=traj.stats.get("joint_indices"),
         )
+    if args.preview:
+        from .preview import render_preview
+
+        render_preview(traj, Path(args.preview), quiet=args.quiet)
     return 0

@@ -1,0 +1,119 @@
+"""`physmocap preview` (issue 10): headless renders of the character beside its source skeleton."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+from physmocap.cli import main
+
+imageio = pytest.importorskip("imageio.v2", reason="imageio is not installed: pip install 'physmocap[render]'")
+
+
+@pytest.fixture(scope="module")
+def backend():
+    from physmocap.render.backend import RenderError, ensure_backend
+
+    try:
+        return ensure_backend()
+    except RenderError as exc:
+        pytest.skip(f"no OpenGL backend on this machine: {exc}")
+
+
+def _run(argv: list[str]) -> int:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return main(argv)
+
+
+def _coloured(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Masks of the left (blue) and right (red) side colours."""
+    r, g, b = (img[..., k].astype(int) for k in range(3))
+    return (b > 120) & (b > r + 50), (r > 120) & (r > b + 50)
+
+
+def test_contact_sheet_shows_character_above_source(backend, tmp_path):
+    out = tmp_path / "walk.png"
+    assert _run(["preview", "example", "-o", str(out), "--end", "90", "--count", "3", "--size", "200x200", "--quiet"]) == 0
+    sheet = imageio.imread(out)
+    assert sheet.shape[:2] == (2 * 200, 3 * 200)
+    panels = [[sheet[r * 200:(r + 1) * 200, c * 200:(c + 1) * 200, :3] for c in range(3)] for r in range(2)]
+    for row in panels:
+        for img in row:
+            left, right = _coloured(img)
+            assert left.sum() > 15 and right.sum() > 15  # both sides drawn, in their colours
+    # the character's pixels move between frames (a walk), and so do the skeleton's
+    for row in panels:
+        a, b = (_coloured(row[0])[0] | _coloured(row[0])[1]), (_coloured(row[2])[0] | _coloured(row[2])[1])
+        assert (a ^ b).sum() > 20
+
+
+def test_video_and_gif_have_every_frame(backend, tmp_path):
+    mp4, gif = tmp_path / "walk.mp4", tmp_path / "walk.gif"
+    argv = ["example", "--end", "25", "--size", "96x80", "--quiet", "--camera", "front"]
+    assert _run(["preview", argv[0], "-o", str(mp4), *argv[1:]]) == 0
+    assert _run(["preview", argv[0], "-o", str(gif), *argv[1:], "--layout", "overlay"]) == 0
+    reader = imageio.get_reader(mp4)
+    assert reader.count_frames() == 24 and reader.get_meta_data()["size"] == (96, 80)
+    frames = imageio.mimread(gif)
+    assert len(frames) == 24 and frames[0].shape[:2] == (80, 96)
+    assert not list(tmp_path.glob(".*tmp*"))  # no temporary files left
+
+
+def test_retarget_writes_a_preview_too(backend, tmp_path):
+    out, sheet = tmp_path / "walk.npz", tmp_path / "sheet.png"
+    assert _run(["retarget", "example", "-o", str(out), "--end", "30", "--preview", str(sheet), "--quiet"]) == 0
+    assert out.exists() and sheet.exists()
+    # and a saved trajectory previews with its source
+    again = tmp_path / "again.png"
+    assert _run(["preview", str(out), "--source", "example", "-o", str(again), "--count", "2", "--size", "64x64"]) == 0
+    assert imageio.imread(again).shape[:2] == (128, 128)
+
+
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["preview", "example", "-o", "{tmp}/x.avi"], "use one of .mp4, .gif, .png"),
+        (["preview", "example", "-o", "{tmp}/missing/x.mp4"], "does not exist"),
+        (["preview", "example", "-o", "{tmp}/x.png", "--size", "10x10000"], "--size"),
+        (["preview", "example", "-o", "{tmp}/x.png", "--camera", "diagonal"], "--camera"),
+        (["preview", "example", "-o", "{tmp}/x.png", "--frames", "1,a"], "--frames"),
+        (["preview", "{tmp}/none.npz", "-o", "{tmp}/x.png"], "not found"),
+    ],
+)
+def test_bad_input_is_one_clear_line(argv, needle, tmp_path, capsys):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert _run(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and needle in err, err
+    assert not [p for p in tmp_path.iterdir() if p.suffix in (".png", ".mp4", ".gif", ".avi")]
+
+
+def test_missing_opengl_backend_says_what_to_install(tmp_path):
+    env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
+    env.pop("DISPLAY", None)
+    from ctypes.util import find_library
+
+    if find_library("OSMesa"):
+        pytest.skip("OSMesa is installed here: cannot show the missing-backend error with it")
+    r = subprocess.run(
+        [sys.executable, "-m", "physmocap", "preview", "example", "-o", str(tmp_path / "x.png"), "--end", "10", "--quiet"],
+        capture_output=True, text=True, env=env, timeout=120,
+    )
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "libosmesa6" in lines[0] and "Traceback" not in r.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_view_without_a_display_suggests_preview(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert _run(["view", "example"]) == 2
+    err = capsys.readouterr().err
+    assert "no display" in err and "physmocap preview" in err and "Traceback" not in err

@@ -35,7 +35,8 @@ def main() -> int:
     warnings.simplefilter("ignore")
 
     from physmocap.ik.retarget import retarget
-    from physmocap.metrics.fidelity import mean_abs_acceleration, trajectory_fidelity
+    from physmocap.metrics import smoothness
+    from physmocap.metrics.fidelity import trajectory_fidelity
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
@@ -56,11 +57,11 @@ def main() -> int:
             traj = retarget(motion, ch, progress=False, end=end)
             fid = trajectory_fidelity(traj)
             worst = max(fid.segments.items(), key=lambda kv: kv[1].median_deg)
-            acc = mean_abs_acceleration(ch.model, traj.qpos, traj.fps)
+            acc = smoothness(ch.model, traj.qpos, traj.fps)["mean_abs_acc"]
             ratio = float("nan")
             if args.no_plant_ratio:
                 free = retarget(motion, ch, progress=False, end=end, plant=False)
-                ratio = acc / max(mean_abs_acceleration(ch.model, free.qpos, free.fps), 1e-9)
+                ratio = acc / max(smoothness(ch.model, free.qpos, free.fps)["mean_abs_acc"], 1e-9)
             print(
                 f"{clip:26s} {name:8s} {worst[1].median_deg:7.1f} {worst[0]:>14s} {100 * fid.share_any_over_45:5.1f}"
                 f" {fid.facing_median_deg:8.1f} {fid.facing_p95_deg:5.1f} {fid.path_mean_cm:7.1f} {fid.path_max_cm:5.1f}"

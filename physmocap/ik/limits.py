@@ -19,6 +19,8 @@ import mink
 import mujoco
 import numpy as np
 
+from ..models.geometry import is_visual_only
+
 __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit"]
 
 
@@ -94,6 +96,21 @@ class FrameStepLimit(mink.Limit):
         return mink.Constraint(G=self._G, h=h)
 
 
+def _hull_vertices(model: mujoco.MjModel, mesh: int) -> np.ndarray:
+    """The vertices of a mesh's convex hull (its lowest point is always one of them):
+    a robot's foot mesh of 10,000 vertices has a few hundred."""
+    start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+    v = np.asarray(model.mesh_vert[start : start + n], dtype=float)
+    if n < 16:
+        return v
+    try:
+        from scipy.spatial import ConvexHull
+
+        return v[np.sort(ConvexHull(v).vertices)]
+    except Exception:  # noqa: BLE001 - flat or degenerate meshes: keep every vertex
+        return v
+
+
 def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
     """Points in the geom's frame whose lowest one, less a radius, is the geom's lowest point.
 
@@ -114,9 +131,7 @@ def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
         corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
         return corners
     if t == int(G.mjGEOM_MESH):
-        mid = model.geom_dataid[gid]
-        start, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
-        v = model.mesh_vert[start : start + n].astype(float)
+        v = _hull_vertices(model, int(model.geom_dataid[gid]))
         return np.hstack([v, np.zeros((len(v), 1))])
     # planes, heightfields, SDFs: not constrained
     return np.zeros((0, 4))
@@ -138,14 +153,36 @@ class GeomCandidates:
         self.owner = np.concatenate(owner) if owner else np.zeros(0, dtype=int)
         self.gid = self.geoms[self.owner] if len(self.owner) else np.zeros(0, dtype=int)
         self.starts = np.flatnonzero(np.r_[True, np.diff(self.owner) != 0]) if len(self.owner) else np.zeros(0, dtype=int)
+        # bounding radius of each geom's candidates about its origin (metres)
+        reach = np.linalg.norm(self.local[:, :3], axis=1) + np.maximum(self.local[:, 3], 0.0)
+        self.radius = np.zeros(len(self.geoms))
+        if len(self.owner):
+            np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
 
-    def points(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height."""
+    def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height.
+
+        With ``below``, geoms whose bounding sphere lies wholly above that height are
+        skipped (their candidates get ``z = inf``): a robot's mesh links far from the
+        floor cost nothing.
+        """
         if len(self.gid) == 0:
             return np.zeros(0), np.zeros((0, 3))
-        R = data.geom_xmat[self.gid].reshape(-1, 3, 3)
-        pts = data.geom_xpos[self.gid] + np.einsum("kij,kj->ki", R, self.local[:, :3])
-        return pts[:, 2] - self.local[:, 3], pts
+        if below is None:
+            rows = slice(None)
+        else:
+            near = data.geom_xpos[self.geoms, 2] - self.radius < below
+            if near.all():
+                rows = slice(None)
+            else:
+                rows = np.flatnonzero(near[self.owner])
+        z = np.full(len(self.gid), np.inf)
+        pts = np.zeros((len(self.gid), 3))
+        gid = self.gid[rows]
+        R = data.geom_xmat[gid].reshape(-1, 3, 3)
+        pts[rows] = data.geom_xpos[gid] + np.einsum("kij,kj->ki", R, self.local[rows, :3])
+        z[rows] = pts[rows, 2] - self.local[rows, 3]
+        return z, pts
 
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
@@ -196,10 +233,11 @@ class FloorLimit(mink.Limit):
         activation: float = 0.15,
     ) -> None:
         if geoms is None:
+            # visual-only meshes are skipped (a robot model draws every link twice)
             geoms = [
                 g
                 for g in range(model.ngeom)
-                if model.geom_bodyid[g] != 0 and len(_geom_local_candidates(model, g))
+                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(_geom_local_candidates(model, g))
             ]
         self.model = model
         self.geoms = np.array(list(geoms), dtype=int)
@@ -228,7 +266,7 @@ class FloorLimit(mink.Limit):
         key = data.qpos.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
-        z_g, a_g = self._cand.points(data)
+        z_g, a_g = self._cand.points(data, below=self.floor + self.activation)
         z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
         a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
         out = (np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), self._bodies)

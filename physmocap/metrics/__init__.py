@@ -132,9 +132,12 @@ def geom_lowest_heights(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.nd
 
 def lowest_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """``(F,)`` height of the lowest point of any non-world geom per frame (metres)
-    (:func:`geom_lowest_heights`)."""
+    (:func:`geom_lowest_heights`); visual-only meshes are left out, as in the floor
+    constraint (:func:`physmocap.models.geometry.is_visual_only`)."""
+    from ..models.geometry import is_visual_only
+
     data = mujoco.MjData(model)
-    geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
+    geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0 and not is_visual_only(model, g)], dtype=int)
     out = np.empty(qpos.shape[0])
     for t, q in enumerate(qpos):
         data.qpos[:] = q

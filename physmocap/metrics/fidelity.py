@@ -459,17 +459,6 @@ def fidelity(
     )
 
 
-def mean_abs_acceleration(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> float:
-    """Mean absolute joint acceleration (rad/s^2 or m/s^2) of the hinge and slide
-    joints, second differences of the trajectory; the root's free joint is left out."""
-    joints = np.flatnonzero(np.isin(model.jnt_type, [mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE]))
-    adr = model.jnt_qposadr[joints]
-    if qpos.shape[0] < 3 or adr.size == 0:
-        return 0.0
-    q = qpos[:, adr]
-    return float(np.mean(np.abs(np.diff(q, n=2, axis=0))) * fps * fps)
-
-
 def trajectory_fidelity(traj) -> Fidelity:
     """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
     motion = traj.stats["source_motion"]

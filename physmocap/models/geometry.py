@@ -17,7 +17,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-__all__ = ["geom_z_extent", "character_geoms", "lowest_z", "highest_z"]
+__all__ = ["geom_z_extent", "character_geoms", "is_visual_only", "lowest_z", "highest_z"]
 
 
 def geom_z_extent(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> tuple[float, float]:
@@ -48,6 +48,17 @@ def geom_z_extent(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> tupl
     else:  # planes, height fields, SDFs: scenery
         return float("inf"), float("-inf")
     return pz - float(e), pz + float(e)
+
+
+def is_visual_only(model: mujoco.MjModel, gid: int) -> bool:
+    """A mesh that does not collide (contype and conaffinity 0): drawn, not simulated.
+    Robot models draw every link with such a mesh beside its collision geoms; the floor
+    constraint and the floor figures leave them out (primitives are always kept)."""
+    return (
+        int(model.geom_type[gid]) == int(mujoco.mjtGeom.mjGEOM_MESH)
+        and model.geom_contype[gid] == 0
+        and model.geom_conaffinity[gid] == 0
+    )
 
 
 def character_geoms(model: mujoco.MjModel, collision_only: bool = False) -> list[int]:

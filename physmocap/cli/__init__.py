@@ -25,6 +25,7 @@ COMMAND_MODULES = (
     "replay",
     "preview",
     "view",
+    "clean",
 )
 
 

@@ -26,6 +26,7 @@ COMMAND_MODULES = (
     "preview",
     "view",
     "clean",
+    "batch",
 )
 
 

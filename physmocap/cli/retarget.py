@@ -53,7 +53,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 
-def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
+def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool = False) -> None:
     for out in outputs:
         suffix = out.suffix.lower()
         if suffix == ".bvh":
@@ -72,7 +72,8 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
             from ..export.mcap import write_trajectory_mcap
 
             write_trajectory_mcap(traj, out)
-        print(f"wrote {out}", file=sys.stderr)
+        if not quiet:
+            print(f"wrote {out}", file=sys.stderr)
 
 
 def retarget_from_args(args: argparse.Namespace):

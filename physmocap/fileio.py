@@ -28,6 +28,21 @@ def check_writable(path: str | os.PathLike) -> Path:
     return p
 
 
+def check_not_input(outputs, inputs) -> None:
+    """Refuse an output path that is one of the inputs (a run must never overwrite its capture)."""
+    ins = [Path(i) for i in inputs if i is not None]
+    for out in outputs:
+        if out is None:
+            continue
+        o = Path(out)
+        for i in ins:
+            same = o.resolve() == i.resolve()
+            if not same and o.exists() and i.exists():
+                same = os.path.samefile(o, i)
+            if same:
+                raise OutputError("the output is the input file: choose another output path", path=o)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[Path]:
     """A temporary file beside ``path`` (with the same suffix, for writers that pick a

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import atomic_open, check_writable
+from ..fileio import atomic_open, check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.output)
     if args.report:
         check_writable(args.report)
+    check_not_input([args.output, args.report], [args.input])
     motion = load_motion(args.input)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)

@@ -29,8 +29,6 @@ __all__ = ["register", "run", "describe"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..sources.profiles import profile_names
-
     p = sub.add_parser(
         "inspect",
         help="describe a capture file: skeleton, profile, canonical mapping, units, floor",
@@ -44,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile",
         metavar="P",
-        help="force the skeleton naming profile: " + ", ".join(profile_names()) + " (default: auto)",
+        help="force the skeleton naming profile: cmu, optitrack, vicon, mixamo, lafan1, bandai_namco, xsens, "
+        "smpl, kinect_v2, ... , topology or none (default: auto; an unknown name lists them all)",
     )
     p.add_argument("--map", metavar="MAP.toml", help="source mapping file (TOML) overriding the profile")
     p.add_argument(

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import check_writable
+from ..fileio import check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -124,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(out)
     if args.report:
         check_writable(args.report)
+    check_not_input(outputs + [args.report, args.preview], [args.input, args.contacts, args.source_map, args.map])
     if args.plots:
         from ..plots import require_matplotlib
         from ..report import _check_plot_dir

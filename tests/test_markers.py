@@ -187,3 +187,23 @@ def test_c3d_retargets_onto_the_robot(tmp_path):
         assert main(["retarget", str(path), "-o", str(out), "--character", "robot", "--end", "240", "--quiet"]) == 0
     with np.load(out) as z:
         assert z["qpos"].shape[0] == 240 and np.all(np.isfinite(z["qpos"]))
+
+
+def test_inspect_markers_and_the_emitted_marker_set(tmp_path, capsys):
+    import json
+
+    labels, P, _ = _standing_markers(20)
+    path = tmp_path / "take.trc"
+    _write_trc(path, [f"S:{lab}" if lab != "LKNE" else "S:odd_knee_name" for lab in labels] + ["prop"], np.concatenate([P, P[:, :1]], axis=1) * 1000)
+    assert main(["inspect", str(path), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["frames"] == 20 and rep["up_axis"] == "Z" and "S:odd_knee_name" in rep["unused"] and "LKNE" not in rep["roles"]
+    assert main(["inspect", str(path), "--emit-markerset"]) == 0
+    text = capsys.readouterr().out.replace('# LKNE = ""', 'LKNE = "S:odd_knee_name"')
+    (tmp_path / "set.toml").write_text(text)
+    assert main(["inspect", str(path), "--json", "--marker-set", str(tmp_path / "set.toml")]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["roles"]["LKNE"] == "S:odd_knee_name" and rep["unused"] == ["prop"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["retarget", str(path), "-o", str(tmp_path / "o.npz"), "--marker-set", str(tmp_path / "set.toml"), "--quiet"]) == 0

@@ -39,6 +39,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", help="override the input's length unit (m, cm, inch, cmu or metres per unit)")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -86,6 +87,8 @@ def retarget_from_args(args: argparse.Namespace):
     read_opts = {}
     if args.in_units:
         read_opts["units"] = args.in_units
+    if getattr(args, "marker_set", None):
+        read_opts["marker_set"] = args.marker_set
     motion = load_motion(args.input, **read_opts)
     character = load_character(args.character, args.map)
     options = {}

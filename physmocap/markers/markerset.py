@@ -128,3 +128,16 @@ def load_marker_set(path: str | os.PathLike) -> dict[str, str]:
     if not isinstance(table, dict) or not all(isinstance(v, str) for v in table.values()):
         raise InputError('a marker set file needs a [markers] table of ROLE = "label" strings', path=path)
     return {str(k).upper(): v for k, v in table.items()}
+
+
+def marker_set_toml(labels: tuple[str, ...] | list[str], ms: MarkerSet) -> str:
+    """A marker set file to edit: every role with the label playing it (or commented out)."""
+    lines = ["# physmocap marker set: ROLE = \"label as in the file\"; delete or fix the guesses", "[markers]"]
+    for role in ROLES:
+        if role in ms.roles:
+            lines.append(f'{role} = "{labels[ms.roles[role]]}"')
+        else:
+            lines.append(f'# {role} = ""')
+    if ms.unused:
+        lines.append("# markers that play no role: " + ", ".join(ms.unused))
+    return "\n".join(lines) + "\n"

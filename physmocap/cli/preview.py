@@ -111,10 +111,16 @@ def _load(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from ..render.output import check_output, require_imageio
+    from ..render.scene import PreviewOptions, parse_camera, parse_size
 
     check_output(args.output)
     require_imageio()
     frames = _frame_list(args.frames)
+    # every option is checked before the (possibly long) retarget
+    w, h = parse_size(args.size)
+    PreviewOptions(width=w, height=h, camera=parse_camera(args.camera), layout=args.layout)
+    if args.count < 1:
+        raise OptionError("--count must be at least 1")
     traj = _load(args)
     render_preview(
         traj, Path(args.output), size=args.size, camera=args.camera, layout=args.layout,

@@ -71,3 +71,27 @@ def test_added_site_on_a_missing_body_names_the_line(tmp_path):
     with pytest.raises(MappingError, match=r"\[sites\] neck: the model has no body 'no_such_link'") as err:
         load_character(G1, bad)
     assert "line" in str(err.value) or err.value.line is not None
+
+
+def test_robot_learning_outputs(g1_walk, tmp_path):
+    """robot-csv: root xyz, root quaternion x-y-z-w, the 29 joints in model order (names beside);
+    robot-npz: every array named, bodies and joints listed, no paths; same bytes on re-runs."""
+    from physmocap.export.robot import write_robot_csv, write_robot_npz
+
+    ch, traj = g1_walk
+    csv_path = write_robot_csv(traj, tmp_path / "walk.csv")
+    rows = np.loadtxt(csv_path, delimiter=",")
+    names = (tmp_path / "walk.joints.txt").read_text().split()
+    assert rows.shape == (traj.num_frames, 7 + 29) and len(names) == 36 and names[7] == "left_hip_pitch_joint"
+    assert np.allclose(np.linalg.norm(rows[:, 3:7], axis=1), 1.0, atol=1e-6)
+    npz = write_robot_npz(traj, tmp_path / "walk.npz")
+    first = npz.read_bytes()
+    with np.load(npz, allow_pickle=False) as z:
+        assert list(z["dof_names"]) == names[7:]
+        assert np.allclose(z["root_pos"], rows[:, :3]) and np.allclose(z["dof_pos"], rows[:, 7:], atol=1e-8)
+        pelvis = list(z["body_names"]).index("pelvis")
+        assert np.allclose(z["body_pos_w"][:, pelvis], z["root_pos"])
+        assert np.allclose(z["root_quat_wxyz"][:, [1, 2, 3, 0]], rows[:, 3:7], atol=1e-8)
+        assert float(z["fps"]) == traj.fps and z["joint_vel"].shape == z["dof_pos"].shape
+        assert all(z[k].dtype.kind != "O" for k in z.files) and not any("/" in str(v) for v in z["body_names"])
+    assert write_robot_npz(traj, tmp_path / "walk.npz").read_bytes() == first

@@ -21,6 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", metavar="INPUT", help="motion file (.bvh, ...) or 'example'")
     p.add_argument("-o", "--output", required=True, help="output file: .bvh, .npz, .csv or .mcap")
+    p.add_argument("--format", choices=["auto", "robot-csv", "robot-npz"], default="auto",
+                   help="layout of -o: by suffix (auto), or the robot-learning CSV/NPZ (root pose + joint "
+                   "positions, named; see README)")
     p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
     p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
     add_retarget_options(p)
@@ -55,9 +58,18 @@ WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 
 def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool = False) -> None:
-    for out in outputs:
+    for k, out in enumerate(outputs):
         suffix = out.suffix.lower()
-        if suffix == ".bvh":
+        layout = getattr(args, "format", "auto") if k == 0 else "auto"
+        if layout == "robot-csv":
+            from ..export.robot import write_robot_csv
+
+            write_robot_csv(traj, out)
+        elif layout == "robot-npz":
+            from ..export.robot import write_robot_npz
+
+            write_robot_npz(traj, out)
+        elif suffix == ".bvh":
             from ..export.character_bvh import write_character_bvh
 
             write_character_bvh(traj, out, up=args.up.upper(), units=args.units)
@@ -118,6 +130,9 @@ def retarget_from_args(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
+    wanted = {"robot-csv": ".csv", "robot-npz": ".npz"}.get(args.format)
+    if wanted and outputs[0].suffix.lower() != wanted:
+        raise OptionError(f"--format {args.format} writes a {wanted} file", path=outputs[0])
     for out in outputs:
         if out.suffix.lower() not in WRITERS:
             raise OptionError(

@@ -19,6 +19,7 @@ import mink
 import mujoco
 import numpy as np
 
+from ..models.geometry import geom_candidates
 from ..models.geometry import is_visual_only
 
 __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit"]
@@ -96,47 +97,6 @@ class FrameStepLimit(mink.Limit):
         return mink.Constraint(G=self._G, h=h)
 
 
-def _hull_vertices(model: mujoco.MjModel, mesh: int) -> np.ndarray:
-    """The vertices of a mesh's convex hull (its lowest point is always one of them):
-    a robot's foot mesh of 10,000 vertices has a few hundred."""
-    start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
-    v = np.asarray(model.mesh_vert[start : start + n], dtype=float)
-    if n < 16:
-        return v
-    try:
-        from scipy.spatial import ConvexHull
-
-        return v[np.sort(ConvexHull(v).vertices)]
-    except Exception:  # noqa: BLE001 - flat or degenerate meshes: keep every vertex
-        return v
-
-
-def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
-    """Points in the geom's frame whose lowest one, less a radius, is the geom's lowest point.
-
-    Returns ``(k, 4)`` rows ``(x, y, z, radius)``: spheres and capsules are
-    handled exactly (centre / end-cap centres with their radius), boxes by their
-    eight corners, cylinders and ellipsoids conservatively by the corners of
-    their bounding box, meshes by their vertices.
-    """
-    t = int(model.geom_type[gid])
-    s = model.geom_size[gid]
-    G = mujoco.mjtGeom
-    if t == int(G.mjGEOM_SPHERE):
-        return np.array([[0.0, 0.0, 0.0, s[0]]])
-    if t == int(G.mjGEOM_CAPSULE):
-        return np.array([[0.0, 0.0, s[1], s[0]], [0.0, 0.0, -s[1], s[0]]])
-    if t in (int(G.mjGEOM_BOX), int(G.mjGEOM_ELLIPSOID), int(G.mjGEOM_CYLINDER)):
-        hx, hy, hz = (s[0], s[1], s[2]) if t != int(G.mjGEOM_CYLINDER) else (s[0], s[0], s[1])
-        corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        return corners
-    if t == int(G.mjGEOM_MESH):
-        v = _hull_vertices(model, int(model.geom_dataid[gid]))
-        return np.hstack([v, np.zeros((len(v), 1))])
-    # planes, heightfields, SDFs: not constrained
-    return np.zeros((0, 4))
-
-
 class GeomCandidates:
     """Stacked lowest-point candidates of a set of geoms, for vectorised queries."""
 
@@ -144,7 +104,7 @@ class GeomCandidates:
         rows, owner = [], []
         self.geoms = np.array(list(geoms), dtype=int)
         for k, gid in enumerate(self.geoms):
-            cand = _geom_local_candidates(model, int(gid))
+            cand = geom_candidates(model, int(gid))
             if len(cand) == 0:  # planes and the like have no lowest point
                 cand = np.array([[0.0, 0.0, 0.0, -np.inf]])
             rows.append(cand)
@@ -237,7 +197,7 @@ class FloorLimit(mink.Limit):
             geoms = [
                 g
                 for g in range(model.ngeom)
-                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(_geom_local_candidates(model, g))
+                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(geom_candidates(model, g))
             ]
         self.model = model
         self.geoms = np.array(list(geoms), dtype=int)

@@ -181,9 +181,10 @@ def retarget(
     plant_opt, rest = plant_options(rest)
     if rest:
         raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {sorted(_KNOWN)}")
-    if not character.contacts:
+    if not character.contacts and plant_opt.plant and contacts is not False:
         raise MappingError(
-            "the character declares no foot contact points; add [contacts] to its mapping file",
+            "the character has no foot contact points (none in its mapping and none found on its feet); "
+            "add [contacts] to its mapping file, or retarget without planting (--no-plant)",
             path=getattr(character, "map_path", None) or getattr(character, "mjcf_path", None),
         )
     source_start = default_start(motion) if start is None else int(start)

@@ -257,6 +257,8 @@ def load_character(
         for s in sites:
             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0:
                 raise mp.error(f"the model has no site {s!r}", "contacts", side)
+    if not mp.contacts and all(f"{side}_ankle" in tracked for side in ("left", "right")):
+        model, tracked = _add_foot_contacts(mjcf, mp, model, tracked, where)
 
     root = _root_joint(model, mjcf)
 
@@ -375,6 +377,27 @@ def load_character(
         total_mass=total_mass,
         _rest=rest,
     )
+
+
+def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: dict, where: Path):
+    """A mapping without ``[contacts]``: heel and toe sites from the feet's geometry
+    (:mod:`.footprint`), added to the model; returns the recompiled model and its frames."""
+    from .footprint import foot_contact_points
+
+    qpos = _rest_qpos(mp, model, _root_joint(model, mjcf), mjcf, where)
+    ankles = {}
+    for side in ("left", "right"):
+        tf = tracked[f"{side}_ankle"]
+        ankles[side] = int(model.site(tf.name).bodyid[0]) if tf.kind == "site" else int(model.body(tf.name).id)
+    found = foot_contact_points(model, qpos, ankles)
+    if set(found) != {"left", "right"}:
+        return model, tracked
+    for side, points in found.items():
+        for name, body, pos in points:
+            mp.sites[name] = (model.body(body).name, (float(pos[0]), float(pos[1]), float(pos[2])))
+        mp.contacts[side] = tuple(name for name, _, _ in points)
+    model = _load_model(mjcf, mp)
+    return model, _resolve_frames(mp, model)
 
 
 def _rest_qpos(mp: Mapping, model: mujoco.MjModel, root: int, mjcf: Path, where: Path) -> np.ndarray:

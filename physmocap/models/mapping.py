@@ -14,8 +14,8 @@ optional except ``[joints]``::
     pelvis = "site:pelvis_site"   # a bare NAME is a site if one has that name, else a body
     left_knee = "body:l_shank"
 
-    [contacts]                # foot contact SITES, heel to toe
-    left = ["l_heel", "l_toe"]
+    [contacts]                # foot contact SITES, heel to toe (optional: without it the heel
+    left = ["l_heel", "l_toe"]  # and toe are found on the feet's geometry, physmocap.models.footprint)
     right = ["r_heel", "r_toe"]
 
     [sites]                   # sites to add to the model before it is compiled (MjSpec), for

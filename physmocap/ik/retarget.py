@@ -210,7 +210,7 @@ def retarget(
     traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
     traj.stats["joint_indices"] = dict(joint_indices)
     traj.stats["source_start"] = int(source_start)
-    fid = trajectory_fidelity(traj)
+    fid = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
     traj.stats["fidelity"] = fid
     for message in fidelity_warnings(fid, source_start):
         warn(f"{motion.source}: {message}")

@@ -401,6 +401,7 @@ def fidelity(
     model: mujoco.MjModel | None = None,
     qpos: np.ndarray | None = None,
     velocity_limits: dict[str, float] | None = None,
+    floor_contact: bool = True,
 ) -> Fidelity:
     """All fidelity figures from the actor's and the character's joint centres.
 
@@ -411,6 +412,8 @@ def fidelity(
             for the vertical-speed comparison.
         model, qpos, velocity_limits: The character's model, trajectory and
             velocity limits, for the saturation count (optional).
+        floor_contact: Also measure slip and scuffing on the collision geoms
+            (:func:`geom_floor_contact`; the slowest figure).
     """
     seg = segment_direction_errors(actor, character)
     segments = {}
@@ -440,7 +443,7 @@ def fidelity(
     if model is not None and qpos is not None and velocity_limits:
         sat = velocity_saturation(model, qpos, fps, velocity_limits)
     transitions = max(1, (qpos.shape[0] - 1) if qpos is not None else 1)
-    floor_contact = geom_floor_contact(model, qpos, fps) if model is not None and qpos is not None else None
+    floor_figures = geom_floor_contact(model, qpos, fps) if floor_contact and model is not None and qpos is not None else None
     return Fidelity(
         segments=segments,
         share_any_over_45=float(frames_over.size / n),
@@ -455,11 +458,11 @@ def fidelity(
         actor_vz_p99_scaled=vz_a,
         saturated_frames=sat,
         saturated_share=float(sat.size / transitions),
-        floor=floor_contact,
+        floor=floor_figures,
     )
 
 
-def trajectory_fidelity(traj) -> Fidelity:
+def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
     motion = traj.stats["source_motion"]
     joints = traj.stats["joint_indices"]
@@ -468,7 +471,8 @@ def trajectory_fidelity(traj) -> Fidelity:
     scale = float(getattr(traj.targets, "scale", 1.0)) if traj.targets is not None else 1.0
     ch = traj.character
     return fidelity(
-        actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits
+        actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
+        floor_contact=floor_contact,
     )
 
 

@@ -121,6 +121,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             source's names (:func:`physmocap.sources.profiles.map_skeleton`).
     """
     from . import metrics
+    from .resources import portable_path
 
     F = traj.num_frames
     if contacts is None:
@@ -149,7 +150,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
         source_metrics = metrics.source_metrics(source_motion, joint_indices, contacts)
         floor = metrics._source_floor(source_motion, joint_indices, contacts)
         source_info = {
-            "path": str(source_motion.source),
+            "path": portable_path(source_motion.source, Path.cwd()),
             "frames": source_motion.num_frames,
             "fps": float(source_motion.fps),
             "floor_m": None if floor is None else float(floor.height),
@@ -180,7 +181,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
         "fidelity": fid,
         "character": {
             "name": str(getattr(ch, "name", "")),
-            "mjcf_path": str(getattr(ch, "mjcf_path", "")),
+            "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),
         },
         "source": source_info,
         "contacts": _contacts_summary(contacts),
@@ -441,8 +442,10 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
         if character is None:
             if "mjcf_path" not in data:
                 raise InputError("trajectory file names no character (mjcf_path); pass --character", path=p)
-            character = str(data["mjcf_path"])
-            if not Path(character).exists():
+            from .resources import resolve_portable
+
+            character = resolve_portable(str(data["mjcf_path"]), p.parent)
+            if Path(character).suffix and not Path(character).exists():
                 raise InputError(
                     f"the character's MJCF {character!r} named in the file does not exist; pass --character",
                     path=p,

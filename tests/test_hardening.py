@@ -104,3 +104,31 @@ def test_fuzz_smoke():
     counts = fuzz["campaign"](cases=10, seconds=0.0, seed=7, keep=None, out=log)
     assert sum(counts.values()) == 10
     assert not any(outcome == "FAIL" for (_, outcome) in counts), log.getvalue()
+
+
+def test_outputs_carry_no_absolute_paths(tmp_path, capsys):
+    """The same job in two folders gives the same bytes; a saved trajectory names its character
+    relative to itself (or by bundled name), and `report` finds it from anywhere."""
+    import shutil
+
+    import numpy as np
+
+    from physmocap.resources import mjcf_dir
+
+    outs = []
+    for d in ("one", "two"):
+        (tmp_path / d).mkdir()
+        out = tmp_path / d / "walk.npz"
+        assert main(["retarget", "example", "-o", str(out), "--end", "30", "--quiet"]) == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and str(tmp_path).encode() not in outs[0]
+    chars = tmp_path / "chars"
+    chars.mkdir()
+    for name in ("robot.xml", "robot.map.toml"):
+        shutil.copy(mjcf_dir() / name, chars / name)
+    out = tmp_path / "one" / "robot.npz"
+    assert main(["retarget", "example", "-o", str(out), "--character", str(chars / "robot.xml"), "--end", "30", "--quiet"]) == 0
+    with np.load(out, allow_pickle=False) as z:
+        assert str(z["mjcf_path"]) == "../chars/robot.xml" and str(z["source"]) == "example"
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 0

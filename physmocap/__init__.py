@@ -8,10 +8,24 @@ character (``physmocap.models``) with mink differential IK; exporters
 
 from __future__ import annotations
 
+from .render.backend import select_backend_env
+
+select_backend_env()  # MuJoCo reads MUJOCO_GL when it is first imported: choose before that
+
 from .errors import InputError, MappingError, OptionError, OutputError, PhysmocapError
-from .motion import Motion, Skeleton, forward_kinematics
 
 __version__ = "0.1.0"
+
+#: Names imported on first use (numpy/scipy load only when needed: ``physmocap --help`` is fast).
+_LAZY = {"Motion": "motion", "Skeleton": "motion", "forward_kinematics": "motion"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    raise AttributeError(f"module 'physmocap' has no attribute {name!r}")
 
 
 def retarget(motion, character=None, **options):

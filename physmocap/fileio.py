@@ -28,17 +28,30 @@ def check_writable(path: str | os.PathLike) -> Path:
     return p
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """A temporary file name beside ``path``, renamed over ``path`` on success.
+def check_not_input(outputs, inputs) -> None:
+    """Refuse an output path that is one of the inputs (a run must never overwrite its capture)."""
+    ins = [Path(i) for i in inputs if i is not None]
+    for out in outputs:
+        if out is None:
+            continue
+        o = Path(out)
+        for i in ins:
+            same = o.resolve() == i.resolve()
+            if not same and o.exists() and i.exists():
+                same = os.path.samefile(o, i)
+            if same:
+                raise OutputError("the output is the input file: choose another output path", path=o)
 
-    The name ends with ``path``'s suffix, for writers that pick the format from
-    it (ffmpeg).  On any exception the temporary file is removed and ``path``
-    is left untouched.
-    """
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[Path]:
+    """A temporary file beside ``path`` (with the same suffix, for writers that pick a
+    format from the name, such as video encoders), renamed over ``path`` when the
+    ``with`` block succeeds and removed on any exception, leaving ``path`` untouched."""
     p = check_writable(path)
+    suffix = f".tmp{p.suffix}" if keep_suffix else ".tmp"
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=f".tmp{p.suffix}", dir=p.parent or ".")
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix, dir=p.parent or ".")
     except OSError as exc:
         raise OutputError(f"cannot create a file here: {exc.strerror}", path=p) from None
     os.close(fd)
@@ -58,14 +71,14 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator[
 
     ``mode`` is ``"w"`` (text, UTF-8, ``\\n`` newlines unless ``newline`` given)
     or ``"wb"``.  On any exception the temporary file is removed and ``path``
-    is left untouched.
+    is left untouched (:func:`atomic_path`).
     """
     if mode not in ("w", "wb"):
         raise ValueError("atomic_open supports modes 'w' and 'wb'")
     if mode == "w":
         kwargs.setdefault("encoding", "utf-8")
         kwargs.setdefault("newline", "\n")
-    with atomic_path(path) as tmp, open(tmp, mode, **kwargs) as fh:
+    with atomic_path(path, keep_suffix=False) as tmp, open(tmp, mode, **kwargs) as fh:
         yield fh
 
 

@@ -2,7 +2,7 @@
 
 :func:`build_report` measures a character trajectory and, when given, the
 source motion it came from with the definitions of :mod:`physmocap.metrics`
-(``shared/design/metrics.md``), side by side:
+(``docs/metrics.md`` in the repository), side by side:
 
 ==========================  =====================  =====================
 figure                      source                 result
@@ -121,6 +121,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             source's names (:func:`physmocap.sources.profiles.map_skeleton`).
     """
     from . import metrics
+    from .resources import portable_path
 
     F = traj.num_frames
     if contacts is None:
@@ -149,7 +150,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
         source_metrics = metrics.source_metrics(source_motion, joint_indices, contacts)
         floor = metrics._source_floor(source_motion, joint_indices, contacts)
         source_info = {
-            "path": str(source_motion.source),
+            "path": portable_path(source_motion.source, Path.cwd()),
             "frames": source_motion.num_frames,
             "fps": float(source_motion.fps),
             "floor_m": None if floor is None else float(floor.height),
@@ -161,11 +162,26 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             path=None if contacts.source == "detected" else contacts.source,
         )
     ch = traj.character
+    fid = None
+    if source_motion is not None and joint_indices is not None:
+        from .metrics.fidelity import actor_joint_positions, character_joint_positions, fidelity
+
+        scale = float(getattr(traj.targets, "scale", 1.0)) if getattr(traj, "targets", None) is not None else 1.0
+        fid = fidelity(
+            actor_joint_positions(source_motion, joint_indices),
+            character_joint_positions(traj),
+            traj.fps,
+            scale,
+            model=ch.model,
+            qpos=traj.qpos,
+            velocity_limits=getattr(ch, "velocity_limits", None),
+        ).as_dict()
     return {
         "format": REPORT_FORMAT,
+        "fidelity": fid,
         "character": {
             "name": str(getattr(ch, "name", "")),
-            "mjcf_path": str(getattr(ch, "mjcf_path", "")),
+            "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),
         },
         "source": source_info,
         "contacts": _contacts_summary(contacts),
@@ -218,6 +234,32 @@ def _table(header: list[str], rows: list[list[str]], right: set[int]) -> list[st
     return [line(header), "  ".join("-" * w for w in widths)] + [line(r) for r in rows]
 
 
+def _fidelity_table(fid: dict | None) -> list[str]:
+    """Rows of the fidelity section (character against actor, docs/metrics.md)."""
+    if not fid:
+        return []
+    out = ["", "fidelity: the character against the actor"]
+    rows = [
+        [name, _fmt(v["median_deg"]), _fmt(v["p95_deg"]), _fmt(100 * v["share_over_45"])]
+        for name, v in fid["segments"].items()
+    ]
+    out += _table(["segment direction", "median deg", "p95 deg", "% > 45 deg"], rows, {1, 2, 3})
+    face, path, vz, sat = fid["facing"], fid["pelvis_path"], fid["pelvis_vertical_speed"], fid["velocity_saturation"]
+    rows = [
+        ["any segment > 45 deg", "% frames", _fmt(100 * fid["share_any_segment_over_45"])],
+        ["facing error median / p95", "deg", f"{_fmt(face['median_deg'])} / {_fmt(face['p95_deg'])}"],
+        ["pelvis path deviation mean / max", "cm", f"{_fmt(path['mean_cm'])} / {_fmt(path['max_cm'])}"],
+        [
+            "pelvis vertical speed p99 (actor scaled)",
+            "m/s",
+            f"{_fmt(vz['character_p99'])} ({_fmt(vz['actor_p99_scaled'])})",
+        ],
+        ["velocity-cap saturation", "frames", f"{sat['frames']} ({_fmt(100 * sat['share'])} %)"],
+    ]
+    out += [""] + _table(["figure", "unit", "value"], rows, {2})
+    return out
+
+
 def format_report(report: dict) -> str:
     """A readable text table: metric, unit, source, result; then tracking per joint."""
     src = _get(report, "metrics.source")
@@ -251,6 +293,7 @@ def format_report(report: dict) -> str:
             continue
         rows.append([label, unit, _fmt(a, scale), _fmt(b, scale)])
     out += _table(["metric", "unit", "source", "result"], rows, {2, 3})
+    out += _fidelity_table(report.get("fidelity"))
     tr = _get(res, "tracking")
     if tr and tr.get("position_cm"):
         out += ["", "tracking error per joint (result)"]
@@ -399,8 +442,10 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
         if character is None:
             if "mjcf_path" not in data:
                 raise InputError("trajectory file names no character (mjcf_path); pass --character", path=p)
-            character = str(data["mjcf_path"])
-            if not Path(character).exists():
+            from .resources import resolve_portable
+
+            character = resolve_portable(str(data["mjcf_path"]), p.parent)
+            if Path(character).suffix and not Path(character).exists():
                 raise InputError(
                     f"the character's MJCF {character!r} named in the file does not exist; pass --character",
                     path=p,

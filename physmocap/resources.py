@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 _PKG = Path(__file__).resolve().parent
@@ -35,3 +36,36 @@ def resolve_input(path: str | Path) -> Path:
     if str(path) == EXAMPLE_NAME:
         return example_clip()
     return Path(path)
+
+
+def _bundled_mjcf_names() -> dict[Path, str]:
+    d = mjcf_dir()
+    return {(d / f"{name}.xml").resolve(): name for name in ("humanoid", "robot") if (d / f"{name}.xml").exists()}
+
+
+def portable_path(path: str | Path, base: str | Path) -> str:
+    """How an output file names another file without the machine's absolute paths:
+    ``"example"`` for the bundled clip, the bundled character's name for its MJCF, else the
+    path relative to ``base`` (the output's folder), with ``/`` separators."""
+    s = str(path)
+    if not s or s.startswith("<"):
+        return s
+    p = Path(s).resolve()
+    if p == example_clip().resolve():
+        return EXAMPLE_NAME
+    named = _bundled_mjcf_names().get(p)
+    if named is not None:
+        return named
+    try:
+        return Path(os.path.relpath(p, Path(base).resolve())).as_posix()
+    except ValueError:  # another drive (Windows)
+        return p.as_posix()
+
+
+def resolve_portable(value: str, base: str | Path) -> str:
+    """The inverse of :func:`portable_path`: bundled names stay names, relative paths are
+    taken from ``base``."""
+    p = Path(value)
+    if value == EXAMPLE_NAME or (not p.suffix and "/" not in value and os.sep not in value):
+        return value
+    return str(p if p.is_absolute() else Path(base) / p)

@@ -218,3 +218,23 @@ def quat_canonical(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., 3:4] < 0.0, -q, q)
+
+
+def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotations (x-y-z-w) taking directions ``a (..., 3)`` onto ``b (..., 3)``.
+
+    :math:`q = (\hat n \sin(\theta/2), \cos(\theta/2))` with
+    :math:`\hat n = \widehat{a \times b}` and :math:`\theta = \operatorname{atan2}(|a \times b|, a \cdot b)`;
+    identity where either vector is zero or they are parallel (antiparallel
+    vectors, where the axis is undefined, also give the identity).
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    axis = np.cross(a, b)
+    s = np.linalg.norm(axis, axis=-1, keepdims=True)
+    c = np.sum(a * b, axis=-1, keepdims=True)
+    theta = np.arctan2(s, c)
+    ok = (s > 1e-12) & (np.linalg.norm(a, axis=-1, keepdims=True) > 1e-12)
+    n = np.where(ok, axis / np.maximum(s, 1e-12), 0.0)
+    half = np.where(ok, 0.5 * theta, 0.0)
+    return np.concatenate([n * np.sin(half), np.cos(half)], axis=-1)

@@ -25,6 +25,8 @@ COMMAND_MODULES = (
     "replay",
     "preview",
     "view",
+    "clean",
+    "batch",
 )
 
 
@@ -81,6 +83,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 0
+    except OSError as exc:  # disk full, quota, file too large, permission: one line, not a traceback
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"physmocap: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     return int(status or 0)
 
 

@@ -8,7 +8,6 @@ import math
 import sys
 from typing import TextIO
 
-import mujoco
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,6 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def describe(ch) -> dict:
     """A JSON-ready description of a :class:`~physmocap.models.Character` (degrees, metres, kg)."""
+    import mujoco
+
     model = ch.model
     data = mujoco.MjData(model)
     data.qpos[:] = ch.rest_qpos

@@ -71,7 +71,10 @@ def _check_output(output: str, options: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..export import write_motion
+    from ..fileio import check_not_input
     from ..sources import load_motion
+
+    check_not_input([args.output], [args.input])
 
     in_opts = {}
     if args.in_units is not None:

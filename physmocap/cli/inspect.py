@@ -23,14 +23,12 @@ from typing import Any
 import numpy as np
 
 from ..canonical import CANONICAL_JOINTS, CANONICAL_NAMES, REQUIRED_JOINTS
-from ..errors import MappingError, warn
+from ..errors import MappingError, OptionError, warn
 
 __all__ = ["register", "run", "describe"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from ..sources.profiles import profile_names
-
     p = sub.add_parser(
         "inspect",
         help="describe a capture file: skeleton, profile, canonical mapping, units, floor",
@@ -44,7 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile",
         metavar="P",
-        help="force the skeleton naming profile: " + ", ".join(profile_names()) + " (default: auto)",
+        help="force the skeleton naming profile: cmu, optitrack, vicon, mixamo, lafan1, bandai_namco, xsens, "
+        "smpl, kinect_v2, ... , topology or none (default: auto; an unknown name lists them all)",
     )
     p.add_argument("--map", metavar="MAP.toml", help="source mapping file (TOML) overriding the profile")
     p.add_argument(
@@ -55,6 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the file's up axis (BVH default Y)")
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print one JSON document instead of text")
+    out.add_argument("--emit-markerset", action="store_true",
+                     help="marker files: print a marker set TOML (roles -> labels) to edit and pass with --marker-set")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files: marker set file overriding the built-in aliases")
     out.add_argument("--emit-map", action="store_true",
                      help="print the mapping as a TOML mapping file (edit it, pass it with --map)")
     p.set_defaults(func=run)
@@ -181,9 +183,62 @@ def _text(rep: dict[str, Any]) -> str:
     return "\n".join(out) + "\n"
 
 
+MARKER_SUFFIXES = (".c3d", ".trc")
+
+
+def _inspect_markers(args: argparse.Namespace) -> int:
+    """Marker files: labels, rate, units, gaps per marker, roles found, markers left unused."""
+    from pathlib import Path
+
+    from ..markers.joints import up_axis
+    from ..markers.markerset import detect_marker_set, load_marker_set, marker_set_toml
+
+    path = Path(args.input)
+    if path.suffix.lower() == ".c3d":
+        from ..sources.c3d import read_c3d_markers as read
+    else:
+        from ..sources.trc import read_trc_markers as read
+    rec = read(path)
+    ms = detect_marker_set(rec.labels, load_marker_set(args.marker_set) if args.marker_set else None)
+    if args.emit_markerset:
+        sys.stdout.write(marker_set_toml(rec.labels, ms))
+        return 0
+    gaps = rec.gaps()
+    up = "XYZ"[int(np.argmax(np.abs(up_axis(rec, ms))))]
+    rep = {
+        "file": str(path),
+        "frames": rec.num_frames,
+        "fps": rec.fps,
+        "markers": len(rec.labels),
+        "up_axis": up,
+        "roles": {role: rec.labels[i] for role, i in sorted(ms.roles.items())},
+        "unused": list(ms.unused),
+        "gaps": {lab: {"frames": n, "share": n / rec.num_frames} for lab, n in gaps.items()},
+    }
+    if args.json:
+        sys.stdout.write(json.dumps(rep, indent=2, allow_nan=False) + "\n")
+        return 0
+    out = [
+        f"file:      {path} (markers)",
+        f"frames:    {rec.num_frames} at {rec.fps:.6g} fps; {len(rec.labels)} markers; up axis {up} (from the markers)",
+        f"roles:     {len(ms.roles)} found: " + ", ".join(f"{r}={rec.labels[i]}" for r, i in sorted(ms.roles.items())),
+        f"unused:    {', '.join(ms.unused) if ms.unused else '(none)'}",
+        "gaps:      " + (", ".join(f"{lab} {n} frames" for lab, n in sorted(gaps.items())) if gaps else "(none)"),
+    ]
+    sys.stdout.write("\n".join(out) + "\n")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from ..sources import load_motion
     from ..sources.profiles import map_skeleton
+
+    if Path(args.input).suffix.lower() in MARKER_SUFFIXES:
+        return _inspect_markers(args)
+    if args.emit_markerset:
+        raise OptionError("--emit-markerset is for marker files (.c3d, .trc)")
 
     opts: dict[str, Any] = {}
     if args.units is not None:

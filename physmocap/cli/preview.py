@@ -1,84 +1,129 @@
-"""``physmocap preview``: render the character beside the source skeleton (MP4, GIF, PNG sheet)."""
+"""``physmocap preview``: render the character beside its source skeleton (MP4, GIF, PNG sheet)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..errors import OptionError
-from .retarget import add_retarget_arguments
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from .retarget import add_retarget_options
+
     p = sub.add_parser(
         "preview",
-        help="render the retargeted character beside the source skeleton (.mp4, .gif, .png sheet)",
+        help="render a retarget beside its source skeleton (.mp4, .gif, .png sheet)",
         description=(
-            "Render a motion offscreen with MuJoCo: the character and, beside it (or overlaid), the source "
-            "skeleton, left side blue and right side red on both, planted contacts green, a camera that "
-            "follows the pelvis. INPUT is a source (retargeted first, with the options of 'retarget'; "
-            "'example' is the bundled walk) or a trajectory .npz from 'retarget --qpos'. A .png output is "
-            "a contact sheet: the character row above the source row. Needs physmocap[render] and an "
-            "OpenGL backend (EGL or OSMesa without a display)."
+            "Render the character and the source skeleton offscreen with MuJoCo's renderer. INPUT is a "
+            "motion file (retargeted first, with the same options as retarget), 'example', or a trajectory "
+            ".npz written by retarget --qpos (give --source to draw its skeleton)."
         ),
     )
-    p.add_argument("input", metavar="INPUT", help="motion file, 'example', or a trajectory .npz")
+    p.add_argument("input", metavar="INPUT", help="motion file, 'example', or trajectory .npz")
     p.add_argument("-o", "--output", required=True, help="output: .mp4, .gif or .png (contact sheet)")
-    add_retarget_arguments(p)
-    add_render_arguments(p)
+    p.add_argument("--size", default="640x480", help="image size per panel, WIDTHxHEIGHT (default 640x480)")
+    p.add_argument("--camera", default="side", help="side, front, back, top or AZIMUTH,ELEVATION in degrees "
+                   "(azimuth relative to the character's initial heading)")
+    p.add_argument("--layout", choices=["beside", "overlay"], default="beside", help="skeleton beside or over the character")
+    p.add_argument("--frames", help="contact sheet: comma-separated source frame numbers (default: --count evenly spaced)")
+    p.add_argument("--count", type=int, default=8, help="contact sheet: number of frames (default 8)")
+    p.add_argument("--source", metavar="FILE", help="with a trajectory .npz: the source motion it was retargeted from")
+    add_retarget_options(p)
     p.set_defaults(func=run)
 
 
-def add_render_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--fps", type=float, help="video frame rate (default: the clip's rate, at most 30)")
-    p.add_argument("--size", default=None, help="image (sheet: tile) size WxH in pixels (default 640x480; sheet 240x320)")
-    p.add_argument("--camera", default="side", help="side, front, back, top (relative to the actor's facing) or AZ,EL degrees")
-    p.add_argument("--overlay", action="store_true", help="draw the source skeleton over the character, not beside it")
-    p.add_argument("--count", type=int, default=8, help="contact sheet: number of evenly spaced frames (default 8)")
-    p.add_argument("--frames", help="contact sheet: source frame numbers, e.g. 10,50,120")
-    p.add_argument("--antialias", action="store_true", help="smooth edges (4x multisampling; slower)")
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise OptionError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 640x480") from None
-    return w, h
-
-
-def parse_frames(text: str | None) -> list[int] | None:
+def _frame_list(text: str | None) -> list[int] | None:
     if not text:
         return None
     try:
-        return [int(v) for v in text.split(",") if v.strip()]
+        return [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise OptionError(f"--frames {text!r}: expected frame numbers separated by commas, e.g. 10,50,120") from None
+        raise OptionError(f"--frames: expected comma-separated frame numbers, got {text!r}") from None
 
 
-def load_clip(args: argparse.Namespace):
-    """The :class:`~physmocap.preview.clip.PreviewClip` of INPUT: a trajectory NPZ, or a retargeted source."""
-    from ..preview.clip import is_trajectory_file, retarget_clip, trajectory_clip
+def render_preview(
+    traj,
+    output: Path,
+    *,
+    size: str = "640x480",
+    camera: str = "side",
+    layout: str = "beside",
+    frames: list[int] | None = None,
+    count: int = 8,
+    quiet: bool = False,
+) -> None:
+    """Render ``traj`` (and its source, if it carries one) to ``output``."""
+    from ..render.backend import ensure_backend
+    from ..render.output import check_output, sheet_frames, write_sheet, write_video
+    from ..render.scene import PreviewOptions, PreviewScene, parse_camera, parse_size
+    from ..render.skeleton import source_skeleton
 
-    if is_trajectory_file(args.input):
-        return trajectory_clip(args.input, args.character).between(args.start, args.end)
-    from .retarget import retarget_inputs
+    out = check_output(output)
+    w, h = parse_size(size)
+    opts = PreviewOptions(width=w, height=h, camera=parse_camera(camera), layout=layout)
+    if count < 1:
+        raise OptionError("--count must be at least 1")
+    ensure_backend()
+    stats = getattr(traj, "stats", None) or {}
+    contacts = stats.get("contacts")
+    first = int(stats.get("source_start", 0))
+    progress = False if quiet else None
+    with PreviewScene(traj, source_skeleton(traj), getattr(contacts, "labels", None), opts) as scene:
+        if out.suffix.lower() == ".png":
+            write_sheet(scene, sheet_frames(traj.num_frames, count, frames, first), out, traj.fps, first, progress)
+        else:
+            write_video(scene, range(traj.num_frames), out, traj.fps, first, progress)
+    print(f"wrote {out}", file=sys.stderr)
 
-    motion, character, options = retarget_inputs(args)
-    return retarget_clip(motion, character, **options)
+
+def _load(args: argparse.Namespace):
+    """The trajectory to show: a saved .npz (with its source if given) or a fresh retarget."""
+    if Path(args.input).suffix.lower() == ".npz":
+        from ..report import load_trajectory
+
+        traj = load_trajectory(args.input, args.character, args.map)
+        if args.source:
+            from ..ik.retarget import default_start, map_motion
+            from ..ik.targets import build_targets
+            from ..sources import load_motion
+
+            motion = load_motion(args.source)
+            start = default_start(motion) if args.start is None else int(args.start)
+            motion = motion.slice_frames(start, min(motion.num_frames, start + traj.num_frames))
+            if motion.num_frames != traj.num_frames:
+                raise OptionError(
+                    f"--source has {motion.num_frames} frames from frame {start} but the trajectory {traj.num_frames}; "
+                    "pass --start as used for the retarget",
+                    path=args.source,
+                )
+            joints = map_motion(motion, profile=args.profile, mapping=args.source_map)
+            traj.targets = build_targets(motion, joints, traj.character)
+            traj.stats.update(source_motion=motion, joint_indices=joints, source_start=start)
+        return traj
+    if args.source:
+        raise OptionError("--source is for a trajectory .npz input; a motion file is its own source")
+    from .retarget import retarget_from_args
+
+    return retarget_from_args(args)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..preview.camera import CameraSpec
-    from ..preview.output import check_preview_path, write_preview
-    from ..preview.render import RenderOptions
+    from ..render.output import check_output, require_imageio
+    from ..render.scene import PreviewOptions, parse_camera, parse_size
 
-    out = check_preview_path(args.output)
-    sheet = out.suffix.lower() == ".png"
-    width, height = parse_size(args.size or ("240x320" if sheet else "640x480"))
-    options = RenderOptions(width, height, CameraSpec.parse(args.camera), args.overlay, True, args.antialias)
-    frames = parse_frames(args.frames)
-    clip = load_clip(args)
-    write_preview(clip, out, options, fps=args.fps, count=args.count, frames=frames, progress=False if args.quiet else None)
-    print(f"wrote {out}", file=sys.stderr)
+    check_output(args.output)
+    require_imageio()
+    frames = _frame_list(args.frames)
+    # every option is checked before the (possibly long) retarget
+    w, h = parse_size(args.size)
+    PreviewOptions(width=w, height=h, camera=parse_camera(args.camera), layout=args.layout)
+    if args.count < 1:
+        raise OptionError("--count must be at least 1")
+    traj = _load(args)
+    render_preview(
+        traj, Path(args.output), size=args.size, camera=args.camera, layout=args.layout,
+        frames=frames, count=args.count, quiet=args.quiet,
+    )
     return 0

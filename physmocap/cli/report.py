@@ -14,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "report",
         help="measure a retargeted trajectory (skating, penetration, hovering, limits, tracking)",
         description=(
-            "Print a table of quality figures (definitions: shared/design/metrics.md) for a "
+            "Print a table of quality figures (definitions: docs/metrics.md) for a "
             "trajectory written by 'physmocap retarget --qpos OUT.npz', next to the same figures "
             "on its source motion; optionally write them as JSON and draw PNG plots."
         ),

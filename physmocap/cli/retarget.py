@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import check_writable
+from ..fileio import check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,29 +21,31 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("input", metavar="INPUT", help="motion file (.bvh, ...) or 'example'")
     p.add_argument("-o", "--output", required=True, help="output file: .bvh, .npz, .csv or .mcap")
+    p.add_argument("--format", choices=["auto", "robot-csv", "robot-npz"], default="auto",
+                   help="layout of -o: by suffix (auto), or the robot-learning CSV/NPZ (root pose + joint "
+                   "positions, named; see README)")
     p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
     p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
-    add_retarget_arguments(p)
-    p.add_argument("--fps", dest="resample", type=float, help="resample the source to this frame rate first")
+    add_retarget_options(p)
     p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
     p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
     p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
-    p.add_argument(
-        "--preview", metavar="OUT.mp4", help="also render a preview: .mp4, .gif or .png sheet (needs physmocap[render])"
-    )
+    p.add_argument("--preview", metavar="OUT.mp4", help="also render a preview (.mp4, .gif or .png sheet; see physmocap preview)")
     p.set_defaults(func=run)
 
 
-def add_retarget_arguments(p: argparse.ArgumentParser) -> None:
-    """The retargeting options, shared by every command that retargets a source."""
+def add_retarget_options(p: argparse.ArgumentParser) -> None:
+    """The options that say how to retarget (shared by ``retarget`` and ``preview``)."""
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", help="override the input's length unit (m, cm, inch, cmu or metres per unit)")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
+    p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
     p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
     p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
     p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
@@ -52,49 +54,22 @@ def add_retarget_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def retarget_inputs(args: argparse.Namespace) -> tuple:
-    """``(motion, character, keyword options of physmocap.ik.retarget)`` from the arguments
-    of :func:`add_retarget_arguments` (and ``--fps``, stored as ``resample``, where the
-    command has it)."""
-    from ..models import load_character
-    from ..sources import load_motion
-
-    read_opts = {}
-    if args.in_units:
-        read_opts["units"] = args.in_units
-    motion = load_motion(args.input, **read_opts)
-    character = load_character(args.character, args.map)
-    options = {}
-    if args.max_iterations is not None:
-        if args.max_iterations < 1:
-            raise OptionError("--max-iterations must be at least 1")
-        options["max_iterations"] = args.max_iterations
-    if args.no_floor:
-        options["floor"] = False
-    if args.no_velocity_limits:
-        options["velocity_limits"] = False
-    if args.no_plant:
-        options["plant"] = False
-    options.update(
-        profile=args.profile,
-        mapping=args.source_map,
-        start=args.start,
-        end=args.end,
-        progress=False if args.quiet else None,
-        contacts=args.contacts,
-    )
-    if getattr(args, "resample", None) is not None:
-        options["fps"] = args.resample
-    return motion, character, options
-
-
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 
-def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
-    for out in outputs:
+def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool = False) -> None:
+    for k, out in enumerate(outputs):
         suffix = out.suffix.lower()
-        if suffix == ".bvh":
+        layout = getattr(args, "format", "auto") if k == 0 else "auto"
+        if layout == "robot-csv":
+            from ..export.robot import write_robot_csv
+
+            write_robot_csv(traj, out)
+        elif layout == "robot-npz":
+            from ..export.robot import write_robot_npz
+
+            write_robot_npz(traj, out)
+        elif suffix == ".bvh":
             from ..export.character_bvh import write_character_bvh
 
             write_character_bvh(traj, out, up=args.up.upper(), units=args.units)
@@ -110,13 +85,54 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace) -> None:
             from ..export.mcap import write_trajectory_mcap
 
             write_trajectory_mcap(traj, out)
-        print(f"wrote {out}", file=sys.stderr)
+        if not quiet:
+            print(f"wrote {out}", file=sys.stderr)
+
+
+def retarget_from_args(args: argparse.Namespace):
+    """Load the input and the character and retarget with the options of
+    :func:`add_retarget_options`; returns the trajectory."""
+    from ..ik.retarget import retarget
+    from ..models import load_character
+    from ..sources import load_motion
+
+    read_opts = {}
+    if args.in_units:
+        read_opts["units"] = args.in_units
+    if getattr(args, "marker_set", None):
+        read_opts["marker_set"] = args.marker_set
+    motion = load_motion(args.input, **read_opts)
+    character = load_character(args.character, args.map)
+    options = {}
+    if args.max_iterations is not None:
+        if args.max_iterations < 1:
+            raise OptionError("--max-iterations must be at least 1")
+        options["max_iterations"] = args.max_iterations
+    if args.no_floor:
+        options["floor"] = False
+    if args.no_velocity_limits:
+        options["velocity_limits"] = False
+    if args.no_plant:
+        options["plant"] = False
+    return retarget(
+        motion,
+        character,
+        profile=args.profile,
+        mapping=args.source_map,
+        start=args.start,
+        end=args.end,
+        fps=args.fps,
+        progress=False if args.quiet else None,
+        contacts=args.contacts,
+        **options,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..ik.retarget import retarget
-
     outputs = [Path(args.output)] + [Path(x) for x in (args.qpos, args.csv) if x]
+    wanted = {"robot-csv": ".csv", "robot-npz": ".npz"}.get(args.format)
+    if wanted and outputs[0].suffix.lower() != wanted:
+        raise OptionError(f"--format {args.format} writes a {wanted} file", path=outputs[0])
     for out in outputs:
         if out.suffix.lower() not in WRITERS:
             raise OptionError(
@@ -126,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(out)
     if args.report:
         check_writable(args.report)
+    check_not_input(outputs + [args.report, args.preview], [args.input, args.contacts, args.source_map, args.map])
     if args.plots:
         from ..plots import require_matplotlib
         from ..report import _check_plot_dir
@@ -133,22 +150,16 @@ def run(args: argparse.Namespace) -> int:
         require_matplotlib()
         _check_plot_dir(args.plots)
     if args.preview:
-        from ..preview.output import check_preview_path
+        from ..render.output import check_output, require_imageio
 
-        check_preview_path(args.preview)
-    motion, character, options = retarget_inputs(args)
-    traj = retarget(motion, character, **options)
+        check_output(args.preview)
+        require_imageio()
+    traj = retarget_from_args(args)
     write_outputs(traj, outputs, args)
-    if args.preview:
-        from ..preview.clip import result_clip
-        from ..preview.output import write_preview
-
-        write_preview(result_clip(traj, motion), args.preview, progress=False if args.quiet else None)
-        print(f"wrote {args.preview}", file=sys.stderr)
     if args.report or args.plots:
         from ..report import emit_report
 
-        used = traj.stats.get("source_motion", motion)
+        used = traj.stats.get("source_motion")
         emit_report(
             traj,
             used,
@@ -157,4 +168,8 @@ def run(args: argparse.Namespace) -> int:
             plots_dir=args.plots,
             joint_indices=traj.stats.get("joint_indices"),
         )
+    if args.preview:
+        from .preview import render_preview
+
+        render_preview(traj, Path(args.preview), quiet=args.quiet)
     return 0

@@ -1,33 +1,70 @@
-"""``physmocap view``: interactive playback of a trajectory or a retargeted source."""
+"""``physmocap view``: interactive playback in ``mujoco.viewer`` with the source skeleton overlaid."""
 
 from __future__ import annotations
 
 import argparse
+import os
+import time
 
-from .retarget import add_retarget_arguments
+from ..errors import OptionError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from .retarget import add_retarget_options
+
     p = sub.add_parser(
         "view",
-        help="play a motion in MuJoCo's interactive viewer, the source skeleton beside the character",
+        help="play a retarget interactively (needs a display; see preview for files)",
         description=(
-            "Open mujoco.viewer and loop the character's motion with the source skeleton drawn beside it "
-            "(or overlaid); space pauses, the arrow keys step while paused. INPUT is a source (retargeted "
-            "first, with the options of 'retarget') or a trajectory .npz. Needs a display; without one, "
-            "use 'physmocap preview'."
+            "Open MuJoCo's viewer and play the character with the source skeleton overlaid; space "
+            "pauses. INPUT is a motion file (retargeted first), 'example', or a trajectory .npz."
         ),
     )
-    p.add_argument("input", metavar="INPUT", help="motion file, 'example', or a trajectory .npz")
-    add_retarget_arguments(p)
-    p.add_argument("--overlay", action="store_true", help="draw the source skeleton over the character")
+    p.add_argument("input", metavar="INPUT", help="motion file, 'example', or trajectory .npz")
+    p.add_argument("--source", metavar="FILE", help="with a trajectory .npz: the source motion it was retargeted from")
+    p.add_argument("--loop", action="store_true", help="play in a loop until the window closes")
+    add_retarget_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..preview.viewer import play, require_display
-    from .preview import load_clip
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) and os.name != "nt":
+        raise OptionError("no display here: physmocap view needs a window; render a file instead with physmocap preview INPUT -o out.mp4")
+    import mujoco
+    import mujoco.viewer
 
-    require_display(args.input)  # before spending time on a retarget
-    play(load_clip(args), overlay=args.overlay)
+    from ..render.scene import _add_connector
+    from ..render.skeleton import source_skeleton
+    from .preview import _load
+
+    traj = _load(args)
+    sk = source_skeleton(traj)
+    model = traj.character.model
+    data = mujoco.MjData(model)
+    paused = {"on": False}
+
+    def key(code: int) -> None:
+        if code == 32:  # space
+            paused["on"] = not paused["on"]
+
+    with mujoco.viewer.launch_passive(model, data, key_callback=key) as viewer:
+        t = 0
+        while viewer.is_running():
+            start = time.perf_counter()
+            data.qpos[:] = traj.qpos[t]
+            mujoco.mj_forward(model, data)
+            with viewer.lock():
+                viewer.user_scn.ngeom = 0
+                if sk is not None:
+                    w = 0.012 * float(getattr(traj.character, "height", 1.7))
+                    for a, b in sk.bones:
+                        _add_connector(viewer.user_scn, mujoco.mjtGeom.mjGEOM_CAPSULE, w, sk.positions[t, a], sk.positions[t, b], [0.9, 0.8, 0.2, 0.8])
+            viewer.sync()
+            if not paused["on"]:
+                t += 1
+                if t >= traj.num_frames:
+                    if not args.loop:
+                        break
+                    t = 0
+            time.sleep(max(0.0, 1.0 / traj.fps - (time.perf_counter() - start)))
     return 0

@@ -14,9 +14,10 @@ NPZ contents (all plain arrays, loadable with ``np.load(path)`` and
 ``joint_types``     ``(njnt,)`` ``free``, ``ball``, ``slide`` or ``hinge``
 ``joint_qposadr``   ``(njnt,)`` first qpos column of each joint
 ``quat_convention`` ``"wxyz"``
-``mjcf_path``       the character's MJCF file (absolute path)
+``mjcf_path``       the character's MJCF file: a bundled character's name, or the
+                    path relative to the NPZ's folder
 ``character``       the character's name
-``source``          the input motion's path
+``source``          the input motion: ``example``, or its path relative to the NPZ's folder
 ``source_start``    the source frame the trajectory's frame 0 came from
 ``target_*``        the IK targets (``target_names`` (N,), ``target_positions``
                     (F, N, 3) metres, ``target_orientations`` (F, N, 4) x-y-z-w,
@@ -85,8 +86,12 @@ def _check_finite(traj: Trajectory, path: Path) -> None:
         )
 
 
-def trajectory_arrays(traj: Trajectory) -> dict[str, np.ndarray]:
-    """The arrays :func:`write_trajectory_npz` stores."""
+def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, np.ndarray]:
+    """The arrays :func:`write_trajectory_npz` stores; paths relative to ``base`` (the
+    output's folder) or bundled names, never the machine's absolute paths."""
+    from ..resources import portable_path
+
+    base = Path(".") if base is None else base
     model = traj.model
     ch = traj.character
     return {
@@ -98,9 +103,9 @@ def trajectory_arrays(traj: Trajectory) -> dict[str, np.ndarray]:
         "joint_types": np.array([_JOINT_TYPES[int(t)] for t in model.jnt_type]),
         "joint_qposadr": model.jnt_qposadr.astype(np.int64),
         "quat_convention": np.array("wxyz"),
-        "mjcf_path": np.array(str(Path(ch.mjcf_path).resolve())),
+        "mjcf_path": np.array(portable_path(ch.mjcf_path, base)),
         "character": np.array(str(ch.name)),
-        "source": np.array(str(traj.source)),
+        "source": np.array(portable_path(traj.source, base)),
         "source_start": np.int64(traj.stats.get("source_start", 0)),
         **target_arrays(traj.targets),
     }
@@ -123,7 +128,7 @@ def write_trajectory_npz(traj: Trajectory, path: str | os.PathLike) -> Path:
     """Write the trajectory as ``.npz`` (see the module docstring for the keys)."""
     p = Path(path)
     _check_finite(traj, p)
-    return write_npz(p, trajectory_arrays(traj))
+    return write_npz(p, trajectory_arrays(traj, p.parent))
 
 
 def write_trajectory_csv(traj: Trajectory, path: str | os.PathLike, precision: int = 9) -> Path:

@@ -19,6 +19,9 @@ import mink
 import mujoco
 import numpy as np
 
+from ..models.geometry import geom_candidates
+from ..models.geometry import is_visual_only
+
 __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit"]
 
 
@@ -94,34 +97,6 @@ class FrameStepLimit(mink.Limit):
         return mink.Constraint(G=self._G, h=h)
 
 
-def _geom_local_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
-    """Points in the geom's frame whose lowest one, less a radius, is the geom's lowest point.
-
-    Returns ``(k, 4)`` rows ``(x, y, z, radius)``: spheres and capsules are
-    handled exactly (centre / end-cap centres with their radius), boxes by their
-    eight corners, cylinders and ellipsoids conservatively by the corners of
-    their bounding box, meshes by their vertices.
-    """
-    t = int(model.geom_type[gid])
-    s = model.geom_size[gid]
-    G = mujoco.mjtGeom
-    if t == int(G.mjGEOM_SPHERE):
-        return np.array([[0.0, 0.0, 0.0, s[0]]])
-    if t == int(G.mjGEOM_CAPSULE):
-        return np.array([[0.0, 0.0, s[1], s[0]], [0.0, 0.0, -s[1], s[0]]])
-    if t in (int(G.mjGEOM_BOX), int(G.mjGEOM_ELLIPSOID), int(G.mjGEOM_CYLINDER)):
-        hx, hy, hz = (s[0], s[1], s[2]) if t != int(G.mjGEOM_CYLINDER) else (s[0], s[0], s[1])
-        corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-        return corners
-    if t == int(G.mjGEOM_MESH):
-        mid = model.geom_dataid[gid]
-        start, n = model.mesh_vertadr[mid], model.mesh_vertnum[mid]
-        v = model.mesh_vert[start : start + n].astype(float)
-        return np.hstack([v, np.zeros((len(v), 1))])
-    # planes, heightfields, SDFs: not constrained
-    return np.zeros((0, 4))
-
-
 class GeomCandidates:
     """Stacked lowest-point candidates of a set of geoms, for vectorised queries."""
 
@@ -129,7 +104,7 @@ class GeomCandidates:
         rows, owner = [], []
         self.geoms = np.array(list(geoms), dtype=int)
         for k, gid in enumerate(self.geoms):
-            cand = _geom_local_candidates(model, int(gid))
+            cand = geom_candidates(model, int(gid))
             if len(cand) == 0:  # planes and the like have no lowest point
                 cand = np.array([[0.0, 0.0, 0.0, -np.inf]])
             rows.append(cand)
@@ -138,14 +113,36 @@ class GeomCandidates:
         self.owner = np.concatenate(owner) if owner else np.zeros(0, dtype=int)
         self.gid = self.geoms[self.owner] if len(self.owner) else np.zeros(0, dtype=int)
         self.starts = np.flatnonzero(np.r_[True, np.diff(self.owner) != 0]) if len(self.owner) else np.zeros(0, dtype=int)
+        # bounding radius of each geom's candidates about its origin (metres)
+        reach = np.linalg.norm(self.local[:, :3], axis=1) + np.maximum(self.local[:, 3], 0.0)
+        self.radius = np.zeros(len(self.geoms))
+        if len(self.owner):
+            np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
 
-    def points(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height."""
+    def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height.
+
+        With ``below``, geoms whose bounding sphere lies wholly above that height are
+        skipped (their candidates get ``z = inf``): a robot's mesh links far from the
+        floor cost nothing.
+        """
         if len(self.gid) == 0:
             return np.zeros(0), np.zeros((0, 3))
-        R = data.geom_xmat[self.gid].reshape(-1, 3, 3)
-        pts = data.geom_xpos[self.gid] + np.einsum("kij,kj->ki", R, self.local[:, :3])
-        return pts[:, 2] - self.local[:, 3], pts
+        if below is None:
+            rows = slice(None)
+        else:
+            near = data.geom_xpos[self.geoms, 2] - self.radius < below
+            if near.all():
+                rows = slice(None)
+            else:
+                rows = np.flatnonzero(near[self.owner])
+        z = np.full(len(self.gid), np.inf)
+        pts = np.zeros((len(self.gid), 3))
+        gid = self.gid[rows]
+        R = data.geom_xmat[gid].reshape(-1, 3, 3)
+        pts[rows] = data.geom_xpos[gid] + np.einsum("kij,kj->ki", R, self.local[rows, :3])
+        z[rows] = pts[rows, 2] - self.local[rows, 3]
+        return z, pts
 
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
@@ -179,6 +176,8 @@ class FloorLimit(mink.Limit):
 
     Swing clearance: for the contact sites in :attr:`clearance` (set per frame
     by the planting: sites of a foot that is neither in contact nor planted),
+    and for every geom point of the bodies in :attr:`swing_bodies` (a foot with
+    no contact at all: heel, sole, toes, every corner of a box foot),
     :math:`z_s + J_{z,s} \Delta q \ge \min(z_{floor} + c, z_s + r)`, so a
     swing foot clears the stance band, rising at most ``max_rise`` per frame
     when it starts below it.
@@ -194,10 +193,11 @@ class FloorLimit(mink.Limit):
         activation: float = 0.15,
     ) -> None:
         if geoms is None:
+            # visual-only meshes are skipped (a robot model draws every link twice)
             geoms = [
                 g
                 for g in range(model.ngeom)
-                if model.geom_bodyid[g] != 0 and len(_geom_local_candidates(model, g))
+                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(geom_candidates(model, g))
             ]
         self.model = model
         self.geoms = np.array(list(geoms), dtype=int)
@@ -212,6 +212,8 @@ class FloorLimit(mink.Limit):
         self._cache: tuple[bytes, tuple] | None = None
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
+        #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
+        self.swing_bodies: dict[int, float] = {}
         self.max_rise = 0.004
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,7 +226,7 @@ class FloorLimit(mink.Limit):
         key = data.qpos.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
-        z_g, a_g = self._cand.points(data)
+        z_g, a_g = self._cand.points(data, below=self.floor + self.activation)
         z_s = data.site_xpos[self.sites, 2] if len(self.sites) else np.zeros(0)
         a_s = data.site_xpos[self.sites] if len(self.sites) else np.zeros((0, 3))
         out = (np.concatenate([z_g, z_s]), np.vstack([a_g, a_s]), self._bodies)
@@ -246,7 +248,11 @@ class FloorLimit(mink.Limit):
         for row, k in enumerate(active):
             mujoco.mj_jac(self.model, data, self._jacp, None, anchor[k], int(body[k]))
             G[row] = -self._jacp[2]
-            h[row] = z[k] - self.floor - self.margin
+            c = self.swing_bodies.get(int(body[k]))
+            if c is None:
+                h[row] = z[k] - self.floor - self.margin
+            else:
+                h[row] = z[k] - min(self.floor + max(c, self.margin), z[k] + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
         for row, (sid, c) in enumerate(self.clearance.items(), start=len(active)):
             zs = data.site_xpos[sid, 2]

@@ -39,12 +39,14 @@ character's world (Z-up, floor at ``floor``).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
 
+from .footplan import FOOT_JOINTS, knee_between
 from .tasks import SitePositionTask
 
 __all__ = ["PlantOptions", "FootPlanter", "FootAnchor", "Planting"]
@@ -62,8 +64,10 @@ class PlantOptions:
         onset_time: Seconds over which the height cost ramps in at contact start.
         anchor_release_time: Seconds over which a foot's target offset
             (:class:`FootAnchor`) fades back to the actor's motion after release.
-        lock_low: Keep holding a site after its label ends until it has lifted
-            clear of ``engage_height + release_margin`` (False: let go with the label).
+        lock_low: Streaming only: keep holding a site after its label ends until it
+            has lifted clear of ``engage_height + release_margin`` (False: let go with
+            the label).  Offline the labels are final and sites are held exactly
+            while labelled.
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -73,9 +77,13 @@ class PlantOptions:
             at least this high (metres), a hard inequality (0 disables): a foot
             skimming the floor would otherwise slide within the stance band.
         max_descent_speed: Fastest a labelled site is pulled down (m/s).
-        root_follow_time: Time constant (s) with which the whole body follows
-            the mean offset of its planted feet from the actor's path (0: the
-            body keeps the actor's path and only the feet are offset).
+        root_follow_time: Streaming only: time constant (s) with which the whole
+            body follows the mean offset of its planted feet from the actor's
+            path (0: the body keeps the actor's path and only the feet are
+            offset).  Offline retargeting never moves the body
+            (:mod:`physmocap.ik.footplan`).
+        ease_time: Offline only: seconds over which a foot's plant offset eases
+            in before a contact and out after it (:mod:`physmocap.ik.footplan`).
     """
 
     plant: bool = True
@@ -89,6 +97,7 @@ class PlantOptions:
     clearance: float = 0.012
     max_descent_speed: float = 1.0
     root_follow_time: float = 0.15
+    ease_time: float = 0.1
 
 
 def _smooth(x: float) -> float:
@@ -288,41 +297,14 @@ class FootAnchor:
         return new
 
 
-#: The canonical joints a foot's offset moves (the knee is then re-solved by
-#: :func:`_knee_between`).
-FOOT_JOINTS = ("ankle", "toe", "toe_end")
-
-
-def _knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float) -> np.ndarray:
-    """Knee position for a hip and a (moved) ankle, keeping thigh ``l1`` and shank ``l2``.
-
-    Two-bone IK in closed form: with :math:`d = |a - h|` (clamped to the
-    reachable range) and :math:`u = (a - h)/d`, the knee is
-    :math:`h + x u + y p` where :math:`x = (l_1^2 - l_2^2 + d^2)/(2d)`,
-    :math:`y = \\sqrt{l_1^2 - x^2}` and :math:`p` the unit direction of the
-    original knee off the hip-ankle line (the knee keeps its plane).
-    """
-    v = ankle - hip
-    d = float(np.linalg.norm(v))
-    if d < 1e-9:
-        return knee0
-    u = v / d
-    d = min(max(d, abs(l1 - l2) + 1e-6), l1 + l2 - 1e-6)
-    x = (l1 * l1 - l2 * l2 + d * d) / (2.0 * d)
-    y = np.sqrt(max(l1 * l1 - x * x, 0.0))
-    w = knee0 - hip
-    p = w - np.dot(w, u) * u
-    n = np.linalg.norm(p)
-    if n < 1e-9:
-        return hip + x * u
-    return hip + x * u + y * p / n
-
-
 class Planting:
     """Per-frame planting for one character: foot target offsets plus contact-site locks.
 
     Causal: each :meth:`step` uses only this frame's labels and targets and the
     previous frame's solution, so offline and streaming retargeting share it.
+    Offline retargeting plans the feet over the whole clip first
+    (:func:`~physmocap.ik.footplan.planted_positions`) and passes
+    ``anchored=False``: the site locks then hold where the planned targets are.
 
     Args:
         character: The :class:`~physmocap.models.Character`.
@@ -332,8 +314,19 @@ class Planting:
         floor: Floor height (metres).
     """
 
-    def __init__(self, character, names, fps: float, options: PlantOptions | None = None, floor: float = 0.0) -> None:
+    def __init__(
+        self,
+        character,
+        names,
+        fps: float,
+        options: PlantOptions | None = None,
+        floor: float = 0.0,
+        anchored: bool = True,
+    ) -> None:
         self.options = opt = options or PlantOptions()
+        #: False when the targets were planted offline (:mod:`.footplan`): only the site
+        #: locks, height pulls and swing clearances act, the targets are used as given.
+        self.anchored = bool(anchored)
         self.character = character
         self.names = tuple(names)
         model = character.model
@@ -342,8 +335,16 @@ class Planting:
         for side in ("left", "right"):
             for k, site in enumerate(character.contacts.get(side, ())):
                 self.site_label[site] = f"{side}_heel" if k == 0 else f"{side}_toe"
-        self.locks = FootPlanter(model, self.sites, fps, opt, floor=floor)
-        self.lengths = {}
+        # Offline the labels are final and the targets planned (.footplan): a site is held
+        # exactly while labelled (no hold-until-lifted hysteresis).
+        lock_opt = opt if self.anchored else dataclasses.replace(opt, lock_low=False)
+        self.locks = FootPlanter(model, self.sites, fps, lock_opt, floor=floor)
+        #: per site, its role while only the toes are down (offline; :meth:`_toe_roles`)
+        self._foot_bodies = {side: self._subtree_bodies(model, character, side) for side in ("left", "right")}
+        roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
+        self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
+        self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
+        self.lengths: dict[str, tuple[int, int, int, float, float]] = {}
         rest = {c: character.rest_positions()[c] for c in self.names if c in character.rest_positions()}
         for side in ("left", "right"):
             hip, knee, ankle = f"{side}_hip", f"{side}_knee", f"{side}_ankle"
@@ -375,6 +376,67 @@ class Planting:
             moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
 
+    @staticmethod
+    def _subtree_bodies(model: mujoco.MjModel, character, side: str) -> list[int]:
+        """The bodies of a foot's contact sites and every body below them (toes)."""
+        roots = {int(model.site(s).bodyid[0]) for s in character.contacts.get(side, ())}
+        out = []
+        for b in range(1, model.nbody):
+            a = b
+            while a > 0 and a not in roots:
+                a = int(model.body_parentid[a])
+            if a > 0:
+                out.append(b)
+        return out
+
+    @staticmethod
+    def _toe_roles(model: mujoco.MjModel, character, side: str) -> dict[str, str]:
+        """How each toe-group contact site acts while only the toes are down (offline).
+
+        ``"hold"``: on a toe segment (a body below the heel's): held and pulled down,
+        the toes stay flat.  ``"release"``: on the heel's body of a foot that has a toe
+        segment: the foot rolls over its toes and the site lifts.  ``"pivot"``: on the
+        heel's body of a rigid foot: held horizontally but free to rise, so the foot
+        rolls over its front edge.
+        """
+        sites = list(character.contacts.get(side, ()))
+        if len(sites) < 2:
+            return {}
+
+        def depth(name: str) -> int:
+            b, d = int(model.site(name).bodyid[0]), 0
+            while b > 0:
+                b, d = int(model.body_parentid[b]), d + 1
+            return d
+
+        heel = depth(sites[0])
+        has_toes = any(depth(s) > heel for s in sites[1:])
+        return {s: "hold" if depth(s) > heel else ("release" if has_toes else "pivot") for s in sites[1:]}
+
+    def stance_heights(self) -> dict[str, float]:
+        """Canonical ankle/toe joint -> its height above the floor in the character's rest pose."""
+        rest = self.character.rest_positions()
+        return {c: float(rest[c][2] - self.locks.floor) for c in self.names if c in rest}
+
+    def leg_lengths(self) -> dict[str, tuple[float, float]]:
+        """Side -> (thigh, shank) length of the character (metres)."""
+        return {side: (v[3], v[4]) for side, v in self.lengths.items()}
+
+    def clearance_bodies(self) -> dict[int, float]:
+        """Body id -> clearance height for the bodies of feet with no contact at all this
+        frame (after :meth:`step`): every collision geom of a swing foot clears the floor."""
+        c = self.options.clearance
+        if not self.options.plant or c <= 0:
+            return {}
+        model = self.character.model
+        out: dict[int, float] = {}
+        for side in ("left", "right"):
+            ks = [k for k, site in enumerate(self.sites) if site in self.character.contacts.get(side, ())]
+            if ks and all(self.locks.free[k] for k in ks):
+                for b in self._foot_bodies[side]:
+                    out[b] = c
+        return out
+
     def clearance_sites(self) -> dict[int, float]:
         """Site id -> clearance height for this frame's swing sites (after :meth:`step`)."""
         c = self.options.clearance
@@ -397,7 +459,18 @@ class Planting:
         if not self.options.plant:
             return out, [], [], offsets
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
+        toes_only = np.zeros(len(self.sites), dtype=bool)
+        if not self.anchored:
+            for k, site in enumerate(self.sites):
+                side = "left" if site in self.character.contacts.get("left", ()) else "right"
+                toes_only[k] = bool(labels.get(f"{side}_toe", False)) and not labels.get(f"{side}_heel", False)
+            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
         tasks, hard, engaged = self.locks.update(flags, data)
+        if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
+            self.locks.free[toes_only & self._release] = False  # rolling, not swinging
+            pivots = {self.locks.tasks[k].site_id for k in np.flatnonzero(toes_only & self._pivot)}
+            tasks = [t for t in tasks if t.site_id not in pivots]  # a pivot may rise as the foot rolls
+            return out, tasks, hard, offsets
         held = {name: bool(labels.get(name, False)) for name in ("left_heel", "left_toe", "right_heel", "right_toe")}
         for site, e in zip(self.sites, engaged):
             held[self.site_label[site]] |= bool(e)
@@ -431,5 +504,5 @@ class Planting:
                 ih, ik, ia2, l1, l2 = self.lengths[side]
                 knee0 = positions[ik].copy()
                 knee0[:2] += self.root_offset
-                out[ik] = _knee_between(out[ih], out[ia2], knee0, l1, l2)
+                out[ik] = knee_between(out[ih][None], out[ia2][None], knee0[None], l1, l2)[0]
         return out, tasks, hard, offsets

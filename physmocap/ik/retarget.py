@@ -16,10 +16,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import MappingError, OptionError, warn
+from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
 from ..trajectory import Trajectory
 from .contacts import ContactOptions, Contacts, detect_contacts, load_contact_csv
+from .footplan import planted_positions
 from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, FrameSolver, SolverOptions
 from .targets import TargetOptions, Targets, build_targets
@@ -179,9 +181,10 @@ def retarget(
     plant_opt, rest = plant_options(rest)
     if rest:
         raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {sorted(_KNOWN)}")
-    if not character.contacts:
+    if not character.contacts and plant_opt.plant and contacts is not False:
         raise MappingError(
-            "the character declares no foot contact points; add [contacts] to its mapping file",
+            "the character has no foot contact points (none in its mapping and none found on its feet); "
+            "add [contacts] to its mapping file, or retarget without planting (--no-plant)",
             path=getattr(character, "map_path", None) or getattr(character, "mjcf_path", None),
         )
     source_start = default_start(motion) if start is None else int(start)
@@ -207,6 +210,10 @@ def retarget(
     traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
     traj.stats["joint_indices"] = dict(joint_indices)
     traj.stats["source_start"] = int(source_start)
+    fid = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
+    traj.stats["fidelity"] = fid
+    for message in fidelity_warnings(fid, source_start):
+        warn(f"{motion.source}: {message}")
     return traj
 
 
@@ -233,9 +240,11 @@ def solve_targets(
     F = targets.num_frames
     planting = None
     if labels is not None and (plant is None or plant.plant):
-        planting = Planting(character, targets.names, targets.fps, plant, floor=solver.options.floor_height)
+        planting = Planting(character, targets.names, targets.fps, plant, floor=solver.options.floor_height, anchored=False)
         targets.info["raw_positions"] = targets.positions.copy()
-        targets.info["foot_offsets"] = np.zeros((F, 2, 2))
+        targets.positions, targets.info["foot_offsets"] = planted_positions(
+            targets.positions, targets.names, labels, targets.fps, planting.options.ease_time, planting.leg_lengths(), planting.stance_heights()
+        )
     qpos = np.empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
@@ -249,12 +258,10 @@ def solve_targets(
                     solver.solve_frame(first=True)
                     solver.q_prev = None
                 frame_labels = {k: v[t] for k, v in labels.items()}
-                pos, solver.extra_tasks, solver.constraints, off = planting.step(
+                _, solver.extra_tasks, solver.constraints, _ = planting.step(
                     targets.positions[t], frame_labels, solver.configuration.data
                 )
-                targets.positions[t] = pos
-                targets.info["foot_offsets"][t] = off
-                solver.set_clearance(planting.clearance_sites())
+                solver.set_clearance(planting.clearance_sites(), planting.clearance_bodies())
             solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
             q, it, level = solver.solve_frame(first=(t == 0 and planting is None))
             qpos[t] = q

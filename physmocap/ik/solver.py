@@ -204,9 +204,11 @@ class FrameSolver:
                 self.points.set_costs(np.where(on, self._point_costs, 0.0))
                 self._points_on = on
 
-    def set_clearance(self, sites: dict[int, float]) -> None:
-        """Swing-foot clearance for the next frame: site id -> height above the floor (m)."""
+    def set_clearance(self, sites: dict[int, float], bodies: dict[int, float] | None = None) -> None:
+        """Swing-foot clearance for the next frame: site id -> height above the floor (m),
+        and body id -> height for every geom point of a swing foot's bodies."""
         self.floor_limit.clearance = dict(sites)
+        self.floor_limit.swing_bodies = dict(bodies or {})
 
     def reset(self, q: np.ndarray | None = None) -> None:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""

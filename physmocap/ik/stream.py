@@ -216,7 +216,7 @@ class StreamingRetargeter:
             pos, solver.extra_tasks, solver.constraints, _ = self.planting.step(
                 targets.positions[0], labels, solver.configuration.data
             )
-            solver.set_clearance(self.planting.clearance_sites())
+            solver.set_clearance(self.planting.clearance_sites(), self.planting.clearance_bodies())
         solver.set_targets(pos, targets.orientations[0], targets.valid[0])
         q, _, _ = solver.solve_frame(first=False)
         self.frame += 1

@@ -38,9 +38,10 @@ import mujoco
 import numpy as np
 
 from ..canonical import CANONICAL_NAMES, canonical_parent
-from ..errors import MappingError
+from ..errors import MappingError, warn
 from ..motion import Motion
-from ..rotations import Rotation, quat_apply, quat_conj, quat_mul
+from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
+from .calibration import CalibrationPose, calibration_pose
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
@@ -123,6 +124,9 @@ class Calibration:
     start_xy: np.ndarray
     ankle_actor: float
     ankle_character: float
+    actor_points: dict = field(default_factory=dict)
+    pose_rotations: dict = field(default_factory=dict)
+    pose: CalibrationPose | None = None
     level: np.ndarray | None = None
     level_centre: np.ndarray | None = None
     info: dict = field(default_factory=dict)
@@ -237,10 +241,18 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     """
     ident = np.array([0.0, 0.0, 0.0, 1.0])
     if c == "pelvis":
-        # Skeletons place the hip centres differently relative to the lumbar joint (CMU's
-        # sit 6 cm in front of it, as in real anatomy; the humanoid's straight below):
-        # that is geometry, not posture, so the pelvis keeps the upright rest assumption.
-        return ident
+        # The pelvis is aligned on the whole trunk line, mid-hip to neck: skeletons place
+        # the hip centres differently relative to the lumbar joint (CMU's sit 6 cm in front
+        # of it, as in real anatomy; the humanoid's straight below), and the line from the
+        # hips to the neck is what the eye (and the fidelity figures) compare.
+        top = next((x for x in ("neck", "head", "chest", "spine") if x in present), None)
+        if top is None or "left_hip" not in present or "right_hip" not in present:
+            return ident
+        d_a = actor_pts[top] - 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
+        d_c = quat_apply(yaw, char_pts[top] - 0.5 * (char_pts["left_hip"] + char_pts["right_hip"]))
+        if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
+            return ident
+        return _min_rotation(d_c, d_a)
     if c in TORSO_UP:
         child = next((x for x in TORSO_UP[c] if x in present), None)
     else:
@@ -253,6 +265,13 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
         return ident
     return _min_rotation(d_c, d_a)
+
+
+def _relative_to_pose(pose_rot: dict[str, np.ndarray], c: str, q: np.ndarray) -> np.ndarray:
+    """:math:`R_a(t_c)^{-1} q`: an offset applied after the actor's world rotation, relative to
+    the calibration pose (identity at the rest pose)."""
+    r = pose_rot.get(c)
+    return q if r is None else quat_mul(quat_conj(r), q)
 
 
 def _median_leg(S: np.ndarray, valid: np.ndarray, col: dict, side: str) -> float | None:
@@ -416,6 +435,29 @@ def build_targets(
         S_rest = motion.skeleton.rest_positions()[idx]
     else:
         S_rest = np.array([S[np.argmax(valid[:, i]), i] for i in range(N)])
+    # --- calibration pose (rotational sources): the rest pose if it stands, else the most
+    # upright frame of the motion (see physmocap.ik.calibration)
+    pose = cal.pose if cal is not None else None
+    pose_rot: dict[str, np.ndarray] = {} if cal is None else dict(cal.pose_rotations)
+    if cal is not None:
+        calib_pts = dict(cal.actor_points)
+    elif motion.is_rotational and rot_all is not None:
+        pose = calibration_pose(
+            {c: S_rest[col[c]] for c in present},
+            {c: np.where(valid[:, col[c], None], S[:, col[c]], np.nan) for c in present},
+        )
+        if pose.frame is None:
+            calib_pts = {c: S_rest[col[c]] for c in present}
+        else:
+            calib_pts = {c: S[pose.frame, col[c]] for c in present}
+            pose_rot = {c: rot_all[pose.frame, joint_indices[c]] for c in present}
+        if not pose.standing:
+            warn(
+                f"{motion.source}: no usable calibration pose: neither the rest pose nor any frame shows "
+                f"the actor standing upright; orientations calibrated on {pose.describe()}, the most upright"
+            )
+    else:
+        calib_pts = {c: S_rest[col[c]] for c in present}
 
     # --- root scale from the leg chains
     def leg_len(points: dict[str, np.ndarray], side: str) -> float | None:
@@ -427,7 +469,7 @@ def build_targets(
             + np.linalg.norm(points[chain[1]] - points[chain[2]])
         )
 
-    actor_pts = {c: S_rest[col[c]] for c in present}
+    actor_pts = {c: S_rest[col[c]] for c in present}  # for bone lengths (any pose)
     char_pts = {c: rest_c[c][0] for c in present}
     if motion.is_rotational:
         la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
@@ -454,7 +496,7 @@ def build_targets(
     has_q = np.zeros(N, dtype=bool)
     yaw = np.array([0.0, 0.0, 0.0, 1.0]) if cal is None else cal.yaw
     if cal is None and "left_hip" in pset and "right_hip" in pset:
-        f_a = _facing(actor_pts["left_hip"], actor_pts["right_hip"])
+        f_a = _facing(calib_pts["left_hip"], calib_pts["right_hip"])
         f_c = _facing(char_pts["left_hip"], char_pts["right_hip"])
         yaw = _yaw_between(f_c, f_a)
     # which character sites can turn relative to their canonical parent's site
@@ -473,7 +515,8 @@ def build_targets(
         if motion.is_rotational and rot_all is not None:
             R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
             if c not in offsets:
-                offsets[c] = quat_mul(quat_mul(_rest_alignment(c, pset, actor_pts, char_pts, yaw), yaw), q_c0)
+                aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
+                offsets[c] = _relative_to_pose(pose_rot, c, aligned)
             Q[:, i] = quat_mul(R_a, offsets[c])
             has_q[i] = True
         elif source_orientations is not None and c in source_orientations:
@@ -497,13 +540,13 @@ def build_targets(
         if seg in pset and has_q[col[seg]]:
             delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
         elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
-            A = _rest_alignment(seg, pset, actor_pts, char_pts, yaw)
-            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], quat_mul(A, yaw))
+            A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
+            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
     if "chest" not in delta:  # the upper torso turns with the highest source torso joint
         for seg in ("spine", "pelvis"):
             if motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
-                A = _rest_alignment(seg, pset, actor_pts, char_pts, yaw)
-                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], quat_mul(A, yaw))
+                A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
+                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
                 break
             if seg in delta:
                 delta["chest"] = delta[seg]
@@ -515,7 +558,8 @@ def build_targets(
     # the hip centres are anatomical), else on the pelvis joint.
     T = np.zeros((F, N, 3))
     ip = col["pelvis"]
-    if "left_hip" in pset and "right_hip" in pset:
+    hips = "left_hip" in pset and "right_hip" in pset
+    if hips:
         anchor_a = 0.5 * (S[:, col["left_hip"]] + S[:, col["right_hip"]])
         anchor_c0 = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
         ok = valid[:, col["left_hip"]] & valid[:, col["right_hip"]]
@@ -546,6 +590,23 @@ def build_targets(
             # c is carried rigidly by a torso segment that the character's parent p belongs to
             T[:, i] = T[:, j] + quat_apply(delta[seg], char_pts[c] - char_pts[p])
             continue
+        if c == "neck" and hips:
+            # the trunk line, mid-hip to neck, follows the actor's (the chain of torso
+            # joints between has other proportions on every skeleton)
+            length = float(np.linalg.norm(char_pts[c] - anchor_c0))
+            d, n = _unit(S[:, i] - anchor_a)
+            ok_n = (n > 1e-6) & valid[:, i] & ok
+            walked = T[:, j] + float(np.linalg.norm(char_pts[c] - char_pts[p])) * _unit(S[:, i] - S[:, j])[0]
+            T[:, i] = np.where(ok_n[:, None], anchor + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
+            # the upper torso turns with its corrected neck, so the chest's orientation
+            # target and the shoulders it carries agree with the trunk line
+            fix = quat_between(walked - T[:, j], T[:, i] - T[:, j])
+            if has_q[j]:
+                Q[:, j] = quat_mul(fix, Q[:, j])
+            carrier = p if p in delta else ("chest" if "chest" not in pset else None)
+            if carrier is not None and carrier in delta:
+                delta[carrier] = quat_mul(fix, delta[carrier])
+            continue
         length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])
         bad = (n < 1e-6) | ~valid[:, i] | ~valid[:, j]
@@ -571,6 +632,9 @@ def build_targets(
             start_xy=np.array(start_xy, dtype=float),
             ankle_actor=float(ankle_a),
             ankle_character=float(ankle_c),
+            actor_points=calib_pts,
+            pose_rotations=pose_rot,
+            pose=pose,
             level=level,
             level_centre=centre,
             info=level_info,

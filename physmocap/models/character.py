@@ -119,16 +119,31 @@ def _resolve(path: str | os.PathLike | None) -> Path:
     return p
 
 
-def _load_model(path: Path) -> mujoco.MjModel:
+def _load_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
+    """Compile the MJCF; with a mapping's ``[sites]``, add those sites first (MjSpec)."""
     if not path.exists():
         raise InputError("MJCF file not found", path=path)
     if path.is_dir():
         raise InputError("is a directory, expected an MJCF file", path=path)
     try:
-        return mujoco.MjModel.from_xml_path(os.fspath(path))
+        if mp is None or not mp.sites:
+            return mujoco.MjModel.from_xml_path(os.fspath(path))
+        spec = mujoco.MjSpec.from_file(os.fspath(path))
     except (ValueError, OSError) as exc:
         msg = " ".join(str(exc).split())
         raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
+    for name, (body_name, pos) in mp.sites.items():
+        body = spec.body(body_name)
+        if body is None:
+            raise mp.error(f"the model has no body {body_name!r}", "sites", name)
+        if spec.site(name) is not None:
+            raise mp.error(f"the model already has a site {name!r}", "sites", name)
+        body.add_site(name=name, pos=list(pos))
+    try:
+        return spec.compile()
+    except (ValueError, OSError) as exc:
+        msg = " ".join(str(exc).split())
+        raise InputError(f"MuJoCo cannot compile this MJCF with the added sites: {msg}", path=path) from None
 
 
 def _find_map(mjcf: Path, map_path: str | os.PathLike | None) -> Path | None:
@@ -139,6 +154,10 @@ def _find_map(mjcf: Path, map_path: str | os.PathLike | None) -> Path | None:
         candidates.append(mjcf.with_name(f"{DEFAULT_CHARACTER}.map.toml"))
     elif mjcf.stem.startswith("scene_"):  # scene_<name>.xml includes <name>.xml
         candidates.append(mjcf.with_name(mjcf.stem[len("scene_"):] + ".map.toml"))
+    # mapping files bundled for known robot models, found by the model's file name
+    from ..resources import mjcf_dir
+
+    candidates.append(mjcf_dir() / "robots" / f"{mjcf.stem}.map.toml")
     for c in candidates:
         if c.exists():
             return c
@@ -219,11 +238,12 @@ def load_character(
             required canonical joint unmapped, or a joint lacks required limits.
     """
     mjcf = _resolve(path)
-    model = _load_model(mjcf)
     mp_file = _find_map(mjcf, map_path)
     if mp_file is not None:
         mp = read_mapping(mp_file)
+        model = _load_model(mjcf, mp)
     else:
+        model = _load_model(mjcf)
         mp = implicit_mapping(model)
     where = mp_file if mp_file is not None else mjcf
     tracked = _resolve_frames(mp, model)
@@ -237,6 +257,8 @@ def load_character(
         for s in sites:
             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0:
                 raise mp.error(f"the model has no site {s!r}", "contacts", side)
+    if not mp.contacts and all(f"{side}_ankle" in tracked for side in ("left", "right")):
+        model, tracked = _add_foot_contacts(mjcf, mp, model, tracked, where)
 
     root = _root_joint(model, mjcf)
 
@@ -355,6 +377,27 @@ def load_character(
         total_mass=total_mass,
         _rest=rest,
     )
+
+
+def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: dict, where: Path):
+    """A mapping without ``[contacts]``: heel and toe sites from the feet's geometry
+    (:mod:`.footprint`), added to the model; returns the recompiled model and its frames."""
+    from .footprint import foot_contact_points
+
+    qpos = _rest_qpos(mp, model, _root_joint(model, mjcf), mjcf, where)
+    ankles = {}
+    for side in ("left", "right"):
+        tf = tracked[f"{side}_ankle"]
+        ankles[side] = int(model.site(tf.name).bodyid[0]) if tf.kind == "site" else int(model.body(tf.name).id)
+    found = foot_contact_points(model, qpos, ankles)
+    if set(found) != {"left", "right"}:
+        return model, tracked
+    for side, points in found.items():
+        for name, body, pos in points:
+            mp.sites[name] = (model.body(body).name, (float(pos[0]), float(pos[1]), float(pos[2])))
+        mp.contacts[side] = tuple(name for name, _, _ in points)
+    model = _load_model(mjcf, mp)
+    return model, _resolve_frames(mp, model)
 
 
 def _rest_qpos(mp: Mapping, model: mujoco.MjModel, root: int, mjcf: Path, where: Path) -> np.ndarray:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-__all__ = ["geom_z_extent", "character_geoms", "lowest_z", "highest_z"]
+__all__ = ["geom_z_extent", "geom_candidates", "hull_vertices", "character_geoms", "is_visual_only", "lowest_z", "highest_z"]
 
 
 def geom_z_extent(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> tuple[float, float]:
@@ -50,6 +50,17 @@ def geom_z_extent(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> tupl
     return pz - float(e), pz + float(e)
 
 
+def is_visual_only(model: mujoco.MjModel, gid: int) -> bool:
+    """A mesh that does not collide (contype and conaffinity 0): drawn, not simulated.
+    Robot models draw every link with such a mesh beside its collision geoms; the floor
+    constraint and the floor figures leave them out (primitives are always kept)."""
+    return (
+        int(model.geom_type[gid]) == int(mujoco.mjtGeom.mjGEOM_MESH)
+        and model.geom_contype[gid] == 0
+        and model.geom_conaffinity[gid] == 0
+    )
+
+
 def character_geoms(model: mujoco.MjModel, collision_only: bool = False) -> list[int]:
     """Geoms attached to a moving body (not the world); optionally only colliding ones."""
     out = []
@@ -72,3 +83,44 @@ def highest_z(model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int] | Non
     """Highest world height of ``geoms`` (default: every character geom), metres."""
     geoms = character_geoms(model) if geoms is None else geoms
     return max((geom_z_extent(model, data, g)[1] for g in geoms), default=float("-inf"))
+
+
+def hull_vertices(model: mujoco.MjModel, mesh: int) -> np.ndarray:
+    """The vertices of a mesh's convex hull (its lowest point is always one of them):
+    a robot's foot mesh of 10,000 vertices has a few hundred."""
+    start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+    v = np.asarray(model.mesh_vert[start : start + n], dtype=float)
+    if n < 16:
+        return v
+    try:
+        from scipy.spatial import ConvexHull
+
+        return v[np.sort(ConvexHull(v).vertices)]
+    except Exception:  # noqa: BLE001 - flat or degenerate meshes: keep every vertex
+        return v
+
+
+def geom_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
+    """Points in the geom's frame whose lowest one, less a radius, is the geom's lowest point.
+
+    Returns ``(k, 4)`` rows ``(x, y, z, radius)``: spheres and capsules are
+    handled exactly (centre / end-cap centres with their radius), boxes by their
+    eight corners, cylinders and ellipsoids conservatively by the corners of
+    their bounding box, meshes by their vertices.
+    """
+    t = int(model.geom_type[gid])
+    s = model.geom_size[gid]
+    G = mujoco.mjtGeom
+    if t == int(G.mjGEOM_SPHERE):
+        return np.array([[0.0, 0.0, 0.0, s[0]]])
+    if t == int(G.mjGEOM_CAPSULE):
+        return np.array([[0.0, 0.0, s[1], s[0]], [0.0, 0.0, -s[1], s[0]]])
+    if t in (int(G.mjGEOM_BOX), int(G.mjGEOM_ELLIPSOID), int(G.mjGEOM_CYLINDER)):
+        hx, hy, hz = (s[0], s[1], s[2]) if t != int(G.mjGEOM_CYLINDER) else (s[0], s[0], s[1])
+        corners = np.array([[sx * hx, sy * hy, sz * hz, 0.0] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+        return corners
+    if t == int(G.mjGEOM_MESH):
+        v = hull_vertices(model, int(model.geom_dataid[gid]))
+        return np.hstack([v, np.zeros((len(v), 1))])
+    # planes, heightfields, SDFs: not constrained
+    return np.zeros((0, 4))

@@ -14,9 +14,12 @@ optional except ``[joints]``::
     pelvis = "site:pelvis_site"   # a bare NAME is a site if one has that name, else a body
     left_knee = "body:l_shank"
 
-    [contacts]                # foot contact SITES, heel to toe
-    left = ["l_heel", "l_toe"]
+    [contacts]                # foot contact SITES, heel to toe (optional: without it the heel
+    left = ["l_heel", "l_toe"]  # and toe are found on the feet's geometry, physmocap.models.footprint)
     right = ["r_heel", "r_toe"]
+
+    [sites]                   # sites to add to the model before it is compiled (MjSpec), for
+    neck = { body = "torso_link", pos = [0.0, 0.0, 0.35] }   # points a stock model lacks
 
     [rest]                    # the rest pose: standing, arms down, facing forward
     keyframe = "home"         # start from this keyframe (default: "rest" if present, else qpos0)
@@ -88,6 +91,7 @@ class Mapping:
     rest_joints: dict[str, float] = field(default_factory=dict)
     velocity_limits: dict[str, float] = field(default_factory=dict)  # deg/s or m/s, "default" allowed
     joint_limits: dict[str, tuple[float, float]] = field(default_factory=dict)  # deg or m
+    sites: dict[str, tuple[str, tuple[float, float, float]]] = field(default_factory=dict)  # name -> (body, pos m)
     text: str = ""
 
     def line_of(self, section: str, key: str | None = None) -> int | None:
@@ -141,7 +145,7 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
     p = Path(path)
     raw, text = read_toml(p, "mapping file")
     mp = Mapping(path=p, text=text)
-    known = {"character", "joints", "contacts", "rest", "velocity_limits", "joint_limits"}
+    known = {"character", "joints", "contacts", "rest", "velocity_limits", "joint_limits", "sites"}
     for key in raw:
         if key not in known:
             raise MappingError(
@@ -210,6 +214,18 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
         if not isinstance(sites, list) or not sites or not all(isinstance(s, str) for s in sites):
             raise mp.error("expected a non-empty list of site names", "contacts", side)
         mp.contacts[side] = tuple(sites)
+
+    added = raw.get("sites", {})
+    if not isinstance(added, dict):
+        raise mp.error("expected a table", "sites")
+    for name, spec in added.items():
+        ok = isinstance(spec, dict) and isinstance(spec.get("body"), str) and set(spec) <= {"body", "pos"}
+        pos = spec.get("pos", [0.0, 0.0, 0.0]) if isinstance(spec, dict) else None
+        if not ok or not isinstance(pos, list) or len(pos) != 3 or not all(isinstance(v, (int, float)) for v in pos):
+            raise mp.error('expected { body = "BODY", pos = [x, y, z] } (metres, in the body\'s frame)', "sites", name)
+        if not all(abs(float(v)) < 100.0 for v in pos):
+            raise mp.error("pos must be within 100 m of the body", "sites", name)
+        mp.sites[name] = (spec["body"], (float(pos[0]), float(pos[1]), float(pos[2])))
 
     rest = raw.get("rest", {})
     if not isinstance(rest, dict):

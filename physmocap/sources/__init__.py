@@ -11,9 +11,13 @@ import importlib
 import os
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from ..errors import InputError
-from ..motion import Motion
 from ..resources import resolve_input
+
+if TYPE_CHECKING:  # the reader modules import numpy/scipy; listing them stays cheap
+    from ..motion import Motion
 
 #: suffix -> (module, function).  Readers take ``(path, **options)``.
 READERS: dict[str, tuple[str, str]] = {
@@ -22,6 +26,8 @@ READERS: dict[str, tuple[str, str]] = {
     ".npz": ("physmocap.sources.positions", "read_positions"),
     ".jsonl": ("physmocap.sources.positions", "read_positions"),
     ".mcap": ("physmocap.sources.mcap", "read_mcap"),
+    ".c3d": ("physmocap.sources.c3d", "read_c3d"),
+    ".trc": ("physmocap.sources.trc", "read_trc"),
 }
 
 
@@ -38,4 +44,48 @@ def load_motion(path: str | os.PathLike, **options) -> Motion:
         raise InputError("is a directory, expected a file", path=p)
     module_name, func_name = READERS[suffix]
     reader = getattr(importlib.import_module(module_name), func_name)
-    return reader(Path(p), **options)
+    motion = reader(Path(p), **options)
+    check_plausible(motion, p)
+    return motion
+
+
+#: Plausible ranges of what a capture holds: frame rate (Hz), distances (metres).
+FPS_RANGE = (0.1, 10000.0)
+MAX_DISTANCE = 1000.0
+
+
+def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
+    """Refuse numbers no capture holds, naming the file, frame and joint: a frame rate outside
+    0.1-10,000 Hz, offsets or positions farther than a kilometre, non-finite or zero-norm
+    rotations (lost tracker samples are NaN positions, which are allowed)."""
+    import numpy as np
+
+    lo, hi = FPS_RANGE
+    if not (lo <= motion.fps <= hi):
+        raise InputError(f"frame rate {motion.fps:.6g} Hz is outside {lo:g}-{hi:g} Hz", path=path)
+    names = motion.skeleton.names
+    off = np.asarray(motion.skeleton.offsets)
+    bad = ~np.all(np.isfinite(off) & (np.abs(off) < MAX_DISTANCE), axis=1)
+    if bad.any():
+        j = int(np.argmax(bad))
+        raise InputError(f"joint {names[j]}: offset {off[j].tolist()} is not a finite distance within 1 km", path=path)
+
+    def first_bad(arr: np.ndarray, what: str, allow_nan: bool) -> None:
+        ok = np.abs(arr) < MAX_DISTANCE
+        if allow_nan:
+            ok |= np.isnan(arr)
+        ok = np.all(ok, axis=-1)
+        if not ok.all():
+            f, j = (int(x) for x in np.argwhere(~ok)[0])
+            raise InputError(f"frame {f}: {what} {j} is not a finite distance within 1 km", path=path)
+
+    if motion.rotations is not None:
+        norms = np.linalg.norm(motion.rotations, axis=-1)
+        ok = np.isfinite(norms) & (norms > 1e-9)
+        if not ok.all():
+            f, j = (int(x) for x in np.argwhere(~ok)[0])
+            raise InputError(f"frame {f}: joint {names[j]} has no valid rotation (zero or non-finite)", path=path)
+        if motion.translations is not None and motion.translations.size:
+            first_bad(motion.translations, "translated joint", allow_nan=False)
+    if motion.positions is not None:
+        first_bad(motion.positions, "joint", allow_nan=True)

@@ -1,6 +1,6 @@
 """Quality metrics of a character trajectory (and of source motions).
 
-Definitions follow ``shared/design/metrics.md``; units are stated per figure
+Definitions: ``docs/metrics.md`` in the repository; units are stated per figure
 (cm/s, mm, degrees, rad/s).  Every function is pure: arrays in, numbers out.
 
 * **Joint-limit violations**: frames x joints whose value lies outside the
@@ -33,7 +33,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from .rotations import Rotation, wxyz_to_xyzw
+from ..rotations import Rotation, wxyz_to_xyzw
 
 __all__ = [
     "LIMIT_TOLERANCE",
@@ -123,7 +123,7 @@ def geom_lowest_heights(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.nd
     solver's floor constraint (:class:`physmocap.ik.limits.GeomCandidates`), so
     the metric checks the solver.
     """
-    from .models.geometry import geom_z_extent
+    from ..models.geometry import geom_z_extent
 
     if geoms is None:
         geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
@@ -132,9 +132,12 @@ def geom_lowest_heights(model: mujoco.MjModel, data: mujoco.MjData, geoms: np.nd
 
 def lowest_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """``(F,)`` height of the lowest point of any non-world geom per frame (metres)
-    (:func:`geom_lowest_heights`)."""
+    (:func:`geom_lowest_heights`); visual-only meshes are left out, as in the floor
+    constraint (:func:`physmocap.models.geometry.is_visual_only`)."""
+    from ..models.geometry import is_visual_only
+
     data = mujoco.MjData(model)
-    geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0], dtype=int)
+    geoms = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0 and not is_visual_only(model, g)], dtype=int)
     out = np.empty(qpos.shape[0])
     for t, q in enumerate(qpos):
         data.qpos[:] = q
@@ -255,7 +258,7 @@ def labelled_skating(traj, contacts, sites: list[str] | None = None, pos: np.nda
     stance samples whose site is labelled in contact (heel site: heel label;
     other sites: toe label).  Skating outside it comes from frames the
     contact labels leave free (landing, toe-off, swing close to the floor)."""
-    from .ik.contacts import contact_sites_labels
+    from ..ik.contacts import contact_sites_labels
 
     _check_frames(traj.num_frames, contacts, "trajectory")
     if sites is None or pos is None:
@@ -376,7 +379,7 @@ def hovering(heights: np.ndarray, in_contact: np.ndarray) -> dict:
 
 def _check_frames(n: int, contacts, what: str) -> None:
     if contacts.num_frames != n:
-        from .errors import OptionError
+        from ..errors import OptionError
 
         raise OptionError(
             f"the contact labels cover {contacts.num_frames} frames but the {what} has {n}",
@@ -409,7 +412,7 @@ def _source_floor(motion, joint_indices, contacts):
     (user labels from a CSV carry no floor)."""
     if contacts is not None and contacts.floor is not None:
         return contacts.floor
-    from .ik.contacts import detect_contacts
+    from ..ik.contacts import detect_contacts
 
     return detect_contacts(motion, joint_indices).floor
 

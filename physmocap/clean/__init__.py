@@ -1,0 +1,52 @@
+"""Glitch detection and repair in the source's own skeleton (``physmocap clean``).
+
+* :mod:`.detect`: spikes, flips, discontinuities, frozen joints, bone stretch, gaps.
+* :mod:`.correct`: interpolation over the repairable ones, nothing else touched.
+
+``clean(motion) -> (Motion, GlitchReport)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..motion import Motion
+from .correct import correct_glitches
+from .detect import CleanOptions, Glitch, detect_glitches
+
+__all__ = ["CleanOptions", "Glitch", "GlitchReport", "clean", "detect_glitches", "correct_glitches"]
+
+
+@dataclass(frozen=True)
+class GlitchReport:
+    """What :func:`clean` found and did."""
+
+    source: str
+    frames: int
+    fps: float
+    glitches: tuple[Glitch, ...]
+
+    def as_dict(self) -> dict:
+        return {
+            "source": self.source,
+            "frames": self.frames,
+            "fps": self.fps,
+            "glitches": [g.as_dict() for g in self.glitches],
+        }
+
+    def table(self) -> str:
+        """A readable table: type, joint, frames, severity, correction."""
+        if not self.glitches:
+            return f"{self.source}: no glitch found in {self.frames} frames\n"
+        rows = [f"{'type':14s} {'joint':22s} {'frames':>13s} {'severity':>10s}  corrected"]
+        for g in self.glitches:
+            frames = f"{g.start}" if g.start == g.end else f"{g.start}-{g.end}"
+            rows.append(f"{g.kind:14s} {g.joint:22s} {frames:>13s} {g.severity:7.1f} {g.unit:3s}  {g.corrected or 'reported only'}")
+        return "\n".join(rows) + "\n"
+
+
+def clean(motion: Motion, options: CleanOptions | None = None) -> tuple[Motion, GlitchReport]:
+    """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`)."""
+    found = detect_glitches(motion, options)
+    fixed, done = correct_glitches(motion, found)
+    return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

@@ -1,0 +1,211 @@
+r"""Finding capture glitches in a motion's own skeleton.
+
+Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, never frames):
+
+* **Jumps** (spikes, flips, discontinuities) on every animated joint's local rotation
+  :math:`q_j(t)`.  The frame-to-frame angle :math:`\omega(t) = \angle(q(t-1), q(t))`
+  (sign-invariant: a quaternion sign flip is not a rotation) is a *jump* where it exceeds
+  ``jump_deg`` and ``jump_ratio`` times the median of its neighbours over
+  ``context_time`` (fast real motion, a kick or a spin, moves every frame, a glitch
+  moves in one), and the step is faster than ``max_speed`` degrees per second.  A jump followed, within ``max_glitch_time``, by a jump back to within
+  ``return_ratio`` of the angle jumped marks the frames between as a ``spike`` (one or a
+  few frames) or a ``flip`` (a jump of 150 degrees or more); a jump with no return is a
+  ``discontinuity`` (reported on its frame).
+* **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
+  longer while it moves before and after and the rest of the body moves meanwhile; a value
+  held in several separate runs is a limit the capture's own solver clamps to, not a freeze.
+* **Bone stretch** (positional sources): a bone whose length departs from its median by
+  more than ``stretch_ratio``.
+* **Gaps** (positional sources): runs of zero confidence.
+
+Each :class:`Glitch` names its type, the joint, the frames (inclusive, in the motion's
+numbering) and a severity (degrees or metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..motion import Motion
+
+__all__ = ["CleanOptions", "Glitch", "detect_glitches", "joint_angles_step"]
+
+
+@dataclass(frozen=True)
+class CleanOptions:
+    """Detection thresholds.
+
+    Attributes:
+        jump_deg: Smallest frame-to-frame rotation (degrees) that can be a glitch.
+        max_speed: ... and faster than this (degrees per second): joints of the fastest
+            human motions (throws, kicks) stay below about 1500 deg/s outside the
+            shoulder's internal rotation, so at a low frame rate a large step is no glitch.
+        jump_ratio: ... and at least this many times the median of its neighbours.
+        context_time: Seconds of neighbours (each side) for that median.
+        max_glitch_time: Longest glitch between a jump and its return (seconds).
+        return_ratio: The return brings the joint back to within this fraction of the jump.
+        flip_deg: A glitch whose jump is at least this large is a flip.
+        frozen_time: Shortest frozen run (seconds).
+        stretch_ratio: Bone-length departure from the median that is a glitch (positional).
+    """
+
+    jump_deg: float = 10.0
+    max_speed: float = 1500.0
+    jump_ratio: float = 5.0
+    context_time: float = 0.1
+    max_glitch_time: float = 0.5
+    return_ratio: float = 0.5
+    flip_deg: float = 150.0
+    frozen_time: float = 0.1
+    stretch_ratio: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name, v in asdict(self).items():
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"CleanOptions.{name} must be positive, got {v}")
+
+
+@dataclass(frozen=True)
+class Glitch:
+    """One glitch: ``kind`` on ``joint`` over frames ``start..end`` (inclusive)."""
+
+    kind: str
+    joint: str
+    start: int
+    end: int
+    severity: float
+    unit: str = "deg"
+    corrected: str = field(default="", compare=False)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (degrees) between unit quaternions ``(..., 4)``, sign-invariant."""
+    d = np.abs(np.sum(a * b, axis=-1))
+    return np.degrees(2.0 * np.arccos(np.clip(d, 0.0, 1.0)))
+
+
+def joint_angles_step(rotations: np.ndarray) -> np.ndarray:
+    """``(F, J)`` frame-to-frame rotation angle in degrees (0 on frame 0)."""
+    out = np.zeros(rotations.shape[:2])
+    out[1:] = _angle(rotations[1:], rotations[:-1])
+    return out
+
+
+def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
+    """Median of ``x (F,)`` over ``t - half .. t + half`` excluding ``t`` and its direct
+    neighbours (a glitch's own jumps); edges repeat the nearest value."""
+    from scipy.ndimage import median_filter
+
+    footprint = np.ones(2 * half + 1, dtype=bool)
+    footprint[half - 1 : half + 2] = False
+    return median_filter(x, footprint=footprint, mode="nearest")
+
+
+def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0) -> list[Glitch]:
+    """Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``."""
+    F = len(rot)
+    step = np.zeros(F)
+    step[1:] = _angle(rot[1:], rot[:-1])
+    half = max(2, int(round(opt.context_time * fps)))
+    ref = _neighbour_median(step, half)
+    is_jump = (step > max(opt.jump_deg, opt.max_speed / fps)) & (step > opt.jump_ratio * ref)
+    is_jump[: skip + 1] = False
+    jumps = np.flatnonzero(is_jump)
+    out: list[Glitch] = []
+    longest = max(1, int(round(opt.max_glitch_time * fps)))
+    used: set[int] = set()
+    for a in jumps:
+        if a in used:
+            continue
+        before = rot[a - 1]
+        back = None
+        for b in jumps[(jumps > a) & (jumps <= a + longest)]:
+            if b in used:
+                continue
+            # does the joint return (near) to where it was before the jump?
+            if _angle(rot[b], before) <= opt.return_ratio * step[a]:
+                back = b
+                break
+        if back is not None:
+            used.update((int(a), int(back)))
+            size = float(np.max(_angle(rot[a:back], before)))
+            kind = "flip" if size >= opt.flip_deg else "spike"
+            out.append(Glitch(kind, joint, int(a), int(back - 1), size))
+        else:
+            used.add(int(a))
+            out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
+    return out
+
+
+def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
+    """Runs where the joint's rotation is exactly constant while the body moves."""
+    F = len(rot)
+    same = np.zeros(F, dtype=bool)
+    same[1:] = np.all(rot[1:] == rot[:-1], axis=1)
+    if same[1:].all():  # never animated: not a glitch
+        return []
+    shortest = max(3, int(round(opt.frozen_time * fps)))
+    d = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+    runs = [(s - 1, e) for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]  # run's first frame too
+    # A value the joint holds in several separate runs is a limit the capture's solver clamps
+    # to (CMU's knees at full extension in every stance), not a freeze.
+    values = [tuple(np.round(rot[a], 9)) for a, _ in runs]
+    out = []
+    for (start, e), v in zip(runs, values):
+        inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
+        if values.count(v) > 1 or not inside or e - start + 1 < shortest or moving[start : e + 1].mean() <= 0.5:
+            continue
+        out.append(Glitch("frozen", joint, int(start + 1), int(e), float((e - start) / fps), unit="s"))
+    return out
+
+
+def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
+    """Every glitch found in ``motion`` (sorted by frame, then joint)."""
+    opt = options or CleanOptions()
+    names = motion.skeleton.names
+    glitches: list[Glitch] = []
+    fps = float(motion.fps)
+    if motion.is_rotational and motion.rotations is not None:
+        R = np.asarray(motion.rotations, dtype=float)
+        steps = joint_angles_step(R)
+        animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+        from ..ik.retarget import default_start
+
+        import warnings
+
+        with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
+            warnings.simplefilter("ignore")
+            skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
+        for j in animated:
+            glitches += _jumps(R[:, j], fps, opt, names[j], skip)
+        # the body moves on a frame where the median joint moves more than 0.05 degrees
+        moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
+        for j in animated:
+            glitches += _frozen(R[:, j], moving, fps, opt, names[j])
+    if motion.positions is not None:
+        P = np.asarray(motion.positions, dtype=float)
+        parents = motion.skeleton.parents
+        for j, p in enumerate(parents):
+            if p < 0:
+                continue
+            length = np.linalg.norm(P[:, j] - P[:, p], axis=1)
+            med = np.nanmedian(length)
+            if not np.isfinite(med) or med <= 1e-6:
+                continue
+            bad = np.abs(length - med) > opt.stretch_ratio * med
+            d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+            for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
+                dev = float(np.nanmax(np.abs(length[s : e + 1] - med)))
+                glitches.append(Glitch("bone_stretch", names[j], int(s), int(e), dev, unit="m"))
+        if motion.confidence is not None:
+            for j in range(P.shape[1]):
+                lost = motion.confidence[:, j] <= 0.0
+                d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
+                for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
+                    glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
+    return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))

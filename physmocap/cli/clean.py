@@ -1,0 +1,56 @@
+"""``physmocap clean``: find and repair capture glitches in a BVH (or any source) file."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..errors import OptionError
+from ..fileio import atomic_open, check_not_input, check_writable
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "clean",
+        help="find and repair capture glitches (spikes, flips, frozen joints)",
+        description=(
+            "Detect glitches in the source skeleton (spikes, flips, discontinuities, frozen joints; "
+            "bone stretch and gaps on joint-position sources), repair the repairable ones by "
+            "interpolating over them, and write the same file layout (a drop-in replacement)."
+        ),
+    )
+    p.add_argument("input", metavar="INPUT", help="motion file (.bvh, ...) or 'example'")
+    p.add_argument("-o", "--output", help="cleaned BVH (same hierarchy, channels, frames and frame time)")
+    p.add_argument("--report", metavar="GLITCHES.json", help="write the glitch list as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..clean import clean
+    from ..sources import load_motion
+
+    if args.output:
+        if Path(args.output).suffix.lower() != ".bvh":
+            raise OptionError("clean writes .bvh files", path=args.output)
+        check_writable(args.output)
+    if args.report:
+        check_writable(args.report)
+    check_not_input([args.output, args.report], [args.input])
+    motion = load_motion(args.input)
+    if args.output and not motion.is_rotational:
+        raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
+    fixed, report = clean(motion)
+    sys.stdout.write(report.table())
+    if args.output:
+        from ..export.bvh import write_bvh
+
+        write_bvh(fixed, args.output)
+        print(f"wrote {args.output}", file=sys.stderr)
+    if args.report:
+        with atomic_open(args.report) as fh:
+            json.dump(report.as_dict(), fh, indent=2, sort_keys=True, allow_nan=False)
+            fh.write("\n")
+        print(f"wrote {args.report}", file=sys.stderr)
+    return 0

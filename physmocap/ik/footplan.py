@@ -1,0 +1,317 @@
+r"""Offline foot plan: one plant location per contact, blended in and out, never dragging the body.
+
+Offline retargeting sees the whole clip, so each foot's targets can be made to
+stand still during its contacts without any causal lag (the streaming
+retargeter keeps the causal :class:`~physmocap.ik.planting.FootAnchor`).
+
+For one foot with contact points ``p`` (heel: the ankle target; toe: the toe
+target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
+
+* the plant location is the median of that point's (scaled) target over the
+  interval horizontally, :math:`A_k = \operatorname{median}_{t \in k} x_p(t)`,
+  for the point that touches down first; the other points of the same contact
+  get the location the same foot translation gives them (so heel and toe
+  agree, :func:`_consistent_anchors`),
+  and vertically the height at which the character's joint carrying the point
+  stands when the point rests on the floor (from its rest pose);
+* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it and is held
+  at its end values outside it;
+* its weight :math:`w_k(t)` is 1 inside the interval and falls to 0 along a
+  smoothstep over ``ease_time`` seconds before :math:`a_k` and after
+  :math:`b_k` (ease-in, ease-out);
+* the foot's offset is :math:`o(t) = \sum_k w_k o_k / \max(1, \sum_k w_k)`.
+
+Offsets are three-dimensional: horizontally the plant location, vertically
+the joint's stance height.  Only the foot moves (ankle, toe, toe tip; the knee is re-placed by two-bone
+IK so thigh and shank keep their lengths); the pelvis and the rest of the body
+stay on the actor's scaled path, so nothing accumulates over a clip.  Because
+the whole foot is translated by the offset of the point(s) in contact, it keeps
+the actor's rotation: a foot turning on its toe pivots about the toe's plant
+location.  With heel and toe both in contact the two offsets are averaged, and
+because each is continuous and the weights are, :math:`o(t)` is continuous
+(no pop at heel strike or toe-off).  Units: metres, seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions"]
+
+
+def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
+    """``[(start, end)]`` inclusive frame ranges where ``label (F,)`` is True."""
+    x = np.asarray(label, dtype=bool).astype(np.int8)
+    d = np.diff(np.concatenate([[0], x, [0]]))
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1) - 1
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
+def ease_weights(
+    num_frames: int, start: int, end: int, ease_frames: int, inside: tuple[bool, bool] = (False, False)
+) -> np.ndarray:
+    """``(F,)`` weight of interval ``[start, end]``: 1 inside, smoothstep ramps of ``ease_frames``.
+
+    A ramp lies outside the interval (before ``start``, after ``end``) unless
+    ``inside`` says otherwise for that end: then it lies within the interval,
+    so the weight is 0 outside it (used where another contact point of the foot
+    is down across that end and must not be disturbed).
+    """
+    t = np.arange(num_frames, dtype=float)
+    if ease_frames <= 0:
+        return ((t >= start) & (t <= end)).astype(float)
+    s0 = start + ease_frames if inside[0] else start
+    e0 = end - ease_frames if inside[1] else end
+    gap = np.maximum(s0 - t, 0.0) + np.maximum(t - e0, 0.0)
+    x = np.clip(1.0 - gap / (ease_frames + 1), 0.0, 1.0)
+    w = x * x * (3.0 - 2.0 * x)
+    if inside[0]:
+        w[t < start] = 0.0
+    if inside[1]:
+        w[t > end] = 0.0
+    return w
+
+
+@dataclass(frozen=True)
+class FootPlan:
+    """The plan of one foot over a clip (metres).
+
+    Attributes:
+        xy: ``(F, 2)`` horizontal offset of the whole foot.
+        z: Contact point name -> ``(F,)`` vertical offset of the joint carrying it.
+        weight: ``(F,)`` how much the foot is in contact, 0..1 (eased).
+    """
+
+    xy: np.ndarray
+    z: dict[str, np.ndarray]
+    weight: np.ndarray
+
+
+def foot_offsets(
+    points: Mapping[str, np.ndarray],
+    labels: Mapping[str, np.ndarray],
+    fps: float,
+    ease_time: float,
+    heights: Mapping[str, float],
+) -> FootPlan:
+    """The :class:`FootPlan` that plants one foot (see the module docstring).
+
+    Args:
+        points: Contact point name -> ``(F, 3)`` target position of the joint
+            that carries it (heel: ankle, toe: toe joint).
+        labels: The same names -> ``(F,)`` contact labels.
+        fps: Frame rate.
+        ease_time: Seconds over which each contact's offset eases in and out.
+        heights: The same names -> height (metres) of the joint above the floor
+            when its contact point rests on the floor (the character's rest pose):
+            in contact that joint is held at that height (each joint on its own,
+            so a foot with heel and toe down lies flat), neither hovering nor
+            pulled into the floor.
+    """
+    F = next(iter(points.values())).shape[0]
+    ease = int(round(max(ease_time, 0.0) * fps))
+    num = np.zeros((F, 2))
+    den = np.zeros(F)
+    z: dict[str, np.ndarray] = {}
+    anchors = _consistent_anchors(points, labels)
+    down = {name: np.asarray(labels[name], dtype=bool) for name in points}
+    for name, x in points.items():
+        x = np.asarray(x, dtype=float)
+        z_num = np.zeros(F)
+        z_den = np.zeros(F)
+        for a, b in contact_intervals(labels[name]):
+            anchor = anchors[(name, a)]
+            o = np.empty((F, 3))
+            o[a : b + 1, :2] = anchor - x[a : b + 1, :2]
+            o[a : b + 1, 2] = heights[name] - x[a : b + 1, 2]
+            o[:a] = o[a]
+            o[b + 1 :] = o[b]
+            # another point of the foot already down at the start (still down at the end):
+            # ease in (out) within the interval so the planted point is not disturbed
+            others = [v for k, v in down.items() if k != name]
+            before = any(v[a - 1] for v in others) if a > 0 else False
+            after = any(v[b + 1] for v in others) if b + 1 < F else False
+            w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
+            num += w[:, None] * o[:, :2]
+            den += w
+            z_num += w * o[:, 2]
+            z_den += w
+        z[name] = z_num / np.maximum(z_den, 1.0)
+    return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
+
+
+def _consistent_anchors(
+    points: Mapping[str, np.ndarray], labels: Mapping[str, np.ndarray]
+) -> dict[tuple[str, int], np.ndarray]:
+    """``(point, interval start) -> (2,)`` plant location of every contact interval.
+
+    Within one contact of the foot (overlapping intervals of its points), the
+    point that touches down first is planted at its median position over its
+    interval; every other point at the median of where the same foot translation
+    puts it over the frames both are down (its own median where they never
+    overlap).  So the points' offsets agree while both are down, and a heel
+    lifting off hands over to the toe without a slide.
+    """
+    F = next(iter(points.values())).shape[0]
+    down = np.zeros(F, dtype=bool)
+    for name in points:
+        down |= np.asarray(labels[name], dtype=bool)
+    out: dict[tuple[str, int], np.ndarray] = {}
+    for ea, eb in contact_intervals(down):
+        spans = [
+            (a, b, name)
+            for name in points
+            for a, b in contact_intervals(labels[name])
+            if a <= eb and b >= ea
+        ]
+        spans.sort(key=lambda s: (s[0], list(points).index(s[2])))
+        a0, b0, ref = spans[0]
+        x0 = np.asarray(points[ref], dtype=float)[:, :2]
+        out[(ref, a0)] = np.median(x0[a0 : b0 + 1], axis=0)
+        for a, b, name in spans[1:]:
+            x = np.asarray(points[name], dtype=float)[:, :2]
+            lo, hi = max(a, a0), min(b, b0)
+            if lo <= hi:
+                out[(name, a)] = np.median(x[lo : hi + 1] + out[(ref, a0)] - x0[lo : hi + 1], axis=0)
+            else:
+                out[(name, a)] = np.median(x[a : b + 1], axis=0)
+    return out
+
+
+def pelvis_drop(
+    hips: np.ndarray, ankles: np.ndarray, weights: np.ndarray, reach: np.ndarray, fps: float, smooth_time: float
+) -> np.ndarray:
+    r"""``(F,)`` how far (metres, >= 0) the body must come down for planted feet to be reachable.
+
+    For a foot in contact (weight :math:`w > 0`) whose ankle target lies
+    farther from its hip than the leg reaches (:math:`\rho`, slightly less
+    than thigh plus shank), the hip must come down by
+    :math:`\delta = \Delta z - \sqrt{\rho^2 - d_{xy}^2}` (:math:`\Delta z` the hip's
+    height above the ankle, :math:`d_{xy}` their horizontal distance).  The
+    drop is :math:`\max_{feet} w\,\delta`, then a running maximum over
+    ``smooth_time`` and a moving average over it, so the pelvis moves
+    smoothly (no pop at toe-off) and never less than it must.
+
+    Args:
+        hips, ankles: ``(F, 2, 3)`` per foot (left, right).
+        weights: ``(F, 2)`` contact weights.
+        reach: ``(2,)`` reach of each leg (metres).
+    """
+    dz = hips[..., 2] - ankles[..., 2]
+    dxy = np.linalg.norm(hips[..., :2] - ankles[..., :2], axis=-1)
+    r = reach[None, :]
+    need = dz - np.sqrt(np.maximum(r * r - dxy * dxy, 0.0))
+    need = np.where(dxy >= r, dz, need)
+    drop = np.max(np.maximum(need, 0.0) * weights, axis=1)
+    n = max(1, int(round(smooth_time * fps)))
+    if n > 1 and drop.size:
+        from scipy.ndimage import maximum_filter1d, uniform_filter1d
+
+        drop = uniform_filter1d(maximum_filter1d(drop, size=2 * n + 1, mode="nearest"), size=2 * n + 1, mode="nearest")
+    return drop
+
+
+def knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float) -> np.ndarray:
+    r"""Knee positions ``(F, 3)`` for hips and (moved) ankles, keeping thigh ``l1`` and shank ``l2``.
+
+    Two-bone IK in closed form: with :math:`d = |a - h|` (clamped to the
+    reachable range) and :math:`u = (a - h)/d`, the knee is
+    :math:`h + x u + y p` where :math:`x = (l_1^2 - l_2^2 + d^2)/(2d)`,
+    :math:`y = \sqrt{l_1^2 - x^2}` and :math:`p` the unit direction of the
+    original knee ``knee0`` off the hip-ankle line (the knee keeps its plane).
+    """
+    v = ankle - hip
+    d = np.linalg.norm(v, axis=-1, keepdims=True)
+    u = v / np.maximum(d, 1e-9)
+    d = np.clip(d, abs(l1 - l2) + 1e-6, l1 + l2 - 1e-6)
+    x = (l1 * l1 - l2 * l2 + d * d) / (2.0 * d)
+    y = np.sqrt(np.maximum(l1 * l1 - x * x, 0.0))
+    w = knee0 - hip
+    p = w - np.sum(w * u, axis=-1, keepdims=True) * u
+    n = np.linalg.norm(p, axis=-1, keepdims=True)
+    knee = hip + x * u + y * p / np.maximum(n, 1e-9)
+    degenerate = (n[..., 0] < 1e-9) | (np.linalg.norm(v, axis=-1) < 1e-9)
+    return np.where(degenerate[..., None], np.where(np.linalg.norm(v, axis=-1, keepdims=True) < 1e-9, knee0, hip + x * u), knee)
+
+
+#: The canonical joints a foot's offset moves (the knee is then re-placed by :func:`knee_between`).
+FOOT_JOINTS = ("ankle", "toe", "toe_end")
+
+
+#: Fraction of thigh plus shank that a planted leg may reach (a fully straight knee is a
+#: singular IK pose).
+REACH = 0.995
+
+
+def planted_positions(
+    positions: np.ndarray,
+    names: tuple[str, ...],
+    labels: Mapping[str, np.ndarray],
+    fps: float,
+    ease_time: float,
+    leg_lengths: Mapping[str, tuple[float, float]],
+    heights: Mapping[str, float],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Targets with both feet planted: ``(new positions (F, N, 3), foot offsets (F, 2, 2))``.
+
+    The feet follow their :class:`FootPlan`; where a planted leg could not
+    reach its foot, the rest of the body comes down smoothly by
+    :func:`pelvis_drop`; the knees are re-placed by :func:`knee_between`.
+
+    Args:
+        positions: ``(F, N, 3)`` target positions (not modified).
+        names: Canonical joint of each target column.
+        labels: ``left_heel``, ``left_toe``, ``right_heel``, ``right_toe`` -> ``(F,)`` bool.
+        fps, ease_time: See :func:`foot_offsets`.
+        leg_lengths: Side -> (thigh, shank) lengths of the character (metres).
+        heights: Canonical joint -> its height above the floor in the character's
+            rest pose (metres), for the ankle and toe joints.
+    """
+    out = np.array(positions, dtype=float, copy=True)
+    F = out.shape[0]
+    offsets = np.zeros((F, 2, 2))
+    col = {n: i for i, n in enumerate(names)}
+    feet = np.zeros(len(names), dtype=bool)
+    legs = []
+    for s, side in enumerate(("left", "right")):
+        ankle = f"{side}_ankle"
+        if ankle not in col:
+            continue
+        # the joints carrying each contact point: heel -> ankle, toe -> toe joint and toe tip
+        carriers = {"heel": [ankle], "toe": [f"{side}_{j}" for j in ("toe", "toe_end") if f"{side}_{j}" in col]}
+        if not carriers["toe"]:
+            carriers["toe"] = [ankle]
+        pts = {j: positions[:, col[j]] for group in carriers.values() for j in group}
+        lab = {
+            j: np.asarray(labels.get(f"{side}_{point}", np.zeros(F, bool)), dtype=bool)
+            for point, group in carriers.items()
+            for j in group
+        }
+        if carriers["toe"] == [ankle]:  # no toe joint: the ankle carries both contact points
+            lab[ankle] = lab[ankle] | np.asarray(labels.get(f"{side}_toe", np.zeros(F, bool)), dtype=bool)
+        plan = foot_offsets(pts, lab, fps, ease_time, {j: heights[j] for j in pts})
+        offsets[:, s] = plan.xy
+        moved = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
+        feet[moved] = True
+        out[:, moved, :2] += plan.xy[:, None, :]
+        for j in pts:
+            out[:, col[j], 2] += plan.z[j]
+        hip, knee = f"{side}_hip", f"{side}_knee"
+        if side in leg_lengths and hip in col and knee in col:
+            feet[col[knee]] = True
+            legs.append((side, col[hip], col[knee], col[ankle], leg_lengths[side], plan.weight))
+    if legs:
+        hips = np.stack([out[:, h] for _, h, _, _, _, _ in legs], axis=1)
+        ankles = np.stack([out[:, a] for _, _, _, a, _, _ in legs], axis=1)
+        weights = np.stack([w for *_, w in legs], axis=1)
+        reach = np.array([REACH * (l1 + l2) for *_, (l1, l2), _ in legs])
+        drop = pelvis_drop(hips, ankles, weights, reach, fps, ease_time)
+        out[:, ~feet, 2] -= drop[:, None]
+        for _, h, k, a, (l1, l2), _ in legs:
+            knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
+            out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2)
+    return out, offsets

@@ -1,0 +1,13 @@
+"""Optical markers: labelled marker recordings to the actor's joint centres.
+
+* :mod:`.recording`: :class:`MarkerRecording`, what a C3D or TRC file holds (labels,
+  positions in metres, validity), and the up-axis guess.
+* :mod:`.markerset`: marker sets: which label plays which anatomical role (built-in
+  aliases for the CMU, Vicon Plug-in Gait, Helen Hayes, Qualisys and OptiTrack sets),
+  detection from the labels, user TOML files.
+* :mod:`.joints`: joint centres from the roles (regression: Harrington 2007 hip centres,
+  lateral markers offset medially by a joint half-width, wrist and head centroids), then a
+  positional :class:`~physmocap.motion.Motion` the retargeter consumes unchanged.
+
+Readers: :mod:`physmocap.sources.c3d` (ezc3d) and :mod:`physmocap.sources.trc`.
+"""

@@ -1,0 +1,55 @@
+"""A marker recording as a positional motion of canonical joints (what the retargeter reads)."""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from ..motion import Motion
+from .joints import joint_centres, up_axis, warn_unused
+from .markerset import detect_marker_set, load_marker_set
+from .recording import MarkerRecording
+
+__all__ = ["marker_motion"]
+
+
+def _to_z_up(up: np.ndarray) -> np.ndarray:
+    """A proper rotation (3x3) taking the signed axis ``up`` to +Z."""
+    k = int(np.argmax(np.abs(up)))
+    z = np.zeros(3)
+    z[k] = np.sign(up[k])
+    x = np.zeros(3)
+    x[(k + 1) % 3] = 1.0
+    y = np.cross(z, x)
+    return np.stack([x, y, z])  # rows: the new axes in the file's coordinates
+
+
+def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
+    """The recording's canonical joint centres (:func:`.joints.joint_centres`) as a
+    positional :class:`~physmocap.motion.Motion` (metres, Z-up, floor at 0), through the
+    same conventions as tracker files (:func:`physmocap.sources.positions.positional_motion`:
+    gaps up to ``max_gap`` filled, levelling, floor).
+
+    Args:
+        rec: The :class:`MarkerRecording`.
+        marker_set: A TOML file of ``[markers] ROLE = "label"`` overriding the aliases.
+        **options: Options of ``positional_motion`` (``max_gap``, ``smooth``, ``floor``...).
+    """
+    from ..sources.positions import positional_motion
+
+    overrides = load_marker_set(marker_set) if marker_set is not None else None
+    ms = detect_marker_set(rec.labels, overrides)
+    warn_unused(rec, ms)
+    centres = joint_centres(rec, ms)
+    R = _to_z_up(up_axis(rec, ms))
+    names = list(centres.positions)
+    P = np.stack([centres.positions[n] for n in names], axis=1) @ R.T
+    # a lab frame is level: no tilt estimate from the feet (that is for camera-frame trackers)
+    opts = {"units": 1.0, "frame": "world", "up": "Z", "mirrored": False, "profile": "generic", "level": False}
+    opts.update(options)
+    motion = positional_motion(names, P, None, rec.fps, rec.source, **opts)
+    motion.meta["joint_centre_methods"] = dict(centres.method)
+    motion.meta["unused_markers"] = list(ms.unused)
+    return motion

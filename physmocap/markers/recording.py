@@ -1,0 +1,70 @@
+"""What a marker file holds: labelled marker trajectories (metres, the file's axes).
+
+A sample is *valid* only where the file says it is (finite coordinates, not all zero, a
+non-negative residual where the format has residuals); invalid samples are NaN and never
+used.  Subject prefixes (``Daphnee:LSHO``) are kept in :attr:`MarkerRecording.labels`
+and stripped by :func:`plain_label`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+
+__all__ = ["MarkerRecording", "plain_label", "UNITS"]
+
+#: Length unit name -> metres.
+UNITS = {"mm": 1e-3, "cm": 1e-2, "dm": 0.1, "m": 1.0, "in": 0.0254, "inch": 0.0254, "inches": 0.0254}
+
+
+def plain_label(label: str) -> str:
+    """A marker label without subject prefix, case or punctuation: ``"Daphnee:L_SHO"`` -> ``"LSHO"``."""
+    base = label.rsplit(":", 1)[-1]
+    return re.sub(r"[^A-Za-z0-9]", "", base).upper()
+
+
+@dataclass(frozen=True)
+class MarkerRecording:
+    """Labelled marker trajectories.
+
+    Attributes:
+        labels: ``(M,)`` marker labels as in the file.
+        positions: ``(F, M, 3)`` metres in the file's axes, NaN where invalid.
+        fps: Frame rate (Hz).
+        source: The file.
+        first_frame: The file's number of the first frame.
+    """
+
+    labels: tuple[str, ...]
+    positions: np.ndarray
+    fps: float
+    source: Path
+    first_frame: int = 0
+
+    def __post_init__(self) -> None:
+        P = self.positions
+        if P.ndim != 3 or P.shape[2] != 3 or P.shape[1] != len(self.labels):
+            raise InputError(f"marker array must be (frames, {len(self.labels)}, 3), got {P.shape}", path=self.source)
+        if P.shape[0] == 0 or P.shape[1] == 0:
+            raise InputError("no frames or no markers", path=self.source)
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise InputError(f"frame rate must be positive, got {self.fps}", path=self.source)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """``(F, M)`` True where a marker sample is usable."""
+        return np.all(np.isfinite(self.positions), axis=2)
+
+    def gaps(self) -> dict[str, int]:
+        """Marker label -> number of invalid frames (markers with any)."""
+        missing = (~self.valid).sum(axis=0)
+        return {lab: int(n) for lab, n in zip(self.labels, missing) if n}

@@ -1,0 +1,522 @@
+r"""Fidelity: does the character move like the actor?
+
+Constraint figures (limits, floor, skating on the project's own contact labels)
+say nothing about whether the retarget *looks like* the actor.  These figures
+compare the character's joint centres with the actor's, frame by frame, with
+nothing taken from the solver or its targets: the actor's joint centres come
+from the source motion's forward kinematics (canonical joints from the name
+mapping), the character's from the sites or bodies its mapping ties to the
+same canonical joints.  Both worlds are metres, Z-up; the retargeter keeps the
+character in the actor's world orientation, so directions compare directly.
+
+* **Segment direction error** (degrees): per frame and segment, the angle
+  between the character's segment direction and the actor's.  Segments
+  (:data:`SEGMENTS`): torso (mid-hip to neck), upper arms (shoulder to
+  elbow), forearms (elbow to wrist), thighs (hip to knee), shanks (knee to
+  ankle).  The torso runs from the midpoint of the hip joint centres, not from
+  the vendor's "pelvis" joint, which sits anywhere between the hips and the
+  waist.
+* **Facing error** (degrees): the angle about the vertical between the
+  character's pelvis heading and the actor's; the heading is the horizontal
+  direction perpendicular to the right-to-left hip line,
+  :math:`\hat h = \widehat{(l - r) \times \hat z}`.
+* **Pelvis path deviation** (cm): the actor's mid-hip path on the floor is
+  mapped onto the character's by one similarity transform for the whole clip
+  (uniform scale, rotation about the vertical, translation; least squares,
+  Umeyama 1991), then the distance per frame.
+* **Pelvis vertical speed**: the 99th percentile of :math:`|\dot z|` of the
+  character's mid-hip against the actor's scaled by the root scale (m/s).
+* **Velocity-cap saturation**: frames on which some joint moves at 99 % or
+  more of its velocity limit (the solver's frame-to-frame bound).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+__all__ = [
+    "SEGMENTS",
+    "SegmentError",
+    "Fidelity",
+    "actor_joint_positions",
+    "character_joint_positions",
+    "segment_direction_errors",
+    "facing_errors",
+    "similarity_fit_2d",
+    "path_deviation",
+    "vertical_speed_p99",
+    "velocity_saturation",
+    "GeomFloorContact",
+    "geom_floor_contact",
+    "fidelity",
+    "SEGMENT_WARN_DEG",
+    "FACING_WARN_DEG",
+]
+
+#: Segment name -> (proximal canonical joint, distal canonical joint).  ``mid_hip``
+#: is the midpoint of the two hip joint centres.
+SEGMENTS: dict[str, tuple[str, str]] = {
+    "torso": ("mid_hip", "neck"),
+    "left_upper_arm": ("left_shoulder", "left_elbow"),
+    "right_upper_arm": ("right_shoulder", "right_elbow"),
+    "left_forearm": ("left_elbow", "left_wrist"),
+    "right_forearm": ("right_elbow", "right_wrist"),
+    "left_thigh": ("left_hip", "left_knee"),
+    "right_thigh": ("right_hip", "right_knee"),
+    "left_shank": ("left_knee", "left_ankle"),
+    "right_shank": ("right_knee", "right_ankle"),
+}
+#: A segment this far off (degrees) counts as wrong on that frame.
+SEGMENT_WARN_DEG = 45.0
+#: Facing this far off (degrees) is warned about.
+FACING_WARN_DEG = 30.0
+#: A joint at this fraction of its velocity limit counts as saturated.
+SATURATION_RATIO = 0.99
+
+
+@dataclass(frozen=True)
+class SegmentError:
+    """Direction error of one segment over a clip (degrees)."""
+
+    median_deg: float
+    p95_deg: float
+    share_over_45: float
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """Fidelity figures of one retarget (see the module docstring).
+
+    Attributes:
+        segments: Segment name -> :class:`SegmentError` (segments both sides have).
+        share_any_over_45: Share of frames on which any segment is more than 45 degrees off.
+        frames_any_over_45: Those frames (indices into the retargeted clip).
+        facing_median_deg, facing_p95_deg: Facing error (None without hips).
+        frames_facing_over_30: Frames with facing more than 30 degrees off.
+        path_mean_cm, path_max_cm: Pelvis path deviation after the similarity fit.
+        path_scale: Scale of the fitted similarity (about the root scale).
+        pelvis_vz_p99, actor_vz_p99_scaled: 99th percentile vertical speeds (m/s).
+        saturated_frames: Frame transitions ``t -> t+1`` with a joint at its velocity cap.
+        saturated_share: Their share of the clip's transitions.
+    """
+
+    segments: dict[str, SegmentError]
+    share_any_over_45: float
+    frames_any_over_45: np.ndarray
+    facing_median_deg: float | None
+    facing_p95_deg: float | None
+    frames_facing_over_30: np.ndarray
+    path_mean_cm: float | None
+    path_max_cm: float | None
+    path_scale: float | None
+    pelvis_vz_p99: float | None
+    actor_vz_p99_scaled: float | None
+    saturated_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    saturated_share: float = 0.0
+    floor: "GeomFloorContact | None" = None
+
+    @property
+    def worst_segment_median_deg(self) -> float:
+        return max((s.median_deg for s in self.segments.values()), default=0.0)
+
+    def as_dict(self) -> dict:
+        """Plain figures for the JSON report (frame lists left out)."""
+        return {
+            "segments": {
+                k: {"median_deg": v.median_deg, "p95_deg": v.p95_deg, "share_over_45": v.share_over_45}
+                for k, v in self.segments.items()
+            },
+            "share_any_segment_over_45": self.share_any_over_45,
+            "facing": {"median_deg": self.facing_median_deg, "p95_deg": self.facing_p95_deg},
+            "pelvis_path": {"mean_cm": self.path_mean_cm, "max_cm": self.path_max_cm, "scale": self.path_scale},
+            "pelvis_vertical_speed": {
+                "character_p99": self.pelvis_vz_p99,
+                "actor_p99_scaled": self.actor_vz_p99_scaled,
+            },
+            "velocity_saturation": {
+                "frames": int(self.saturated_frames.size),
+                "share": self.saturated_share,
+            },
+            "geoms_on_floor": None if self.floor is None else self.floor.as_dict(),
+        }
+
+
+def actor_joint_positions(motion, joint_indices: dict[str, int]) -> dict[str, np.ndarray]:
+    """Canonical joint -> ``(F, 3)`` world positions of the actor (metres, Z-up; NaN where lost)."""
+    world = motion.world_positions()
+    out = {}
+    for name, j in joint_indices.items():
+        p = np.array(world[:, j], dtype=float)
+        if motion.confidence is not None:
+            p[motion.confidence[:, j] <= 0.0] = np.nan
+        out[name] = p
+    return out
+
+
+def character_joint_positions(traj) -> dict[str, np.ndarray]:
+    """Canonical joint -> ``(F, 3)`` world positions of the character's mapped sites/bodies."""
+    ch = traj.character
+    model = ch.model
+    data = mujoco.MjData(model)
+    names = list(ch.tracked)
+    sites = [(k, model.site(ch.tracked[n].name).id) for k, n in enumerate(names) if ch.tracked[n].kind == "site"]
+    bodies = [(k, model.body(ch.tracked[n].name).id) for k, n in enumerate(names) if ch.tracked[n].kind != "site"]
+    s_k, s_id = (np.array([a for a, _ in sites], int), np.array([b for _, b in sites], int))
+    b_k, b_id = (np.array([a for a, _ in bodies], int), np.array([b for _, b in bodies], int))
+    out = np.empty((traj.num_frames, len(names), 3))
+    for t, q in enumerate(traj.qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        if s_k.size:
+            out[t, s_k] = data.site_xpos[s_id]
+        if b_k.size:
+            out[t, b_k] = data.xpos[b_id]
+    return {n: out[:, k] for k, n in enumerate(names)}
+
+
+def _point(joints: dict[str, np.ndarray], name: str) -> np.ndarray | None:
+    if name == "mid_hip":
+        if "left_hip" in joints and "right_hip" in joints:
+            return 0.5 * (joints["left_hip"] + joints["right_hip"])
+        return joints.get("pelvis")
+    return joints.get(name)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between vectors (degrees), NaN where either is degenerate or unknown."""
+    na = np.linalg.norm(a, axis=-1)
+    nb = np.linalg.norm(b, axis=-1)
+    ok = (na > 1e-6) & (nb > 1e-6)
+    cos = np.einsum("...i,...i->...", a, b) / np.where(ok, na * nb, 1.0)
+    ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return np.where(ok, ang, np.nan)
+
+
+def segment_direction_errors(actor: dict[str, np.ndarray], character: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Segment name -> ``(F,)`` angle in degrees between the character's segment
+    and the actor's (NaN where the actor lost a joint); segments both have."""
+    out = {}
+    for seg, (a, b) in SEGMENTS.items():
+        pa, da, pc, dc = _point(actor, a), _point(actor, b), _point(character, a), _point(character, b)
+        if pa is None or da is None or pc is None or dc is None:
+            continue
+        out[seg] = _angle_deg(dc - pc, da - pa)
+    return out
+
+
+def _heading(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``(F,)`` heading angle (radians) of the direction ``(left - right) x z``."""
+    d = left - right
+    fwd = np.stack([d[:, 1], -d[:, 0]], axis=-1)  # (l - r) x z, horizontal part
+    return np.arctan2(fwd[:, 1], fwd[:, 0])
+
+
+def facing_errors(actor: dict[str, np.ndarray], character: dict[str, np.ndarray]) -> np.ndarray | None:
+    """``(F,)`` absolute pelvis heading difference in degrees (0..180), or None without hips."""
+    if not all(h in actor and h in character for h in ("left_hip", "right_hip")):
+        return None
+    ha = _heading(actor["left_hip"], actor["right_hip"])
+    hc = _heading(character["left_hip"], character["right_hip"])
+    d = np.angle(np.exp(1j * (hc - ha)))
+    return np.degrees(np.abs(d))
+
+
+def similarity_fit_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    r"""Least-squares similarity :math:`x \mapsto s R x + t` taking ``src (F, 2)`` onto
+    ``dst (F, 2)`` (Umeyama 1991): returns ``(s, R (2, 2), t (2,))``."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - mu_s, dst - mu_d
+    var = float(np.mean(np.sum(a * a, axis=1)))
+    if var < 1e-12:  # the actor stands still: translation only
+        return 1.0, np.eye(2), mu_d - mu_s
+    cov = b.T @ a / len(src)
+    U, S, Vt = np.linalg.svd(cov)
+    D = np.diag([1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    R = U @ D @ Vt
+    s = float(np.trace(np.diag(S) @ D) / var)
+    return s, R, mu_d - s * R @ mu_s
+
+
+def path_deviation(actor: dict[str, np.ndarray], character: dict[str, np.ndarray]) -> tuple[np.ndarray, float] | None:
+    """``((F,) cm, fitted scale)``: distance between the character's mid-hip floor
+    path and the actor's after one similarity fit; None without a pelvis."""
+    pa, pc = _point(actor, "mid_hip"), _point(character, "mid_hip")
+    if pa is None or pc is None:
+        return None
+    ok = np.all(np.isfinite(pa[:, :2]), axis=1)
+    if ok.sum() < 2:
+        return None
+    s, R, t = similarity_fit_2d(pa[ok, :2], pc[ok, :2])
+    mapped = pa[:, :2] @ (s * R).T + t
+    d = np.linalg.norm(mapped - pc[:, :2], axis=1) * 100.0
+    d[~ok] = np.nan
+    return d, s
+
+
+def vertical_speed_p99(z: np.ndarray, fps: float) -> float | None:
+    """99th percentile of :math:`|\\dot z|` (central differences, m/s)."""
+    z = z[np.isfinite(z)]
+    if z.size < 3:
+        return None
+    return float(np.percentile(np.abs(np.gradient(z) * fps), 99))
+
+
+def velocity_saturation(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float]) -> np.ndarray:
+    """Indices ``t`` of transitions ``t -> t+1`` on which some hinge/slide joint moves at
+    :data:`SATURATION_RATIO` of its velocity limit or faster."""
+    if qpos.shape[0] < 2 or not limits:
+        return np.zeros(0, dtype=int)
+    adr = np.array([int(model.joint(n).qposadr[0]) for n in limits])
+    vmax = np.array([limits[n] for n in limits], dtype=float)
+    speed = np.abs(np.diff(qpos[:, adr], axis=0)) * fps
+    return np.flatnonzero(np.any(speed >= SATURATION_RATIO * vmax, axis=1))
+
+
+#: A collision geom whose lowest point is within this of the floor rests on it (metres).
+RESTING_HEIGHT = 0.002
+#: A collision geom whose lowest point is within this of the floor is near it (metres).
+NEAR_FLOOR_HEIGHT = 0.01
+#: A near-floor geom moving horizontally faster than this scuffs (m/s).
+SCUFF_SPEED = 0.30
+
+
+@dataclass(frozen=True)
+class GeomFloorContact:
+    """Skating and scuffing measured on the character's collision geoms.
+
+    Attributes:
+        slip_mean_cm_s, slip_p95_cm_s: Horizontal speed of the centre of geoms
+            resting on the floor (lowest point within :data:`RESTING_HEIGHT` on
+            both frames of a transition), cm/s.
+        resting_samples: Geom-transitions counted there.
+        scuff_share: Share of near-floor geom-transitions (lowest point within
+            :data:`NEAR_FLOOR_HEIGHT`) moving faster than :data:`SCUFF_SPEED`.
+        near_samples: Near-floor geom-transitions.
+    """
+
+    slip_mean_cm_s: float
+    slip_p95_cm_s: float
+    resting_samples: int
+    scuff_share: float
+    near_samples: int
+
+    def as_dict(self) -> dict:
+        return {
+            "slip_mean_cm_s": self.slip_mean_cm_s,
+            "slip_p95_cm_s": self.slip_p95_cm_s,
+            "resting_samples": self.resting_samples,
+            "scuff_share": self.scuff_share,
+            "near_samples": self.near_samples,
+        }
+
+
+_BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+
+
+def _lowest_material_point(model: mujoco.MjModel, data: mujoco.MjData, g: int, tie: float = 1e-3) -> np.ndarray:
+    """The geom's lowest point in its own frame (metres): for a face or edge lying
+    flat, the centroid of its points within ``tie`` of the lowest."""
+    R = data.geom_xmat[g].reshape(3, 3)
+    size = model.geom_size[g]
+    gtype = int(model.geom_type[g])
+    G = mujoco.mjtGeom
+    down = R.T @ np.array([0.0, 0.0, -1.0])  # world down in geom coordinates
+    if gtype == G.mjGEOM_SPHERE:
+        return size[0] * down
+    if gtype == G.mjGEOM_CAPSULE:
+        ends = np.array([[0.0, 0.0, size[1]], [0.0, 0.0, -size[1]]])
+        pts = ends
+    elif gtype == G.mjGEOM_BOX:
+        pts = _BOX_CORNERS * size
+    elif gtype == G.mjGEOM_MESH:
+        mesh = int(model.geom_dataid[g])
+        start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+        pts = np.asarray(model.mesh_vert[start : start + n], dtype=float)
+    else:  # cylinders, ellipsoids: the point under the centre
+        return np.zeros(3)
+    z = pts @ R[2]
+    low = pts[z <= z.min() + tie].mean(axis=0)
+    return low + (size[0] * down if gtype == G.mjGEOM_CAPSULE else 0.0)
+
+
+def geom_floor_contact(model: mujoco.MjModel, qpos: np.ndarray, fps: float, floor: float = 0.0) -> GeomFloorContact:
+    """:class:`GeomFloorContact` of a trajectory ``qpos (F, nq)`` on a floor at height ``floor``.
+
+    Slip is the horizontal speed of the *material* point of a resting geom that
+    touches the floor (its lowest point on the first frame of a transition,
+    followed to the next frame): a foot rolling over its toe edge or a capsule
+    rolling does not slip; a foot sliding does.  Scuffing uses the same
+    material point of near-floor geoms.
+    """
+    from ..models.geometry import character_geoms, geom_z_extent
+
+    geoms = character_geoms(model, collision_only=True)
+    F = qpos.shape[0]
+    if F < 2 or not geoms:
+        return GeomFloorContact(0.0, 0.0, 0, 0.0, 0)
+    data = mujoco.MjData(model)
+    low = np.empty((F, len(geoms)))
+    local = np.empty((F, len(geoms), 3))
+    pos = np.empty((F, len(geoms), 3))
+    mat = np.empty((F, len(geoms), 3, 3))
+    for t in range(F):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        for k, g in enumerate(geoms):
+            low[t, k] = geom_z_extent(model, data, g)[0] - floor
+            local[t, k] = _lowest_material_point(model, data, g)
+        pos[t] = data.geom_xpos[geoms]
+        mat[t] = data.geom_xmat[geoms].reshape(-1, 3, 3)
+    before = pos[:-1] + np.einsum("fkij,fkj->fki", mat[:-1], local[:-1])
+    after = pos[1:] + np.einsum("fkij,fkj->fki", mat[1:], local[:-1])
+    speed = np.linalg.norm((after - before)[..., :2], axis=-1) * fps
+    resting = (low[1:] < RESTING_HEIGHT) & (low[:-1] < RESTING_HEIGHT)
+    near = (low[1:] < NEAR_FLOOR_HEIGHT) | (low[:-1] < NEAR_FLOOR_HEIGHT)
+    slip = speed[resting] * 100.0
+    return GeomFloorContact(
+        slip_mean_cm_s=float(slip.mean()) if slip.size else 0.0,
+        slip_p95_cm_s=float(np.percentile(slip, 95)) if slip.size else 0.0,
+        resting_samples=int(slip.size),
+        scuff_share=float(np.mean(speed[near] > SCUFF_SPEED)) if near.any() else 0.0,
+        near_samples=int(near.sum()),
+    )
+
+
+def _nan_stats(x: np.ndarray) -> tuple[float, float]:
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return float("nan"), float("nan")
+    return float(np.median(x)), float(np.percentile(x, 95))
+
+
+def fidelity(
+    actor: dict[str, np.ndarray],
+    character: dict[str, np.ndarray],
+    fps: float,
+    scale: float = 1.0,
+    *,
+    model: mujoco.MjModel | None = None,
+    qpos: np.ndarray | None = None,
+    velocity_limits: dict[str, float] | None = None,
+    floor_contact: bool = True,
+) -> Fidelity:
+    """All fidelity figures from the actor's and the character's joint centres.
+
+    Args:
+        actor, character: Canonical joint -> ``(F, 3)`` world positions (metres, Z-up).
+        fps: Frame rate.
+        scale: Root scale of the retarget (character leg length over the actor's),
+            for the vertical-speed comparison.
+        model, qpos, velocity_limits: The character's model, trajectory and
+            velocity limits, for the saturation count (optional).
+        floor_contact: Also measure slip and scuffing on the collision geoms
+            (:func:`geom_floor_contact`; the slowest figure).
+    """
+    seg = segment_direction_errors(actor, character)
+    segments = {}
+    over = None
+    for name, err in seg.items():
+        med, p95 = _nan_stats(err)
+        big = np.nan_to_num(err, nan=0.0) > SEGMENT_WARN_DEG
+        segments[name] = SegmentError(med, p95, float(np.mean(big)))
+        over = big if over is None else over | big
+    frames_over = np.flatnonzero(over) if over is not None else np.zeros(0, dtype=int)
+    n = len(over) if over is not None else 1
+    face = facing_errors(actor, character)
+    f_med, f_p95 = _nan_stats(face) if face is not None else (None, None)
+    frames_face = np.flatnonzero(np.nan_to_num(face, nan=0.0) > FACING_WARN_DEG) if face is not None else np.zeros(0, dtype=int)
+    path = path_deviation(actor, character)
+    p_mean = p_max = p_scale = None
+    if path is not None:
+        d, p_scale = path
+        p_mean, p_max = float(np.nanmean(d)), float(np.nanmax(d))
+    vz_c = vz_a = None
+    pa, pc = _point(actor, "mid_hip"), _point(character, "mid_hip")
+    if pa is not None and pc is not None:
+        vz_c = vertical_speed_p99(pc[:, 2], fps)
+        va = vertical_speed_p99(pa[:, 2], fps)
+        vz_a = None if va is None else va * scale
+    sat = np.zeros(0, dtype=int)
+    if model is not None and qpos is not None and velocity_limits:
+        sat = velocity_saturation(model, qpos, fps, velocity_limits)
+    transitions = max(1, (qpos.shape[0] - 1) if qpos is not None else 1)
+    floor_figures = geom_floor_contact(model, qpos, fps) if floor_contact and model is not None and qpos is not None else None
+    return Fidelity(
+        segments=segments,
+        share_any_over_45=float(frames_over.size / n),
+        frames_any_over_45=frames_over,
+        facing_median_deg=f_med,
+        facing_p95_deg=f_p95,
+        frames_facing_over_30=frames_face,
+        path_mean_cm=p_mean,
+        path_max_cm=p_max,
+        path_scale=p_scale,
+        pelvis_vz_p99=vz_c,
+        actor_vz_p99_scaled=vz_a,
+        saturated_frames=sat,
+        saturated_share=float(sat.size / transitions),
+        floor=floor_figures,
+    )
+
+
+def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
+    """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
+    motion = traj.stats["source_motion"]
+    joints = traj.stats["joint_indices"]
+    actor = actor_joint_positions(motion, joints)
+    character = character_joint_positions(traj)
+    scale = float(getattr(traj.targets, "scale", 1.0)) if traj.targets is not None else 1.0
+    ch = traj.character
+    return fidelity(
+        actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
+        floor_contact=floor_contact,
+    )
+
+
+#: Share of the clip above which segments more than :data:`SEGMENT_WARN_DEG` off are warned about.
+SEGMENT_WARN_SHARE = 0.01
+
+
+def _frames_text(frames: np.ndarray, offset: int) -> str:
+    """``"12-40, 97, ..."``: runs of consecutive frames (source numbering), the first few."""
+    if frames.size == 0:
+        return ""
+    f = np.asarray(frames, dtype=int) + int(offset)
+    breaks = np.flatnonzero(np.diff(f) > 1)
+    starts = np.concatenate([[f[0]], f[breaks + 1]])
+    ends = np.concatenate([f[breaks], [f[-1]]])
+    parts = [str(a) if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
+    return ", ".join(parts[:6]) + (" ..." if len(parts) > 6 else "")
+
+
+def fidelity_warnings(fid: Fidelity, offset: int = 0) -> list[str]:
+    """One message per fidelity problem worth a warning (frames in source numbering:
+    ``offset`` is the source frame of the trajectory's first frame).
+
+    * a segment more than :data:`SEGMENT_WARN_DEG` off on more than
+      :data:`SEGMENT_WARN_SHARE` of the clip;
+    * facing more than :data:`FACING_WARN_DEG` off;
+    * joints at their velocity caps on more than 0.5 % of the clip.
+    """
+    out = []
+    if fid.share_any_over_45 > SEGMENT_WARN_SHARE:
+        worst = [k for k, v in fid.segments.items() if v.share_over_45 > SEGMENT_WARN_SHARE] or list(fid.segments)
+        out.append(
+            f"the character does not follow the actor: {', '.join(worst)} more than {SEGMENT_WARN_DEG:.0f} degrees "
+            f"off on {100 * fid.share_any_over_45:.1f} % of the frames ({_frames_text(fid.frames_any_over_45, offset)})"
+        )
+    if fid.frames_facing_over_30.size:
+        out.append(
+            f"the character faces more than {FACING_WARN_DEG:.0f} degrees away from the actor on "
+            f"{fid.frames_facing_over_30.size} frame(s) ({_frames_text(fid.frames_facing_over_30, offset)})"
+        )
+    if fid.saturated_share > 0.005:
+        out.append(
+            f"joints move at their velocity caps on {fid.saturated_frames.size} frame(s) "
+            f"({100 * fid.saturated_share:.1f} %: {_frames_text(fid.saturated_frames, offset)}); the character lags "
+            "the actor there"
+        )
+    return out

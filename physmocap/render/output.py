@@ -1,0 +1,107 @@
+"""Preview files: MP4 and GIF streamed frame by frame to ``imageio``, PNG contact sheets.
+
+Videos are written frame by frame (memory stays bounded on long clips) to a temporary
+file that is renamed over the output only when complete
+(:func:`physmocap.fileio.atomic_path`).  Each image carries its frame number (in the
+source's numbering) and time.  A contact sheet is a grid of chosen frames: the character
+row above the source row.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..errors import OptionError
+from ..fileio import atomic_path, check_writable
+from ..progress import Progress
+from .scene import PreviewScene
+
+__all__ = ["SUFFIXES", "check_output", "label", "write_video", "write_sheet", "sheet_frames", "require_imageio"]
+
+SUFFIXES = (".mp4", ".gif", ".png")
+
+
+def require_imageio():
+    """The ``imageio`` module, or a clear error naming the extra to install."""
+    try:
+        import imageio.v2 as iio
+    except ImportError:
+        raise OptionError("previews need imageio: pip install 'physmocap[render]'") from None
+    return iio
+
+
+def check_output(path: str | Path) -> Path:
+    """The output path if its suffix is known and its folder writable (before any work)."""
+    p = Path(path)
+    if p.suffix.lower() not in SUFFIXES:
+        raise OptionError(f"cannot write {p.suffix or 'files without a suffix'!r} previews; use one of {', '.join(SUFFIXES)}", path=p)
+    check_writable(p)
+    return p
+
+
+def label(image: np.ndarray, text: str) -> np.ndarray:
+    """The image with ``text`` written in its top-left corner (white on a dark box)."""
+    from PIL import Image, ImageDraw
+
+    img = Image.fromarray(image)
+    draw = ImageDraw.Draw(img)
+    box = draw.textbbox((6, 4), text)
+    draw.rectangle((box[0] - 3, box[1] - 2, box[2] + 3, box[3] + 2), fill=(0, 0, 0))
+    draw.text((6, 4), text, fill=(255, 255, 255))
+    return np.asarray(img)
+
+
+def _caption(t: int, first: int, fps: float) -> str:
+    return f"frame {first + t}  t={(first + t) / fps:.2f} s"
+
+
+def write_video(scene: PreviewScene, frames: Iterable[int], path: Path, fps: float, first: int, progress: bool | None) -> int:
+    """Stream the frames to an MP4 or GIF at ``path``; returns the number written."""
+    iio = require_imageio()
+    frames = list(frames)
+    kind = path.suffix.lower()
+    n = 0
+    with atomic_path(path) as tmp, Progress(len(frames), "preview", enabled=progress) as bar:
+        if kind == ".mp4":
+            writer = iio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_log_level="error")
+        else:
+            writer = iio.get_writer(tmp, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
+        try:
+            for t in frames:
+                writer.append_data(label(scene.render(t), _caption(t, first, fps)))
+                n += 1
+                bar.update(1)
+        finally:
+            writer.close()
+    return n
+
+
+def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = None, first: int = 0) -> list[int]:
+    """Trajectory frame indices of a contact sheet: ``given`` source frame numbers, or
+    ``count`` evenly spaced ones."""
+    if given:
+        out = [int(f) - first for f in given]
+        bad = [f + first for f in out if not 0 <= f < num_frames]
+        if bad:
+            raise OptionError(f"--frames: {bad} outside the rendered frames {first}..{first + num_frames - 1}")
+        return out
+    count = max(1, min(count, num_frames))
+    return sorted(set(np.linspace(0, num_frames - 1, count).round().astype(int).tolist()))
+
+
+def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, fps: float, first: int, progress: bool | None) -> None:
+    """A PNG grid: one column per frame, the character row above the source row."""
+    iio = require_imageio()
+    rows = [[], []]
+    with Progress(len(frames), "preview", enabled=progress) as bar:
+        for t in frames:
+            rows[0].append(label(scene.render(t, character=True, source=False), _caption(t, first, fps)))
+            if scene.skeleton is not None:
+                rows[1].append(label(scene.render(t, character=False, source=True), "source"))
+            bar.update(1)
+    grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, grid, format="PNG")

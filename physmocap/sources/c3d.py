@@ -1,0 +1,71 @@
+"""C3D marker files, read with ``ezc3d`` (the pure-Python ``c3d`` package rejects some real files).
+
+Point labels (``POINT:LABELS`` and ``LABELS2``...), units (``POINT:UNITS``), rate
+(``POINT:RATE``); a sample is invalid where its residual is negative, its coordinates
+are not finite or all exactly zero.  Analog channels are ignored.  The markers become the
+actor's canonical joint centres (:mod:`physmocap.markers`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, warn
+from ..markers.recording import UNITS, MarkerRecording
+from ..motion import Motion
+
+__all__ = ["read_c3d_markers", "read_c3d"]
+
+
+def read_c3d_markers(path: str | os.PathLike) -> MarkerRecording:
+    """The labelled markers of a C3D file (metres, the file's axes)."""
+    p = Path(path)
+    try:
+        import ezc3d
+    except ImportError:
+        raise InputError("reading C3D needs ezc3d: pip install ezc3d", path=p) from None
+    if not p.is_file():
+        raise InputError("file not found", path=p)
+    try:
+        c = ezc3d.c3d(str(p))
+    except Exception as exc:  # noqa: BLE001 - ezc3d raises plain RuntimeError/ValueError on corrupt files
+        raise InputError(f"not a readable C3D file: {str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__}", path=p) from None
+    try:
+        point = c["parameters"]["POINT"]
+        labels = list(point["LABELS"]["value"])
+        for extra in ("LABELS2", "LABELS3", "LABELS4"):
+            if extra in point:
+                labels += list(point[extra]["value"])
+        unit = str((point.get("UNITS", {}).get("value") or ["mm"])[0]).strip().lower() or "mm"
+        rate = float(np.asarray(point["RATE"]["value"]).reshape(-1)[0])
+        data = np.asarray(c["data"]["points"], dtype=float)  # (4, M, F)
+        residuals = np.asarray(c["data"]["meta_points"]["residuals"], dtype=float)  # (1, M, F)
+        first = int(c["header"]["points"]["first_frame"])
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
+        raise InputError(f"C3D file lacks point data or parameters ({exc})", path=p) from None
+    if data.ndim != 3 or data.shape[1] == 0 or data.shape[2] == 0:
+        raise InputError("C3D file holds no marker samples", path=p)
+    M = data.shape[1]
+    labels = (labels + [f"marker{k}" for k in range(len(labels), M)])[:M]
+    if unit not in UNITS:
+        warn(f"{p}: unknown point unit {unit!r}; assuming millimetres")
+        unit = "mm"
+    pos = np.transpose(data[:3], (2, 1, 0)) * UNITS[unit]  # (F, M, 3)
+    bad = ~np.all(np.isfinite(pos), axis=2) | np.all(pos == 0.0, axis=2)
+    if residuals.shape == (1, M, data.shape[2]):
+        bad |= residuals[0].T < 0.0
+    pos[bad] = np.nan
+    if np.all(bad):
+        raise InputError("every marker sample is invalid (NaN, zero or a negative residual)", path=p)
+    return MarkerRecording(labels=tuple(str(x) for x in labels), positions=pos, fps=rate, source=p, first_frame=first)
+
+
+def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
+    """A C3D file as the actor's canonical joint centres (:func:`physmocap.markers.motion.marker_motion`)."""
+    from ..markers.motion import marker_motion
+
+    return marker_motion(read_c3d_markers(path), marker_set, **options)

@@ -1,0 +1,105 @@
+"""TRC marker files (OpenSim / Motion Analysis text format), tab- or comma-separated.
+
+Line 1 ``PathFileType``; line 2 the header names, line 3 their values (``DataRate``,
+``NumFrames``, ``NumMarkers``, ``Units``...); line 4 ``Frame# Time`` then each marker's
+label above its three columns; line 5 the ``X1 Y1 Z1`` row; then one row per frame.
+Empty cells are missing samples.  A file that declares more frames than it holds is read
+as far as it goes, with a warning; a cell that is not a number is an error naming its
+line and marker.  The markers become canonical joint centres (:mod:`physmocap.markers`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError, warn
+from ..markers.recording import UNITS, MarkerRecording
+from ..motion import Motion
+
+__all__ = ["read_trc_markers", "read_trc"]
+
+#: Largest file read whole (bytes): a TRC of a long take stays well below.
+MAX_BYTES = 2_000_000_000
+
+
+def _split(line: str, sep: str) -> list[str]:
+    return [c.strip() for c in line.rstrip("\r\n").split(sep)]
+
+
+def read_trc_markers(path: str | os.PathLike) -> MarkerRecording:
+    """The labelled markers of a TRC file (metres, the file's axes)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("file not found", path=p)
+    if p.stat().st_size > MAX_BYTES:
+        raise InputError(f"file larger than {MAX_BYTES} bytes", path=p)
+    try:
+        lines = p.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=p) from None
+    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        raise InputError("not a TRC file (line 1 must start with PathFileType and 5 header lines follow)", path=p)
+    sep = "\t" if "\t" in lines[0] else ","
+    keys, values = _split(lines[1], sep), _split(lines[2], sep)
+    head = {k: v for k, v in zip(keys, values) if k}
+    try:
+        rate = float(head.get("DataRate") or head.get("CameraRate") or "nan")
+    except ValueError:
+        rate = math.nan
+    if not (math.isfinite(rate) and 0 < rate < 1e6):
+        raise InputError(f"line 3: DataRate must be a positive number, got {head.get('DataRate')!r}", path=p)
+    unit = (head.get("Units") or "mm").strip().lower()
+    if unit not in UNITS:
+        raise InputError(f"line 3: unknown Units {unit!r}; expected one of {', '.join(UNITS)}", path=p)
+    names = _split(lines[3], sep)
+    labels = [n for n in names[2:] if n]
+    if not labels:
+        raise InputError("line 4: no marker labels", path=p)
+    M = len(labels)
+    rows: list[list[float]] = []
+    short = 0
+    for ln, line in enumerate(lines[5:], start=6):
+        if not line.strip() or not line.replace(sep, "").strip():
+            continue
+        cells = _split(line, sep)
+        vals = cells[2 : 2 + 3 * M]
+        if len(vals) < 3 * M:
+            short += 1
+            vals = vals + [""] * (3 * M - len(vals))
+        row = []
+        for k, cell in enumerate(vals):
+            if cell == "" or cell.lower() == "nan":
+                row.append(math.nan)
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                raise InputError(f"line {ln}: marker {labels[k // 3]} {'XYZ'[k % 3]} is not a number: {cell[:20]!r}", path=p) from None
+            if not math.isfinite(v) or abs(v) > 1e9:
+                raise InputError(f"line {ln}: marker {labels[k // 3]} {'XYZ'[k % 3]} is out of range: {cell[:20]!r}", path=p)
+            row.append(v)
+        rows.append(row)
+    if not rows:
+        raise InputError("no data rows after the header", path=p)
+    declared = head.get("NumFrames")
+    if declared and declared.isdigit() and int(declared) != len(rows):
+        warn(f"{p}: the header declares {declared} frames but the file holds {len(rows)}; read what is there")
+    if short:
+        warn(f"{p}: {short} row(s) end early; their missing markers are gaps")
+    pos = np.array(rows, dtype=float).reshape(len(rows), M, 3) * UNITS[unit]
+    pos[np.all(pos == 0.0, axis=2)] = np.nan
+    if not np.isfinite(pos).any():
+        raise InputError("every marker sample is missing", path=p)
+    return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p)
+
+
+def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
+    """A TRC file as the actor's canonical joint centres (:func:`physmocap.markers.motion.marker_motion`)."""
+    from ..markers.motion import marker_motion
+
+    return marker_motion(read_trc_markers(path), marker_set, **options)

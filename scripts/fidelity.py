@@ -1,0 +1,76 @@
+#!/usr/bin/env python3
+"""Fidelity of the retargeting on the shared clips: does the character do what the actor does?
+
+For every BVH clip in ../shared/data and each bundled character, retargets with
+the default options and prints the figures of physmocap.metrics.fidelity
+(definitions in docs/metrics.md): worst segment direction error (median over
+frames, of the worst segment), share of frames with any segment over 45 degrees,
+facing error (median, p95), pelvis path deviation after a similarity fit (mean,
+max cm), the pelvis's vertical speed against the actor's (p99 m/s), velocity-cap
+saturation, and mean absolute joint acceleration with planting against the same
+clip retargeted with planting off.
+
+Usage:  python scripts/fidelity.py [--characters humanoid robot] [--clips ...] [--frames N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import warnings
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
+    ap.add_argument("--clips", nargs="+", default=None, help="file names in the data folder (default: every .bvh)")
+    ap.add_argument("--frames", type=int, default=None, help="retarget only the first N frames of each clip")
+    ap.add_argument("--no-plant-ratio", action="store_true", help="also retarget with planting off for the jerk ratio")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+
+    from physmocap.ik.retarget import retarget
+    from physmocap.metrics import smoothness
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    clips = args.clips or sorted(p.name for p in DATA.glob("*.bvh"))
+    print(
+        f"{'clip':26s} {'char':8s} {'seg med':>7s} {'worst':>14s} {'>45%':>5s} {'face med':>8s} {'p95':>5s}"
+        f" {'path cm':>7s} {'max':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'scuf%':>5s}"
+    )
+    for clip in clips:
+        path = DATA / clip
+        if not path.exists():
+            print(f"skip {clip}: {path} not found", file=sys.stderr)
+            continue
+        motion = load_motion(path)
+        end = args.frames
+        for name in args.characters:
+            ch = load_character(name)
+            traj = retarget(motion, ch, progress=False, end=end)
+            fid = trajectory_fidelity(traj)
+            worst = max(fid.segments.items(), key=lambda kv: kv[1].median_deg)
+            acc = smoothness(ch.model, traj.qpos, traj.fps)["mean_abs_acc"]
+            ratio = float("nan")
+            if args.no_plant_ratio:
+                free = retarget(motion, ch, progress=False, end=end, plant=False)
+                ratio = acc / max(smoothness(ch.model, free.qpos, free.fps)["mean_abs_acc"], 1e-9)
+            print(
+                f"{clip:26s} {name:8s} {worst[1].median_deg:7.1f} {worst[0]:>14s} {100 * fid.share_any_over_45:5.1f}"
+                f" {fid.facing_median_deg:8.1f} {fid.facing_p95_deg:5.1f} {fid.path_mean_cm:7.1f} {fid.path_max_cm:5.1f}"
+                f" {fid.pelvis_vz_p99:5.2f} {fid.actor_vz_p99_scaled:6.2f} {100 * fid.saturated_share:5.1f}"
+                f" {acc:6.1f} {ratio:5.2f} {fid.floor.slip_mean_cm_s:5.2f} {100 * fid.floor.scuff_share:5.1f}",
+                flush=True,
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,134 @@
+"""Hardening (issue 15, first part): one clear line for every bad input or environment failure."""
+
+from __future__ import annotations
+
+import resource
+import subprocess
+import sys
+
+import pytest
+
+from physmocap.cli import main
+from physmocap.resources import resolve_input
+
+BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  End Site
+  {
+    OFFSET 0 10 0
+  }
+}
+MOTION
+Frames: 2
+Frame Time: FT
+0 90 0 0 0 0
+0 90 0 0 0 0
+"""
+
+
+def _one_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("physmocap: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_help_imports_neither_numpy_stack_nor_mujoco():
+    """`physmocap --help` must start fast: the command table loads no scipy, MuJoCo or mink."""
+    code = (
+        "import sys; from physmocap.cli import build_parser; build_parser(); "
+        "print(','.join(m for m in ('scipy', 'mujoco', 'mink') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0 and out.stdout.strip() == "", out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("command", ["convert", "retarget", "clean"])
+def test_output_that_is_the_input_is_refused(tmp_path, capsys, command):
+    src = tmp_path / "walk.bvh"
+    original = resolve_input("example").read_bytes()
+    src.write_bytes(original)
+    argv = [command, str(src), str(src)] if command == "convert" else [command, str(src), "-o", str(src)]
+    assert main(argv) == 2
+    assert "the output is the input file" in _one_line(capsys)
+    assert src.read_bytes() == original
+
+
+@pytest.mark.parametrize("ft,needle", [("1e-300", "frame rate"), ("0.000001", "frame rate"), ("100", "frame rate")])
+def test_implausible_frame_rates_are_refused(tmp_path, capsys, ft, needle):
+    path = tmp_path / "odd.bvh"
+    path.write_text(BVH.replace("FT", ft))
+    assert main(["convert", str(path), str(tmp_path / "out.bvh")]) == 2
+    line = _one_line(capsys)
+    assert needle in line and "odd.bvh" in line
+    assert not (tmp_path / "out.bvh").exists()
+
+
+def test_far_offsets_are_refused(tmp_path, capsys):
+    path = tmp_path / "far.bvh"
+    path.write_text(BVH.replace("FT", "0.033").replace("OFFSET 0 10 0", "OFFSET 0 5e6 0"))
+    assert main(["inspect", str(path), "--in-units", "m"]) == 2
+    line = _one_line(capsys)
+    assert "far.bvh" in line and "within 1 km" in line
+
+
+def test_file_too_large_is_one_line(tmp_path):
+    """An OSError while writing (disk full, quota, ulimit -f) is one line with exit 2 and leaves
+    no partial file."""
+    out = tmp_path / "walk.npz"
+
+    def limit():  # 64 KB per file: the trajectory NPZ is larger
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 * 1024, 64 * 1024))
+
+    r = subprocess.run(
+        [sys.executable, "-m", "physmocap", "retarget", "example", "-o", str(out), "--end", "40", "--quiet"],
+        capture_output=True, text=True, timeout=300, preexec_fn=limit,
+    )
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
+    assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists() and not list(tmp_path.glob(".*tmp*"))
+
+
+def test_fuzz_smoke():
+    """A short run of the repository's fuzzing campaign (scripts/fuzz.py runs it for hours)."""
+    import io
+    import runpy
+
+    from conftest import REPO
+
+    fuzz = runpy.run_path(str(REPO / "scripts" / "fuzz.py"), run_name="fuzz")
+    log = io.StringIO()
+    counts = fuzz["campaign"](cases=10, seconds=0.0, seed=7, keep=None, out=log)
+    assert sum(counts.values()) == 10
+    assert not any(outcome == "FAIL" for (_, outcome) in counts), log.getvalue()
+
+
+def test_outputs_carry_no_absolute_paths(tmp_path, capsys):
+    """The same job in two folders gives the same bytes; a saved trajectory names its character
+    relative to itself (or by bundled name), and `report` finds it from anywhere."""
+    import shutil
+
+    import numpy as np
+
+    from physmocap.resources import mjcf_dir
+
+    outs = []
+    for d in ("one", "two"):
+        (tmp_path / d).mkdir()
+        out = tmp_path / d / "walk.npz"
+        assert main(["retarget", "example", "-o", str(out), "--end", "30", "--quiet"]) == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and str(tmp_path).encode() not in outs[0]
+    chars = tmp_path / "chars"
+    chars.mkdir()
+    for name in ("robot.xml", "robot.map.toml"):
+        shutil.copy(mjcf_dir() / name, chars / name)
+    out = tmp_path / "one" / "robot.npz"
+    assert main(["retarget", "example", "-o", str(out), "--character", str(chars / "robot.xml"), "--end", "30", "--quiet"]) == 0
+    with np.load(out, allow_pickle=False) as z:
+        assert str(z["mjcf_path"]) == "../chars/robot.xml" and str(z["source"]) == "example"
+    capsys.readouterr()
+    assert main(["report", str(out)]) == 0

@@ -1,0 +1,97 @@
+"""A real robot model (issue 13, first part): the Unitree G1 with its meshes, no user mapping."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from conftest import REPO, SHARED_DATA, shared_file
+from physmocap.errors import MappingError
+
+G1 = SHARED_DATA.parent / "robots" / "unitree_g1" / "g1_mocap_29dof.xml"
+
+
+@pytest.fixture(scope="module")
+def g1_walk():
+    if not G1.exists():
+        pytest.skip(f"the Unitree G1 model is not here: {G1} (../shared absent)")
+    from physmocap import load_motion, retarget
+    from physmocap.models import load_character
+
+    ch = load_character(G1)  # the bundled mapping file is found by the model's file name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion(shared_file("pymo_walk.bvh")), ch, progress=False, end=240)
+    return ch, traj
+
+
+def test_g1_retargets_without_a_user_mapping(g1_walk):
+    from physmocap import metrics
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    ch, traj = g1_walk
+    assert ch.name == "unitree_g1" and set(ch.contacts) == {"left", "right"}
+    assert np.all(np.isfinite(traj.qpos))
+    assert metrics.joint_limit_violations(ch.model, traj.qpos)["count"] == 0
+    assert metrics.penetration(ch.model, traj.qpos)["max_mm"] < 1.0
+    fid = trajectory_fidelity(traj)
+    assert max(v.median_deg for v in fid.segments.values()) < 8.0
+    assert fid.facing_p95_deg < 10.0 and fid.path_mean_cm < 3.0
+
+
+def test_floor_constraint_skips_visual_meshes_and_far_geoms(g1_walk):
+    import mujoco
+
+    from physmocap.ik.limits import FloorLimit
+    from physmocap.models.geometry import is_visual_only
+
+    ch, traj = g1_walk
+    m = ch.model
+    limit = FloorLimit(m)
+    assert not any(is_visual_only(m, int(g)) for g in limit.geoms)
+    assert any(is_visual_only(m, g) for g in range(m.ngeom))
+    data = mujoco.MjData(m)
+    data.qpos[:] = traj.qpos[0]
+    mujoco.mj_kinematics(m, data)
+    z, _, _ = limit.heights(data)
+    assert np.isinf(z).sum() > 0.5 * len(z)  # the arms' and torso's hull points are not evaluated
+    assert np.nanmin(z[np.isfinite(z)]) > -1e-3
+
+
+def test_added_site_on_a_missing_body_names_the_line(tmp_path):
+    if not G1.exists():
+        pytest.skip("../shared absent")
+    from physmocap.models import load_character
+
+    text = (REPO / "assets" / "mjcf" / "robots" / "g1_mocap_29dof.map.toml").read_text()
+    bad = tmp_path / "g1.map.toml"
+    bad.write_text(text.replace('neck = { body = "torso_link"', 'neck = { body = "no_such_link"'))
+    with pytest.raises(MappingError, match=r"\[sites\] neck: the model has no body 'no_such_link'") as err:
+        load_character(G1, bad)
+    assert "line" in str(err.value) or err.value.line is not None
+
+
+def test_robot_learning_outputs(g1_walk, tmp_path):
+    """robot-csv: root xyz, root quaternion x-y-z-w, the 29 joints in model order (names beside);
+    robot-npz: every array named, bodies and joints listed, no paths; same bytes on re-runs."""
+    from physmocap.export.robot import write_robot_csv, write_robot_npz
+
+    ch, traj = g1_walk
+    csv_path = write_robot_csv(traj, tmp_path / "walk.csv")
+    rows = np.loadtxt(csv_path, delimiter=",")
+    names = (tmp_path / "walk.joints.txt").read_text().split()
+    assert rows.shape == (traj.num_frames, 7 + 29) and len(names) == 36 and names[7] == "left_hip_pitch_joint"
+    assert np.allclose(np.linalg.norm(rows[:, 3:7], axis=1), 1.0, atol=1e-6)
+    npz = write_robot_npz(traj, tmp_path / "walk.npz")
+    first = npz.read_bytes()
+    with np.load(npz, allow_pickle=False) as z:
+        assert list(z["dof_names"]) == names[7:]
+        assert np.allclose(z["root_pos"], rows[:, :3]) and np.allclose(z["dof_pos"], rows[:, 7:], atol=1e-8)
+        pelvis = list(z["body_names"]).index("pelvis")
+        assert np.allclose(z["body_pos_w"][:, pelvis], z["root_pos"])
+        assert np.allclose(z["root_quat_wxyz"][:, [1, 2, 3, 0]], rows[:, 3:7], atol=1e-8)
+        assert float(z["fps"]) == traj.fps and z["joint_vel"].shape == z["dof_pos"].shape
+        assert all(z[k].dtype.kind != "O" for k in z.files) and not any("/" in str(v) for v in z["body_names"])
+    assert write_robot_npz(traj, tmp_path / "walk.npz").read_bytes() == first

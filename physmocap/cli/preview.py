@@ -18,7 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Render the character and the source skeleton offscreen with MuJoCo's renderer. INPUT is a "
             "motion file (retargeted first, with the same options as retarget), 'example', or a trajectory "
-            ".npz written by retarget --qpos (give --source to draw its skeleton)."
+            ".npz written by retarget --qpos (give --source to draw its skeleton). Videos play at --fps "
+            "(a source is retargeted at that rate; a trajectory's frames are picked at it), by default the "
+            "clip's rate up to 30 frames per second."
         ),
     )
     p.add_argument("input", metavar="INPUT", help="motion file, 'example', or trajectory .npz")
@@ -30,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", help="contact sheet: comma-separated source frame numbers (default: --count evenly spaced)")
     p.add_argument("--count", type=int, default=8, help="contact sheet: number of frames (default 8)")
     p.add_argument("--source", metavar="FILE", help="with a trajectory .npz: the source motion it was retargeted from")
+    p.add_argument("--antialias", action="store_true", help="4x multisampling: smoother edges, about 2.7x slower")
     add_retarget_options(p)
     p.set_defaults(func=run)
 
@@ -44,86 +47,80 @@ def _frame_list(text: str | None) -> list[int] | None:
 
 
 def render_preview(
-    traj,
+    source,
     output: Path,
+    options=None,
     *,
-    size: str = "640x480",
-    camera: str = "side",
-    layout: str = "beside",
     frames: list[int] | None = None,
     count: int = 8,
+    fps: float | None = None,
     quiet: bool = False,
 ) -> None:
-    """Render ``traj`` (and its source, if it carries one) to ``output``."""
+    """Render a retargeted trajectory (or a :class:`~physmocap.render.source.PreviewInput`)
+    to ``output`` with :class:`~physmocap.render.scene.PreviewOptions` ``options``."""
     from ..render.backend import ensure_backend
-    from ..render.output import check_output, sheet_frames, write_sheet, write_video
-    from ..render.scene import PreviewOptions, PreviewScene, parse_camera, parse_size
-    from ..render.skeleton import source_skeleton
+    from ..render.output import check_output, sheet_frames, video_frames, write_sheet, write_video
+    from ..render.scene import PreviewOptions, PreviewScene
+    from ..render.source import PreviewInput, preview_input
 
     out = check_output(output)
-    w, h = parse_size(size)
-    opts = PreviewOptions(width=w, height=h, camera=parse_camera(camera), layout=layout)
     if count < 1:
         raise OptionError("--count must be at least 1")
+    inp = source if isinstance(source, PreviewInput) else preview_input(source)
+    traj = inp.traj
     ensure_backend()
-    stats = getattr(traj, "stats", None) or {}
-    contacts = stats.get("contacts")
-    first = int(stats.get("source_start", 0))
     progress = False if quiet else None
-    with PreviewScene(traj, source_skeleton(traj), getattr(contacts, "labels", None), opts) as scene:
+    with PreviewScene(traj, inp.skeleton, inp.contacts, options or PreviewOptions()) as scene:
         if out.suffix.lower() == ".png":
-            write_sheet(scene, sheet_frames(traj.num_frames, count, frames, first), out, traj.fps, first, progress)
+            write_sheet(scene, sheet_frames(traj.num_frames, count, frames, inp.first), out, inp.first, progress)
         else:
-            write_video(scene, range(traj.num_frames), out, traj.fps, first, progress)
+            shown, rate = video_frames(traj.num_frames, traj.fps, fps)
+            write_video(scene, shown, out, rate, inp.first, progress)
     print(f"wrote {out}", file=sys.stderr)
 
 
 def _load(args: argparse.Namespace):
-    """The trajectory to show: a saved .npz (with its source if given) or a fresh retarget."""
+    """The :class:`~physmocap.render.source.PreviewInput` to show: a saved .npz (with its
+    source if given) or a fresh retarget."""
+    from ..render.source import preview_input, preview_input_with_source
+
     if Path(args.input).suffix.lower() == ".npz":
         from ..report import load_trajectory
 
         traj = load_trajectory(args.input, args.character, args.map)
-        if args.source:
-            from ..ik.retarget import default_start, map_motion
-            from ..ik.targets import build_targets
-            from ..sources import load_motion
+        if not args.source:
+            return preview_input(traj)
+        from ..sources import load_motion
 
-            motion = load_motion(args.source)
-            start = default_start(motion) if args.start is None else int(args.start)
-            motion = motion.slice_frames(start, min(motion.num_frames, start + traj.num_frames))
-            if motion.num_frames != traj.num_frames:
-                raise OptionError(
-                    f"--source has {motion.num_frames} frames from frame {start} but the trajectory {traj.num_frames}; "
-                    "pass --start as used for the retarget",
-                    path=args.source,
-                )
-            joints = map_motion(motion, profile=args.profile, mapping=args.source_map)
-            traj.targets = build_targets(motion, joints, traj.character)
-            traj.stats.update(source_motion=motion, joint_indices=joints, source_start=start)
-        return traj
+        return preview_input_with_source(traj, load_motion(args.source), args.start, args.profile, args.source_map)
     if args.source:
         raise OptionError("--source is for a trajectory .npz input; a motion file is its own source")
     from .retarget import retarget_from_args
 
-    return retarget_from_args(args)
+    return preview_input(retarget_from_args(args))
+
+
+def options_from_args(args: argparse.Namespace):
+    """:class:`~physmocap.render.scene.PreviewOptions` from the command line (checked)."""
+    from ..render.scene import PreviewOptions, parse_camera, parse_size
+
+    w, h = parse_size(args.size)
+    return PreviewOptions(width=w, height=h, camera=parse_camera(args.camera), layout=args.layout, antialias=args.antialias)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render.output import check_output, require_imageio
-    from ..render.scene import PreviewOptions, parse_camera, parse_size
+    from ..render.output import check_output, require_imageio, video_frames
 
     check_output(args.output)
     require_imageio()
-    frames = _frame_list(args.frames)
     # every option is checked before the (possibly long) retarget
-    w, h = parse_size(args.size)
-    PreviewOptions(width=w, height=h, camera=parse_camera(args.camera), layout=args.layout)
+    frames = _frame_list(args.frames)
+    options = options_from_args(args)
     if args.count < 1:
         raise OptionError("--count must be at least 1")
-    traj = _load(args)
+    if args.fps is not None:
+        video_frames(1, 1.0, args.fps)
     render_preview(
-        traj, Path(args.output), size=args.size, camera=args.camera, layout=args.layout,
-        frames=frames, count=args.count, quiet=args.quiet,
+        _load(args), Path(args.output), options, frames=frames, count=args.count, fps=args.fps, quiet=args.quiet
     )
     return 0

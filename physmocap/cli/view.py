@@ -33,12 +33,11 @@ def run(args: argparse.Namespace) -> int:
     import mujoco
     import mujoco.viewer
 
-    from ..render.scene import _add_connector
-    from ..render.skeleton import source_skeleton
+    from ..render.scene import add_skeleton
     from .preview import _load
 
-    traj = _load(args)
-    sk = source_skeleton(traj)
+    inp = _load(args)
+    traj, sk = inp.traj, inp.skeleton
     model = traj.character.model
     data = mujoco.MjData(model)
     paused = {"on": False}
@@ -56,9 +55,7 @@ def run(args: argparse.Namespace) -> int:
             with viewer.lock():
                 viewer.user_scn.ngeom = 0
                 if sk is not None:
-                    w = 0.012 * float(getattr(traj.character, "height", 1.7))
-                    for a, b in sk.bones:
-                        _add_connector(viewer.user_scn, mujoco.mjtGeom.mjGEOM_CAPSULE, w, sk.positions[t, a], sk.positions[t, b], [0.9, 0.8, 0.2, 0.8])
+                    add_skeleton(viewer.user_scn, sk, t, 0.012 * float(getattr(traj.character, "height", 1.7)))
             viewer.sync()
             if not paused["on"]:
                 t += 1

@@ -19,7 +19,7 @@ from ..fileio import atomic_path, check_writable
 from ..progress import Progress
 from .scene import PreviewScene
 
-__all__ = ["SUFFIXES", "check_output", "label", "write_video", "write_sheet", "sheet_frames", "require_imageio"]
+__all__ = ["SUFFIXES", "check_output", "label", "video_frames", "write_video", "write_sheet", "sheet_frames", "require_imageio"]
 
 SUFFIXES = (".mp4", ".gif", ".png")
 
@@ -58,8 +58,20 @@ def _caption(t: int, first: int, fps: float) -> str:
     return f"frame {first + t}  t={(first + t) / fps:.2f} s"
 
 
+def video_frames(num_frames: int, clip_fps: float, fps: float | None = None) -> tuple[list[int], float]:
+    """Trajectory frames of a video at ``fps`` frames per second (default: the clip's
+    rate, at most 30) and that rate: video frame ``n`` shows the clip frame nearest to
+    time ``n / fps``."""
+    rate = min(float(clip_fps), 30.0) if fps is None else float(fps)
+    if not (np.isfinite(rate) and 0.0 < rate <= 240.0):
+        raise OptionError(f"--fps must be within (0, 240] frames per second, got {fps}")
+    count = int(np.floor((num_frames - 1) / clip_fps * rate + 1e-9)) + 1
+    return np.minimum(np.rint(np.arange(count) * clip_fps / rate), num_frames - 1).astype(int).tolist(), rate
+
+
 def write_video(scene: PreviewScene, frames: Iterable[int], path: Path, fps: float, first: int, progress: bool | None) -> int:
-    """Stream the frames to an MP4 or GIF at ``path``; returns the number written."""
+    """Stream the frames to an MP4 or GIF at ``path`` played at ``fps``; returns the number
+    written.  Captions give the source frame number (``first`` + trajectory frame) and time."""
     iio = require_imageio()
     frames = list(frames)
     kind = path.suffix.lower()
@@ -71,7 +83,7 @@ def write_video(scene: PreviewScene, frames: Iterable[int], path: Path, fps: flo
             writer = iio.get_writer(tmp, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
         try:
             for t in frames:
-                writer.append_data(label(scene.render(t), _caption(t, first, fps)))
+                writer.append_data(label(scene.render(t), _caption(t, first, scene.traj.fps)))
                 n += 1
                 bar.update(1)
         finally:
@@ -92,13 +104,13 @@ def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = 
     return sorted(set(np.linspace(0, num_frames - 1, count).round().astype(int).tolist()))
 
 
-def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, fps: float, first: int, progress: bool | None) -> None:
+def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, first: int, progress: bool | None) -> None:
     """A PNG grid: one column per frame, the character row above the source row."""
     iio = require_imageio()
     rows = [[], []]
     with Progress(len(frames), "preview", enabled=progress) as bar:
         for t in frames:
-            rows[0].append(label(scene.render(t, character=True, source=False), _caption(t, first, fps)))
+            rows[0].append(label(scene.render(t, character=True, source=False), _caption(t, first, scene.traj.fps)))
             if scene.skeleton is not None:
                 rows[1].append(label(scene.render(t, character=False, source=True), "source"))
             bar.update(1)

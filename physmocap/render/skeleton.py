@@ -16,7 +16,7 @@ import numpy as np
 
 from ..rotations import quat_apply
 
-__all__ = ["SourceSkeleton", "source_skeleton", "side_of_joints"]
+__all__ = ["Placement", "SourceSkeleton", "source_skeleton", "side_of_joints"]
 
 LEFT, CENTRE, RIGHT = 1, 0, -1
 
@@ -60,26 +60,50 @@ def _subtree(parents: np.ndarray, root: int) -> np.ndarray:
     return inside
 
 
-def source_skeleton(traj) -> SourceSkeleton | None:
-    """The source skeleton of a retargeted trajectory, or None if it carries no source."""
-    stats = getattr(traj, "stats", None) or {}
-    motion = stats.get("source_motion")
-    joints = stats.get("joint_indices")
-    targets = getattr(traj, "targets", None)
-    cal = getattr(targets, "calibration", None)
-    if motion is None or joints is None or cal is None:
-        return None
+@dataclass(frozen=True, eq=False)
+class Placement:
+    """The retargeter's map from the actor's world to the character's (module doc).
+
+    Attributes:
+        scale: :math:`k`, the leg-length ratio.
+        start_xy: :math:`s`, the actor's start point (m).
+        floor: :math:`z_{floor}`, the actor's floor height after levelling (m).
+        ankle_actor, ankle_character: :math:`h_a`, :math:`h_c` (m).
+        level: Rotation (x-y-z-w) levelling a tilted floor, or None.
+        level_centre: Point it turns about (m), or None.
+    """
+
+    scale: float
+    start_xy: np.ndarray
+    floor: float
+    ankle_actor: float
+    ankle_character: float
+    level: np.ndarray | None = None
+    level_centre: np.ndarray | None = None
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """``(..., 3)`` actor world points -> character world points (metres)."""
+        P = np.asarray(points, dtype=float)
+        if self.level is not None:
+            c = np.asarray(self.level_centre, dtype=float)
+            P = quat_apply(self.level, P - c) + np.array([c[0], c[1], 0.0])
+        out = np.empty_like(P)
+        out[..., :2] = self.start_xy + self.scale * (P[..., :2] - self.start_xy)
+        out[..., 2] = self.scale * (P[..., 2] - self.floor - self.ankle_actor) + self.ankle_character
+        return out
+
+
+def source_skeleton(motion, joint_indices: dict[str, int], placement: Placement) -> SourceSkeleton:
+    """The source skeleton of ``motion`` (as retargeted: cut, resampled) placed by ``placement``.
+
+    Joints above the mapped pelvis (a wrapper root such as Bandai's ``joint_Root``) are not
+    bones of the body and are left out; joints with zero confidence are NaN.
+    """
     P = np.array(motion.world_positions(), dtype=float)
     if motion.confidence is not None:
         P[motion.confidence <= 0.0] = np.nan
-    if cal.level is not None:
-        c = cal.level_centre
-        P = quat_apply(cal.level, P - c) + np.array([c[0], c[1], 0.0])
-    k = float(cal.scale)
-    out = np.empty_like(P)
-    out[..., :2] = cal.start_xy + k * (P[..., :2] - cal.start_xy)
-    out[..., 2] = k * (P[..., 2] - cal.floor - cal.ankle_actor) + cal.ankle_character
+    out = placement.apply(P)
     parents = np.asarray(motion.skeleton.parents)
-    body = _subtree(parents, joints.get("pelvis", 0))
+    body = _subtree(parents, joint_indices.get("pelvis", 0))
     bones = np.array([(int(p), j) for j, p in enumerate(parents) if p >= 0 and body[j] and body[p]], dtype=int).reshape(-1, 2)
-    return SourceSkeleton(positions=out, bones=bones, side=side_of_joints(parents, joints))
+    return SourceSkeleton(positions=out, bones=bones, side=side_of_joints(parents, joint_indices))

@@ -119,3 +119,76 @@ def test_view_without_a_display_suggests_preview(monkeypatch, capsys):
     assert _run(["view", "example"]) == 2
     err = capsys.readouterr().err
     assert "no display" in err and "physmocap preview" in err and "Traceback" not in err
+
+
+# --- placement, determinism, frame rates, robustness -------------------------------------------
+
+
+def test_source_skeleton_sits_where_the_retargeter_put_the_actor():
+    """The midpoint of the placed source hips is the retargeter's root anchor: the midpoint
+    of its hip targets (before planting shifts them), frame by frame."""
+    from conftest import retargeted
+    from physmocap.render.source import preview_input
+
+    with warnings.catch_warnings():  # velocity caps on a few frames: not what is tested here
+        warnings.simplefilter("ignore")
+        motion, traj = retargeted("cmu_12_01_walk.bvh", start=1, end=61)
+    inp = preview_input(traj)
+    joints = traj.stats["joint_indices"]
+    targets = traj.targets
+    raw = targets.info.get("raw_positions", targets.positions)
+    placed = inp.skeleton.positions[:, [joints["left_hip"], joints["right_hip"]]].mean(axis=1)
+    anchor = raw[:, [targets.index("left_hip"), targets.index("right_hip")]].mean(axis=1)
+    np.testing.assert_allclose(placed, anchor, atol=1e-9)
+    assert inp.first == 1 and inp.contacts is not None
+
+
+def test_sheet_bytes_are_deterministic(backend, tmp_path):
+    outs = [tmp_path / f"s{k}.png" for k in (1, 2)]
+    for out in outs:
+        assert _run(["preview", "example", "-o", str(out), "--end", "40", "--count", "2", "--size", "64x48", "--quiet"]) == 0
+    assert outs[0].read_bytes() == outs[1].read_bytes()
+
+
+def test_trajectory_frames_are_picked_at_fps(backend, tmp_path):
+    npz, mp4 = tmp_path / "walk.npz", tmp_path / "walk.mp4"
+    assert _run(["retarget", "example", "-o", str(npz), "--end", "61", "--quiet"]) == 0
+    assert _run(["preview", str(npz), "-o", str(mp4), "--fps", "10", "--size", "64x48", "--quiet"]) == 0
+    reader = imageio.get_reader(mp4)
+    assert reader.count_frames() == 5 and reader.get_meta_data()["fps"] == 10  # 60 frames at 120 Hz: 0.49 s
+
+
+def test_unusable_outputs_and_characters_are_one_line(tmp_path, capsys):
+    # an MP4 of odd size is refused before the retarget (libx264 cannot encode it)
+    assert _run(["preview", "example", "-o", str(tmp_path / "x.mp4"), "--size", "65x48"]) == 2
+    err = capsys.readouterr().err
+    assert "even width and height" in err and len(err.strip().splitlines()) == 1
+    # a trajectory whose character file is gone
+    npz = tmp_path / "walk.npz"
+    assert _run(["retarget", "example", "-o", str(npz), "--end", "11", "--quiet"]) == 0
+    with np.load(npz, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["mjcf_path"] = np.array(str(tmp_path / "gone.xml"))
+    from physmocap.export.trajectory import write_npz
+
+    write_npz(npz, arrays)
+    capsys.readouterr()
+    assert _run(["preview", str(npz), "-o", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gone.xml" in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["walk.npz"]
+
+
+def test_renders_when_mujoco_was_imported_first(backend, tmp_path):
+    """MuJoCo picks its OpenGL backend at its own import: a program that imports mujoco
+    before physmocap still renders headless."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    code = (
+        "import mujoco\n"
+        "from physmocap.render.backend import ensure_backend\n"
+        "ensure_backend()\n"
+        "m = mujoco.MjModel.from_xml_string('<mujoco><worldbody><geom size=\".1\"/></worldbody></mujoco>')\n"
+        "print(mujoco.Renderer(m, 16, 16).render().shape)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0 and "(16, 16, 3)" in r.stdout, r.stderr

@@ -59,18 +59,20 @@ def render_preview(
     """Render a retargeted trajectory (or a :class:`~physmocap.render.source.PreviewInput`)
     to ``output`` with :class:`~physmocap.render.scene.PreviewOptions` ``options``."""
     from ..render.backend import ensure_backend
-    from ..render.output import check_output, sheet_frames, video_frames, write_sheet, write_video
+    from ..render.output import check_output, check_size, sheet_frames, video_frames, write_sheet, write_video
     from ..render.scene import PreviewOptions, PreviewScene
     from ..render.source import PreviewInput, preview_input
 
     out = check_output(output)
+    options = options or PreviewOptions()
+    check_size(out, options.width, options.height)
     if count < 1:
         raise OptionError("--count must be at least 1")
     inp = source if isinstance(source, PreviewInput) else preview_input(source)
     traj = inp.traj
     ensure_backend()
     progress = False if quiet else None
-    with PreviewScene(traj, inp.skeleton, inp.contacts, options or PreviewOptions()) as scene:
+    with PreviewScene(traj, inp.skeleton, inp.contacts, options) as scene:
         if out.suffix.lower() == ".png":
             write_sheet(scene, sheet_frames(traj.num_frames, count, frames, inp.first), out, inp.first, progress)
         else:
@@ -109,13 +111,14 @@ def options_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..render.output import check_output, require_imageio, video_frames
+    from ..render.output import check_output, check_size, require_imageio, video_frames
 
     check_output(args.output)
     require_imageio()
     # every option is checked before the (possibly long) retarget
     frames = _frame_list(args.frames)
     options = options_from_args(args)
+    check_size(Path(args.output), options.width, options.height)
     if args.count < 1:
         raise OptionError("--count must be at least 1")
     if args.fps is not None:

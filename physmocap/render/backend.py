@@ -66,6 +66,25 @@ def select_backend_env() -> None:
 _checked: str | None = None
 
 
+def _use_backend(name: str) -> None:
+    """Point MuJoCo's renderer at the headless backend ``name``.
+
+    MuJoCo reads ``MUJOCO_GL`` once, at its import; a program that imported ``mujoco``
+    before ``physmocap`` got its default (GLFW, which needs a display), so the context
+    class is replaced here when it is not the chosen one.
+    """
+    if name not in ("egl", "osmesa"):
+        return
+    import importlib
+    import sys
+
+    wanted = importlib.import_module(f"mujoco.{name}").GLContext
+    for module in ("mujoco.rendering.classic.gl_context", "mujoco.gl_context"):
+        loaded = sys.modules.get(module)
+        if loaded is not None and getattr(loaded, "GLContext", wanted) is not wanted:
+            loaded.GLContext = wanted
+
+
 def ensure_backend() -> str:
     """Select and test the OpenGL backend; returns its name.
 
@@ -86,6 +105,13 @@ def ensure_backend() -> str:
         raise RenderError(f"cannot render: no display and no EGL or OSMesa library found; {hint}")
     os.environ.setdefault("MUJOCO_GL", name)
     import mujoco
+
+    try:
+        _use_backend(os.environ["MUJOCO_GL"].lower())
+    except Exception as exc:  # noqa: BLE001 - an unloadable backend is the same problem
+        raise RenderError(
+            f"cannot load the {name} OpenGL backend: {str(exc).splitlines()[0][:120]}; {hint}"
+        ) from None
 
     try:
         model = mujoco.MjModel.from_xml_string("<mujoco><worldbody><geom size='.1'/></worldbody></mujoco>")

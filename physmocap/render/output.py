@@ -9,6 +9,7 @@ row above the source row.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -19,7 +20,7 @@ from ..fileio import atomic_path, check_writable
 from ..progress import Progress
 from .scene import PreviewScene
 
-__all__ = ["SUFFIXES", "check_output", "label", "video_frames", "write_video", "write_sheet", "sheet_frames", "require_imageio"]
+__all__ = ["SUFFIXES", "check_output", "check_size", "label", "video_frames", "write_video", "write_sheet", "sheet_frames", "require_imageio"]
 
 SUFFIXES = (".mp4", ".gif", ".png")
 
@@ -42,15 +43,33 @@ def check_output(path: str | Path) -> Path:
     return p
 
 
+def check_size(path: Path, width: int, height: int) -> None:
+    """H.264 video (yuv420p) needs an even width and height: say so before any work."""
+    if path.suffix.lower() == ".mp4" and (width % 2 or height % 2):
+        raise OptionError(f"--size {width}x{height}: an MP4 needs an even width and height", path=path)
+
+
+@functools.lru_cache(maxsize=8)
+def _font(size: int):
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)  # Pillow >= 10.1: a scalable font
+    except TypeError:  # older Pillow: its small bitmap font
+        return ImageFont.load_default()
+
+
 def label(image: np.ndarray, text: str) -> np.ndarray:
-    """The image with ``text`` written in its top-left corner (white on a dark box)."""
+    """The image with ``text`` written in its top-left corner (white on a dark box), the
+    font about 1/26 of the image height."""
     from PIL import Image, ImageDraw
 
     img = Image.fromarray(image)
     draw = ImageDraw.Draw(img)
-    box = draw.textbbox((6, 4), text)
+    font = _font(max(10, image.shape[0] // 26))
+    box = draw.textbbox((6, 4), text, font=font)
     draw.rectangle((box[0] - 3, box[1] - 2, box[2] + 3, box[3] + 2), fill=(0, 0, 0))
-    draw.text((6, 4), text, fill=(255, 255, 255))
+    draw.text((6, 4), text, fill=(255, 255, 255), font=font)
     return np.asarray(img)
 
 

@@ -177,11 +177,26 @@ class PreviewScene:
         self.hidden.sitegroup[:] = 0
 
     def _initial_heading(self) -> float:
-        """Heading (degrees) of the root body's +X axis on the first frame."""
-        self.data.qpos[:] = self.traj.qpos[0]
-        mujoco.mj_kinematics(self.model, self.data)
-        x = self.data.xmat[self.root].reshape(3, 3)[:, 0]
-        return float(np.degrees(np.arctan2(x[1], x[0])))
+        """Heading (degrees about +Z) the character faces on the first frame.
+
+        Facing is :math:`(l - r) \\times \\hat z` from the left and right hip joints, which
+        a bent torso does not tilt; without both hips mapped, the root body's rotation
+        from the rest pose (facing +X) applied to +X.
+        """
+        ch, model, data = self.traj.character, self.model, self.data
+        data.qpos[:] = ch.rest_qpos
+        mujoco.mj_kinematics(model, data)
+        rest = data.xmat[self.root].reshape(3, 3).copy()
+        self.rest_root_z = float(data.xpos[self.root][2])
+        data.qpos[:] = self.traj.qpos[0]
+        mujoco.mj_kinematics(model, data)
+        hips = [getattr(ch, "tracked", {}).get(f"{s}_hip") for s in ("left", "right")]
+        if all(h is not None for h in hips):
+            l, r = (data.site_xpos[model.site(h.name).id] if h.kind == "site" else data.xpos[model.body(h.name).id] for h in hips)
+            forward = np.cross(l - r, [0.0, 0.0, 1.0])
+        else:
+            forward = data.xmat[self.root].reshape(3, 3) @ rest.T @ np.array([1.0, 0.0, 0.0])
+        return float(np.degrees(np.arctan2(forward[1], forward[0])))
 
     def close(self) -> None:
         self.renderer.close()
@@ -198,7 +213,8 @@ class PreviewScene:
         mujoco.mj_kinematics(self.model, self.data)
         pelvis = self.data.xpos[self.root].copy()
         show_skeleton = source and self.skeleton is not None
-        self.camera.lookat[:] = [pelvis[0], pelvis[1], 0.5 * self.height_m]
+        # follow the pelvis; upwards too (jumps), not down (a crouch keeps the feet in view)
+        self.camera.lookat[:] = [pelvis[0], pelvis[1], 0.5 * self.height_m + max(0.0, pelvis[2] - self.rest_root_z)]
         both = character and show_skeleton and self.options.layout == "beside"
         self.camera.distance = self.options.distance * self.height_m * (1.4 if both else 1.0)
         if character and show_skeleton:

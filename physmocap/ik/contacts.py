@@ -500,6 +500,8 @@ class Contacts:
         groups: Label -> the points it combines.
         joints: Point -> source joint index it was measured on.
         source: Where the labels came from (``"detected"`` or a CSV path).
+        body_labels: Knees, hands and pelvis resting on the floor
+            (:mod:`physmocap.ik.body_contacts`): part -> ``(F,)`` bool.
     """
 
     labels: dict[str, np.ndarray]
@@ -511,6 +513,7 @@ class Contacts:
     groups: dict[str, tuple[str, ...]] = field(default_factory=dict)
     joints: dict[str, int] = field(default_factory=dict)
     source: str = "detected"
+    body_labels: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def num_frames(self) -> int:
@@ -546,6 +549,7 @@ class Contacts:
             groups=dict(self.groups),
             joints=dict(self.joints),
             source=self.source,
+            body_labels=cut(self.body_labels),
         )
 
 
@@ -655,6 +659,11 @@ def detect_contacts(motion, joint_indices: Mapping[str, int], options: ContactOp
         raise InputError(exc.message, path=motion.source) from None
     contacts.joints = pts
     contacts.source = "detected"
+    if contacts.floor is not None:
+        from .body_contacts import detect_body_contacts
+
+        canonical = {name: world[:, j] for name, j in joint_indices.items()}
+        contacts.body_labels = detect_body_contacts(canonical, motion.fps, contacts.floor)
     return contacts
 
 

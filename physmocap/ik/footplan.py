@@ -39,7 +39,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "plant_body_contacts", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -315,3 +315,58 @@ def planted_positions(
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2)
     return out, offsets
+
+
+#: Contact part -> the canonical joints its plan moves (the first one is planned).
+BODY_PART_JOINTS: dict[str, tuple[str, ...]] = {
+    "left_knee": ("left_knee",),
+    "right_knee": ("right_knee",),
+    "left_hand": ("left_wrist", "left_hand_end"),
+    "right_hand": ("right_wrist", "right_hand_end"),
+    "pelvis": ("pelvis", "left_hip", "right_hip"),
+}
+
+
+def plant_body_contacts(
+    positions: np.ndarray,
+    names: tuple[str, ...],
+    body_labels: Mapping[str, np.ndarray],
+    fps: float,
+    ease_time: float,
+    floor: float = 0.0,
+) -> np.ndarray:
+    """Targets ``(F, N, 3)`` with knees, hands and pelvis held on the floor during their contacts.
+
+    Each part's first joint in :data:`BODY_PART_JOINTS` that has a target
+    (the mid-hip for the pelvis) is planned like a foot point
+    (:func:`foot_offsets`): one location per contact, eased in and out, and
+    pulled down to the floor height ``floor``; the part's other joints move
+    with it.  The target lies below what the character's geometry allows, so
+    the floor constraint decides how low the joint goes: the knee's, hand's or
+    pelvis's collision geoms end on the floor, whatever their thickness.
+
+    Args:
+        positions: ``(F, N, 3)`` target positions (not modified).
+        names: Canonical joint of each target column.
+        body_labels: Part (``left_knee``, ``left_hand``, ``pelvis``...) -> ``(F,)`` bool.
+        fps, ease_time: See :func:`foot_offsets`.
+        floor: Floor height (metres).
+    """
+    out = np.array(positions, dtype=float, copy=True)
+    col = {n: i for i, n in enumerate(names)}
+    for part, label in body_labels.items():
+        joints = [j for j in BODY_PART_JOINTS.get(part, ()) if j in col]
+        label = np.asarray(label, dtype=bool)
+        if not joints or not label.any():
+            continue
+        if part == "pelvis":
+            if not all(h in col for h in ("left_hip", "right_hip")):
+                continue
+            point = 0.5 * (positions[:, col["left_hip"]] + positions[:, col["right_hip"]])
+        else:
+            point = positions[:, col[joints[0]]]
+        plan = foot_offsets({part: point}, {part: label}, fps, ease_time, {part: floor})
+        idx = [col[j] for j in joints]
+        out[:, idx, :2] += plan.xy[:, None, :]
+        out[:, idx, 2] += plan.z[part][:, None]
+    return out

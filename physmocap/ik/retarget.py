@@ -21,7 +21,7 @@ from ..motion import Motion
 from ..progress import Progress
 from ..trajectory import Trajectory
 from .contacts import ContactOptions, Contacts, detect_contacts, load_contact_csv
-from .footplan import planted_positions
+from .footplan import plant_body_contacts, planted_positions
 from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, FrameSolver, SolverOptions
 from .targets import TargetOptions, Targets, build_targets
@@ -205,6 +205,7 @@ def retarget(
         progress=progress,
         labels=found.labels if found is not None else None,
         plant=plant_opt,
+        body_labels=found.body_labels if found is not None else None,
     )
     traj.stats["contacts"] = found
     traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
@@ -217,6 +218,23 @@ def retarget(
     return traj
 
 
+def feet_off_kneeling(labels: dict[str, np.ndarray], body_labels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Foot labels with each foot's contact cleared while its knee rests on the floor.
+
+    A kneeling leg's foot lies on its instep or on tucked toes: holding its
+    sole sites on the floor would twist the ankle beyond its range, so the
+    foot is left to the floor constraint while the knee is down."""
+    out = dict(labels)
+    for side in ("left", "right"):
+        knee = body_labels.get(f"{side}_knee")
+        if knee is None or not np.any(knee):
+            continue
+        for name in list(out):
+            if name.startswith(side + "_"):
+                out[name] = np.asarray(out[name], dtype=bool) & ~np.asarray(knee, dtype=bool)
+    return out
+
+
 def solve_targets(
     targets: Targets,
     character,
@@ -225,6 +243,7 @@ def solve_targets(
     progress: bool | None = None,
     labels: dict[str, np.ndarray] | None = None,
     plant: PlantOptions | None = None,
+    body_labels: dict[str, np.ndarray] | None = None,
 ) -> Trajectory:
     """Run the per-frame IK over prepared targets.
 
@@ -242,9 +261,14 @@ def solve_targets(
     if labels is not None and (plant is None or plant.plant):
         planting = Planting(character, targets.names, targets.fps, plant, floor=solver.options.floor_height, anchored=False)
         targets.info["raw_positions"] = targets.positions.copy()
+        labels = feet_off_kneeling(labels, body_labels or {})
         targets.positions, targets.info["foot_offsets"] = planted_positions(
             targets.positions, targets.names, labels, targets.fps, planting.options.ease_time, planting.leg_lengths(), planting.stance_heights()
         )
+        if body_labels:
+            targets.positions = plant_body_contacts(
+                targets.positions, targets.names, body_labels, targets.fps, planting.options.ease_time, solver.options.floor_height
+            )
     qpos = np.empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)

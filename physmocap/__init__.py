@@ -17,7 +17,7 @@ from .errors import InputError, MappingError, OptionError, OutputError, Physmoca
 __version__ = "0.1.0"
 
 #: Names imported on first use (numpy/scipy load only when needed: ``physmocap --help`` is fast).
-_LAZY = {"Motion": "motion", "Skeleton": "motion", "forward_kinematics": "motion"}
+_LAZY = {"Motion": "motion", "Skeleton": "motion", "forward_kinematics": "motion", "RetargetConfig": "ik.config"}
 
 
 def __getattr__(name: str):
@@ -28,11 +28,11 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'physmocap' has no attribute {name!r}")
 
 
-def retarget(motion, character=None, **options):
+def retarget(motion, character=None, config=None, **options):
     """Retarget a :class:`Motion` onto a character; see :func:`physmocap.ik.retarget.retarget`."""
     from .ik.retarget import retarget as _retarget
 
-    return _retarget(motion, character, **options)
+    return _retarget(motion, character, config, **options)
 
 
 def load_motion(path, **options):
@@ -53,6 +53,7 @@ __all__ = [
     "Skeleton",
     "forward_kinematics",
     "retarget",
+    "RetargetConfig",
     "load_motion",
     "load_character",
     "PhysmocapError",

@@ -122,12 +122,12 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
             traj = retarget_from_args(ns)
             write_outputs(traj, [Path(job.output)], ns, quiet=True)
         ch = traj.character
-        fid = traj.stats.get("fidelity")
+        fid = traj.fidelity
         res.status = "done"
         res.frames, res.fps = int(traj.num_frames), float(traj.fps)
         res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
         res.penetration_max_mm = round(float(metrics.penetration(ch.model, traj.qpos)["max_mm"]), 3)
-        if traj.stats.get("contacts") is not None:
+        if traj.contacts is not None:
             res.skating_mean_cm_s = round(float(metrics.character_skating(traj)["mean_cm_s"]), 3)
         if fid is not None:
             res.worst_segment_median_deg = round(float(fid.worst_segment_median_deg), 2)

@@ -115,7 +115,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
         source_motion: The motion it was retargeted from, over the same frames
             (after any ``--start/--end/--fps``), or None.
         contacts: Foot contact labels over the same frames; None takes
-            ``traj.stats["contacts"]`` if present, else detects them on the
+            ``traj.contacts`` if present, else detects them on the
             source.
         joint_indices: Canonical joint -> source joint index; None maps the
             source's names (:func:`physmocap.sources.profiles.map_skeleton`).
@@ -125,11 +125,11 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
 
     F = traj.num_frames
     if contacts is None:
-        contacts = traj.stats.get("contacts") if isinstance(getattr(traj, "stats", None), dict) else None
+        contacts = traj.contacts
     source_info = None
     source_metrics = None
     if source_motion is not None:
-        start = int(traj.stats.get("source_start", 0)) if isinstance(getattr(traj, "stats", None), dict) else 0
+        start = int(traj.source_start)
         if start and source_motion.num_frames == F + start and abs(source_motion.fps - traj.fps) < 1e-6 * traj.fps:
             # the whole clip, of which retarget skipped a reference first frame
             source_motion = source_motion.slice_frames(start, source_motion.num_frames)
@@ -382,7 +382,7 @@ def emit_report(
         from .plots import write_plots
 
         if contacts is None:
-            contacts = traj.stats.get("contacts") if isinstance(getattr(traj, "stats", None), dict) else None
+            contacts = traj.contacts
         for p in write_plots(traj, source_motion, contacts, plots_dir, joint_indices=joint_indices):
             print(f"wrote {p}", file=sys.stderr)
     return report
@@ -461,7 +461,7 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
     traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
     traj.targets = _stored_targets(data, qpos.shape[0], fps, p)
     if "source_start" in data:
-        traj.stats["source_start"] = int(np.asarray(data["source_start"]).reshape(-1)[0])
+        traj.source_start = int(np.asarray(data["source_start"]).reshape(-1)[0])
     return traj
 
 

@@ -8,14 +8,14 @@ per hinge (radians) or slide (metres) joint.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from .rotations import wxyz_to_xyzw
 
-__all__ = ["Trajectory", "qpos_column_names"]
+__all__ = ["Trajectory", "SolverStats", "qpos_column_names"]
 
 
 def qpos_column_names(model: mujoco.MjModel) -> list[str]:
@@ -34,17 +34,44 @@ def qpos_column_names(model: mujoco.MjModel) -> list[str]:
     return names
 
 
+@dataclass(frozen=True)
+class SolverStats:
+    """Per-frame figures of the IK that produced a trajectory.
+
+    Attributes:
+        iterations: ``(F,)`` QP iterations of each frame.
+        relaxation: ``(F,)`` strongest relaxation a frame needed, an index into
+            :data:`physmocap.ik.solver.RELAXATION_LEVELS` (0: every constraint held).
+        latency: ``(F,)`` wall time of each frame (seconds).
+    """
+
+    iterations: np.ndarray
+    relaxation: np.ndarray
+    latency: np.ndarray
+
+
 @dataclass(eq=False)
 class Trajectory:
     """A character's motion as joint positions over frames.
+
+    What the retargeter knew is kept with it, typed: the targets it tracked,
+    the contacts it planted, the source motion as retargeted (cut and
+    resampled), the source's canonical joints, the first source frame used,
+    the solver's per-frame figures and the fidelity figures.  Each is None
+    (``source_start`` 0) for a trajectory read from a file or built by hand.
 
     Attributes:
         character: The :class:`physmocap.models.Character` it drives.
         qpos: ``(F, nq)`` MuJoCo generalised positions (quaternions w-x-y-z).
         fps: Frames per second.
         source: Where the input motion came from.
-        targets: The IK targets (:class:`physmocap.ik.targets.Targets`), if known.
-        stats: Per-frame solver figures (``iterations``, ``relaxation``) and notes.
+        targets: The IK targets (:class:`physmocap.ik.targets.Targets`).
+        contacts: The contact labels used (:class:`physmocap.ik.contacts.Contacts`).
+        source_motion: The source :class:`~physmocap.motion.Motion` as retargeted.
+        joint_indices: Canonical joint -> joint index in ``source_motion``.
+        source_start: Frame of the source file that frame 0 comes from.
+        solver: Per-frame :class:`SolverStats`.
+        fidelity: :class:`physmocap.metrics.fidelity.Fidelity` figures.
     """
 
     character: object
@@ -52,7 +79,12 @@ class Trajectory:
     fps: float
     source: str = "<memory>"
     targets: object | None = None
-    stats: dict = field(default_factory=dict)
+    contacts: object | None = None
+    source_motion: object | None = None
+    joint_indices: dict[str, int] | None = None
+    source_start: int = 0
+    solver: SolverStats | None = None
+    fidelity: object | None = None
 
     @property
     def model(self) -> mujoco.MjModel:

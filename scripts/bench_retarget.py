@@ -77,7 +77,7 @@ def main() -> int:
                 labels = None if args.no_plant else contacts.labels
                 traj = solve_targets(targets, character, labels=labels, progress=False)
                 ik.append(motion.num_frames / (time.perf_counter() - t0))
-                lat.extend(traj.stats["latency"][1:])
+                lat.extend(traj.solver.latency[1:])
             lat_ms = np.array(lat) * 1000.0
             print(
                 f"{clip:27s} {name:9s} {motion.num_frames:6d} {statistics.median(full):12.0f}"
@@ -89,7 +89,7 @@ def main() -> int:
         for name in args.characters:
             lat = []
             for _ in range(args.runs):
-                lat.extend(stream_motion(motion, load_character(name)).stats["latency"][1:])
+                lat.extend(stream_motion(motion, load_character(name)).solver.latency[1:])
             lat_ms = np.array(lat) * 1000.0
             print(
                 f"streaming {walk.name} onto {name}: latency median {np.median(lat_ms):.2f} ms,"

@@ -55,7 +55,7 @@ def main() -> int:
             ch = load_character(name)
             traj = retarget(motion, ch, progress=False)
             sk = metrics.character_skating(traj)
-            hv = metrics.character_hovering(traj, traj.stats["contacts"])
+            hv = metrics.character_hovering(traj, traj.contacts)
             pen = metrics.penetration(ch.model, traj.qpos)["max_mm"]
             lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
             vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]

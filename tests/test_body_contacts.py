@@ -77,7 +77,7 @@ def test_all_fours_rests_knees_and_hands_on_the_floor(crawl, character, knee, ha
         assert _lowest(traj, hold, tuple(f"{p}{w}" for w in knee for p in (f"{side}_", side[0] + "_"))) < 0.02
         assert _lowest(traj, hold, tuple(f"{p}{w}" for w in hand for p in (f"{side}_", side[0] + "_"))) < 0.01
     errors = segment_direction_errors(
-        actor_joint_positions(traj.stats["source_motion"], traj.stats["joint_indices"]), character_joint_positions(traj)
+        actor_joint_positions(traj.source_motion, traj.joint_indices), character_joint_positions(traj)
     )
     for seg in ("left_thigh", "right_thigh", "left_shank", "right_shank"):
         assert np.nanpercentile(errors[seg], 95) < 45.0, seg

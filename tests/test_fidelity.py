@@ -106,7 +106,7 @@ def test_vendor_fixtures_with_a_lying_rest_pose_come_out_upright(fixture):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         traj = retarget(motion, "humanoid", progress=False, start=0)
-    fid = traj.stats["fidelity"]
+    fid = traj.fidelity
     assert fid.segments["torso"].median_deg < 8.0, fid.segments["torso"]
 
 
@@ -136,7 +136,7 @@ def test_report_carries_fidelity(tmp_path):
 
     shared_file("bandai_walk.bvh")
     _, traj = retargeted("bandai_walk.bvh", "humanoid")
-    rep = build_report(traj, traj.stats["source_motion"], joint_indices=traj.stats["joint_indices"])
+    rep = build_report(traj, traj.source_motion, joint_indices=traj.joint_indices)
     assert rep["fidelity"]["segments"]["torso"]["median_deg"] < 5.0
     assert "fidelity: the character against the actor" in format_report(rep)
 

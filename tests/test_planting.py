@@ -30,7 +30,7 @@ def _flat_stance_skating(traj) -> dict:
     the site is within 1 cm of the floor.  While only the toes are down the foot rolls over
     its toes (or its front edge) and the sites under the heel's body move with the roll:
     that is not a slide, and the fidelity figures measure slip on the geoms instead."""
-    labels = traj.stats["contacts"].labels
+    labels = traj.contacts.labels
     cols, masks = [], []
     for side in sorted(traj.character.contacts):
         flat = labels[f"{side}_heel"] & labels[f"{side}_toe"]
@@ -45,7 +45,7 @@ def _flat_stance_skating(traj) -> dict:
 @pytest.mark.parametrize("clip,character", CASES)
 def test_planted_feet_do_not_skate_sink_or_hover(clip, character):
     _, traj = retargeted(clip, character)
-    contacts = traj.stats["contacts"]
+    contacts = traj.contacts
     assert contacts is not None and any(lab.any() for lab in contacts.labels.values())
     skating = _flat_stance_skating(traj)
     assert skating["stance_samples"] > 0
@@ -98,7 +98,7 @@ def test_double_support_pulled_apart_stays_feasible_and_planted(character):
     targets = _standing_targets(ch, frames, spread=0.25)
     labels = {k: np.ones(frames, bool) for k in ("left_heel", "left_toe", "right_heel", "right_toe")}
     traj = solve_targets(targets, ch, labels=labels, progress=False)
-    assert np.all(traj.stats["relaxation"] == 0)  # every QP feasible with all constraints
+    assert np.all(traj.solver.relaxation == 0)  # every QP feasible with all constraints
     sites = [s for side in ("left", "right") for s in ch.contacts[side]]
     xy = traj.site_positions(sites)[:, :, :2]
     drift = np.linalg.norm(xy - xy[0], axis=-1).max()

@@ -134,7 +134,7 @@ def test_source_skeleton_sits_where_the_retargeter_put_the_actor():
         warnings.simplefilter("ignore")
         motion, traj = retargeted("cmu_12_01_walk.bvh", start=1, end=61)
     inp = preview_input(traj)
-    joints = traj.stats["joint_indices"]
+    joints = traj.joint_indices
     targets = traj.targets
     raw = targets.info.get("raw_positions", targets.positions)
     placed = inp.skeleton.positions[:, [joints["left_hip"], joints["right_hip"]]].mean(axis=1)

@@ -17,7 +17,7 @@ def test_hard_constraints_hold_on_every_frame(clip, character):
     motion, traj = retargeted(clip, character)
     model = traj.model
     # never drops a frame (a reference pose at frame 0 is skipped on purpose, and said so)
-    assert traj.num_frames == motion.num_frames - traj.stats["source_start"]
+    assert traj.num_frames == motion.num_frames - traj.source_start
     assert np.all(np.isfinite(traj.qpos))
     lim = metrics.joint_limit_violations(model, traj.qpos)
     assert lim["count"] == 0, lim

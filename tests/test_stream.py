@@ -32,7 +32,7 @@ def test_stream_is_causal_and_safe(walk):
     vel = metrics.velocity_violations(ch.model, long.qpos, long.fps, ch.velocity_limits)
     assert vel["count"] == 0
     assert metrics.penetration(ch.model, long.qpos)["max_mm"] < 2.0
-    assert len(long.stats["latency"]) == 200
+    assert len(long.solver.latency) == 200
 
 
 def test_streaming_plants_feet(walk):

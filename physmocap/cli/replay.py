@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
         fps=motion.fps,
         translated=motion.translated,
         mapping=args.source_map or motion.meta.get("source_mapping"),
-        floor=floor,
         source=str(motion.source),
+        **({} if floor is None else {"source_floor": float(floor)}),
     )
     F = motion.num_frames
     qpos = np.empty((F, character.model.nq))

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError(f"--start must be >= 0, got {args.start}")
     traj = load_trajectory(args.trajectory, args.character, args.map)
     if args.start is None:
-        args.start = int(traj.stats.get("source_start", 0))
+        args.start = int(traj.source_start)
     F = traj.num_frames
     motion = None
     joint_indices = None

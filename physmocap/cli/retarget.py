@@ -159,14 +159,13 @@ def run(args: argparse.Namespace) -> int:
     if args.report or args.plots:
         from ..report import emit_report
 
-        used = traj.stats.get("source_motion")
         emit_report(
             traj,
-            used,
-            traj.stats.get("contacts"),
+            traj.source_motion,
+            traj.contacts,
             json_path=args.report,
             plots_dir=args.plots,
-            joint_indices=traj.stats.get("joint_indices"),
+            joint_indices=traj.joint_indices,
         )
     if args.preview:
         from .preview import render_preview

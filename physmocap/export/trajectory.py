@@ -106,7 +106,7 @@ def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, n
         "mjcf_path": np.array(portable_path(ch.mjcf_path, base)),
         "character": np.array(str(ch.name)),
         "source": np.array(portable_path(traj.source, base)),
-        "source_start": np.int64(traj.stats.get("source_start", 0)),
+        "source_start": np.int64(traj.source_start),
         **target_arrays(traj.targets),
     }
 

@@ -637,7 +637,9 @@ def detect_point_contacts(
     )
 
 
-def detect_contacts(motion, joint_indices: Mapping[str, int], options: ContactOptions | None = None) -> Contacts:
+def detect_contacts(
+    motion, joint_indices: Mapping[str, int], options: ContactOptions | None = None, body_options=None
+) -> Contacts:
     """Detect foot contacts on an actor's :class:`~physmocap.motion.Motion`.
 
     Args:
@@ -646,6 +648,8 @@ def detect_contacts(motion, joint_indices: Mapping[str, int], options: ContactOp
             (``map_skeleton(...).indices``); uses the ankles, and the toes and
             toe ends where present.
         options: Thresholds (:class:`ContactOptions`).
+        body_options: Knee, hand and pelvis thresholds
+            (:class:`~physmocap.ik.body_contacts.BodyContactOptions`).
 
     Returns:
         :class:`Contacts` with labels for :data:`CONTACT_LABELS`, the floor,
@@ -663,7 +667,7 @@ def detect_contacts(motion, joint_indices: Mapping[str, int], options: ContactOp
         from .body_contacts import detect_body_contacts
 
         canonical = {name: world[:, j] for name, j in joint_indices.items()}
-        contacts.body_labels = detect_body_contacts(canonical, motion.fps, contacts.floor)
+        contacts.body_labels = detect_body_contacts(canonical, motion.fps, contacts.floor, body_options)
     return contacts
 
 

@@ -46,6 +46,7 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from ..options import check_fields
 from .footplan import FOOT_JOINTS, knee_between
 from .tasks import SitePositionTask
 
@@ -98,6 +99,9 @@ class PlantOptions:
     max_descent_speed: float = 1.0
     root_follow_time: float = 0.15
     ease_time: float = 0.1
+
+    def __post_init__(self) -> None:
+        check_fields(self, "planting")
 
 
 def _smooth(x: float) -> float:

@@ -1,16 +1,17 @@
-"""Offline retargeting: a whole motion onto a character, frame by frame.
+"""Offline retargeting: a whole motion onto a character.
 
-``retarget(motion, character, **options)`` maps the actor's joints to the
-canonical set, builds targets that fit the character
-(:mod:`physmocap.ik.targets`), then solves one IK per frame
-(:mod:`physmocap.ik.solver`), warm-started from the previous frame, and
-returns a :class:`~physmocap.trajectory.Trajectory`.
+``retarget(motion, character, config)`` maps the actor's joints to the
+canonical set, detects contacts, builds targets that fit the character
+(:mod:`physmocap.ik.targets`), plans them over the whole clip
+(:mod:`physmocap.ik.footplan`) and runs the per-frame pipeline
+(:class:`~physmocap.ik.frame.FrameRetargeter`, the same one the streaming
+retargeter runs) over every frame.  It returns a
+:class:`~physmocap.trajectory.Trajectory` that carries what it used, typed.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import time
 from typing import Any
 
 import numpy as np
@@ -19,49 +20,24 @@ from ..errors import MappingError, OptionError, warn
 from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
-from ..trajectory import Trajectory
+from ..trajectory import SolverStats, Trajectory
+from .config import RetargetConfig
 from .contacts import ContactOptions, Contacts, detect_contacts, load_contact_csv
 from .footplan import plant_body_contacts, planted_positions
+from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
-from .solver import RELAXATION_LEVELS, FrameSolver, SolverOptions
-from .targets import TargetOptions, Targets, build_targets
+from .solver import RELAXATION_LEVELS, SolverOptions
+from .targets import Targets, build_targets
 
-__all__ = ["retarget", "split_options", "map_motion"]
-
-_TARGET_FIELDS = {f.name for f in dataclasses.fields(TargetOptions)}
-_SOLVER_FIELDS = {f.name for f in dataclasses.fields(SolverOptions)}
-_PLANT_FIELDS = {f.name for f in dataclasses.fields(PlantOptions)}
-_KNOWN = _TARGET_FIELDS | _SOLVER_FIELDS | _PLANT_FIELDS
+__all__ = ["retarget", "solve_targets", "map_motion", "RetargetConfig"]
 
 
-def split_options(
-    options: dict[str, Any],
-) -> tuple[TargetOptions, SolverOptions, dict[str, Any]]:
-    """Split flat keyword options into target options, solver options and the rest
-    (planting options stay in the rest; see :func:`plant_options`)."""
-    t, s, rest = {}, {}, {}
-    for k, v in options.items():
-        if k in _TARGET_FIELDS:
-            t[k] = v
-        elif k in _SOLVER_FIELDS:
-            s[k] = v
-        else:
-            rest[k] = v
-    return TargetOptions(**t), SolverOptions(**s), rest
-
-
-def plant_options(rest: dict[str, Any]) -> tuple[PlantOptions, dict[str, Any]]:
-    """Take the :class:`PlantOptions` fields out of ``rest``."""
-    p = {k: v for k, v in rest.items() if k in _PLANT_FIELDS}
-    return PlantOptions(**p), {k: v for k, v in rest.items() if k not in _PLANT_FIELDS}
-
-
-def resolve_contacts(motion: Motion, joint_indices: dict[str, int], contacts, options: ContactOptions | None):
+def resolve_contacts(motion: Motion, joint_indices: dict[str, int], contacts, config: RetargetConfig):
     """Contacts for ``motion``: detected (None), loaded from a CSV path, given, or none (False)."""
     if contacts is False:
         return None
     if contacts is None:
-        return detect_contacts(motion, joint_indices, options)
+        return detect_contacts(motion, joint_indices, config.contacts, config.body_contacts)
     if isinstance(contacts, Contacts):
         if contacts.num_frames != motion.num_frames:
             raise OptionError(
@@ -132,6 +108,7 @@ def _frame_range(motion: Motion, start: int, end: int | None) -> Motion:
 def retarget(
     motion: Motion,
     character=None,
+    config: RetargetConfig | None = None,
     *,
     profile: str | None = None,
     mapping=None,
@@ -142,7 +119,6 @@ def retarget(
     progress: bool | None = None,
     targets: Targets | None = None,
     contacts=None,
-    contact_options: ContactOptions | None = None,
     **options: Any,
 ) -> Trajectory:
     """Retarget ``motion`` onto ``character`` (default: the bundled humanoid).
@@ -151,6 +127,7 @@ def retarget(
         motion: The actor's motion.
         character: A :class:`physmocap.models.Character`, a path to an MJCF,
             or None for the default humanoid.
+        config: The :class:`~physmocap.ik.config.RetargetConfig` (default options if None).
         profile: Force a source naming profile (see ``physmocap inspect``).
         mapping: A TOML mapping file (or dict) for the source skeleton.
         joint_indices: Canonical joint -> source joint index, bypassing the mapping.
@@ -158,30 +135,31 @@ def retarget(
         fps: Resample the source to this rate first.
         progress: Draw a progress bar on stderr (default: when it is a terminal).
         targets: Precomputed targets (skips target building).
-        contacts: Foot contact labels: None detects them on the (sliced,
+        contacts: Contact labels: None detects them on the (sliced,
             resampled) motion, a path reads a CSV of frame ranges
             (:func:`~physmocap.ik.contacts.load_contact_csv`), a
             :class:`~physmocap.ik.contacts.Contacts` is used as is, False
             turns planting off.
-        contact_options: Detection thresholds (:class:`~physmocap.ik.contacts.ContactOptions`).
-        **options: Fields of :class:`~physmocap.ik.targets.TargetOptions`,
-            :class:`~physmocap.ik.solver.SolverOptions` and
-            :class:`~physmocap.ik.planting.PlantOptions` (e.g.
-            ``max_iterations=8``, ``floor=False``, ``scale_root=False``,
-            ``plant=False``, ``anchor_release_time=0.4``).
+        **options: Flat option names applied on top of ``config``
+            (:meth:`RetargetConfig.with_options`: ``max_iterations=8``,
+            ``floor=False``, ``scale_root=False``, ``plant=False``...).
 
     Returns:
-        The character's :class:`~physmocap.trajectory.Trajectory`.
+        The character's :class:`~physmocap.trajectory.Trajectory`, with the
+        targets, contacts, source motion as retargeted, canonical joints,
+        first source frame, solver statistics and fidelity figures.
     """
     from ..models import load_character
 
     if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
         character = load_character(character)
-    target_opt, solver_opt, rest = split_options(options)
-    plant_opt, rest = plant_options(rest)
-    if rest:
-        raise OptionError(f"unknown retarget option(s) {sorted(rest)}; known options: {sorted(_KNOWN)}")
-    if not character.contacts and plant_opt.plant and contacts is not False:
+    config = config or RetargetConfig()
+    if not isinstance(config, RetargetConfig):
+        raise OptionError(f"config must be a RetargetConfig, got {type(config).__name__}")
+    if options:
+        config = config.with_options(**options)
+    plant = config.plant.plant and contacts is not False
+    if not character.contacts and plant:
         raise MappingError(
             "the character has no foot contact points (none in its mapping and none found on its feet); "
             "add [contacts] to its mapping file, or retarget without planting (--no-plant)",
@@ -193,27 +171,26 @@ def retarget(
         motion = motion.resample(float(fps))
     if joint_indices is None:
         joint_indices = map_motion(motion, profile=profile, mapping=mapping)
-    found = resolve_contacts(motion, joint_indices, contacts if plant_opt.plant else False, contact_options)
+    found = resolve_contacts(motion, joint_indices, contacts if plant else False, config)
     if targets is None:
         floor = found.floor if found is not None else None
-        targets = build_targets(motion, joint_indices, character, target_opt, floor=floor)
+        targets = build_targets(motion, joint_indices, character, config.targets, floor=floor)
     traj = solve_targets(
         targets,
         character,
-        solver_opt,
+        config.solver,
         source=motion.source,
         progress=progress,
         labels=found.labels if found is not None else None,
-        plant=plant_opt,
+        plant=config.plant,
         body_labels=found.body_labels if found is not None else None,
     )
-    traj.stats["contacts"] = found
-    traj.stats["source_motion"] = motion  # as retargeted: cut and resampled
-    traj.stats["joint_indices"] = dict(joint_indices)
-    traj.stats["source_start"] = int(source_start)
-    fid = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
-    traj.stats["fidelity"] = fid
-    for message in fidelity_warnings(fid, source_start):
+    traj.contacts = found
+    traj.source_motion = motion  # as retargeted: cut and resampled
+    traj.joint_indices = dict(joint_indices)
+    traj.source_start = int(source_start)
+    traj.fidelity = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
+    for message in fidelity_warnings(traj.fidelity, source_start):
         warn(f"{motion.source}: {message}")
     return traj
 
@@ -235,6 +212,29 @@ def feet_off_kneeling(labels: dict[str, np.ndarray], body_labels: dict[str, np.n
     return out
 
 
+def plan_targets(
+    targets: Targets,
+    character,
+    labels: dict[str, np.ndarray],
+    plant: PlantOptions,
+    floor_height: float,
+    body_labels: dict[str, np.ndarray] | None = None,
+) -> Targets:
+    """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
+    feet (and knees, hands, pelvis in contact) held where they land, eased in and out
+    (``labels`` as planted: :func:`feet_off_kneeling` applied).
+    The unplanned positions are kept in ``info["raw_positions"]``, the feet's
+    horizontal offsets in ``info["foot_offsets"]``."""
+    planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
+    positions, offsets = planted_positions(
+        targets.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
+    )
+    if body_labels:
+        positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
+    info = {**targets.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets}
+    return dataclasses.replace(targets, positions=positions, info=info)
+
+
 def solve_targets(
     targets: Targets,
     character,
@@ -245,53 +245,37 @@ def solve_targets(
     plant: PlantOptions | None = None,
     body_labels: dict[str, np.ndarray] | None = None,
 ) -> Trajectory:
-    """Run the per-frame IK over prepared targets.
+    """Run the per-frame pipeline (:class:`~physmocap.ik.frame.FrameRetargeter`) over prepared targets.
 
     With contact ``labels`` (``left_heel``, ``left_toe``, ``right_heel``,
-    ``right_toe`` -> ``(F,)`` bool) the feet are planted
-    (:class:`~physmocap.ik.planting.Planting`): the targets the IK tracks
-    become ``targets.positions`` with each foot's offsets applied (the
-    unshifted ones are kept in ``targets.info["raw_positions"]``).  On frame 0
-    the solver first converges from the rest pose without planting, then
-    anchors the feet in contact where that solution put them and solves again.
+    ``right_toe`` -> ``(F,)`` bool) the targets are first planned over the
+    whole clip (:func:`plan_targets`; the trajectory carries the planned
+    copy, ``targets`` itself is not modified), then every frame holds its
+    planted contact points.  Without labels, or with ``plant.plant`` False,
+    the targets are tracked as they are.
     """
-    solver = FrameSolver(character, targets.names, targets.has_orientation, targets.fps, options)
-    F = targets.num_frames
-    planting = None
-    if labels is not None and (plant is None or plant.plant):
-        planting = Planting(character, targets.names, targets.fps, plant, floor=solver.options.floor_height, anchored=False)
-        targets.info["raw_positions"] = targets.positions.copy()
+    options = options or SolverOptions()
+    plant = plant or PlantOptions()
+    planted = labels is not None and plant.plant
+    if planted:
         labels = feet_off_kneeling(labels, body_labels or {})
-        targets.positions, targets.info["foot_offsets"] = planted_positions(
-            targets.positions, targets.names, labels, targets.fps, planting.options.ease_time, planting.leg_lengths(), planting.stance_heights()
-        )
-        if body_labels:
-            targets.positions = plant_body_contacts(
-                targets.positions, targets.names, body_labels, targets.fps, planting.options.ease_time, solver.options.floor_height
-            )
+        targets = plan_targets(targets, character, labels, plant, options.floor_height, body_labels)
+    pipeline = FrameRetargeter(
+        character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False
+    )
+    F = targets.num_frames
     qpos = np.empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
     latency = np.zeros(F)
     with Progress(F, "retarget", enabled=progress) as bar:
         for t in range(F):
-            t_frame = time.perf_counter()
-            if planting is not None:
-                if t == 0:
-                    solver.set_targets(targets.positions[0], targets.orientations[0], targets.valid[0])
-                    solver.solve_frame(first=True)
-                    solver.q_prev = None
-                frame_labels = {k: v[t] for k, v in labels.items()}
-                _, solver.extra_tasks, solver.constraints, _ = planting.step(
-                    targets.positions[t], frame_labels, solver.configuration.data
-                )
-                solver.set_clearance(planting.clearance_sites(), planting.clearance_bodies())
-            solver.set_targets(targets.positions[t], targets.orientations[t], targets.valid[t])
-            q, it, level = solver.solve_frame(first=(t == 0 and planting is None))
-            qpos[t] = q
-            latency[t] = time.perf_counter() - t_frame
-            iterations[t] = it
-            relaxation[t] = level
+            frame_labels = {k: bool(v[t]) for k, v in labels.items()} if planted else None
+            result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels)
+            qpos[t] = result.qpos
+            iterations[t] = result.iterations
+            relaxation[t] = result.relaxation
+            latency[t] = result.latency
             bar.update(1)
     for level in range(1, len(RELAXATION_LEVELS)):
         frames = np.flatnonzero(relaxation == level)
@@ -304,5 +288,5 @@ def solve_targets(
         fps=targets.fps,
         source=source,
         targets=targets,
-        stats={"iterations": iterations, "relaxation": relaxation, "latency": latency},
+        solver=SolverStats(iterations=iterations, relaxation=relaxation, latency=latency),
     )

@@ -33,19 +33,21 @@ configuration.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import mink
 import mujoco
 import numpy as np
 import qpsolvers
 
+from ..errors import OptionError
+from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit, RootStepLimit
 from .tasks import SitesPositionTask
 from .targets import weight_of
 
-__all__ = ["SolverOptions", "FrameSolver", "RELAXATION_LEVELS"]
+__all__ = ["SolverOptions", "ContactHolds", "FrameSolver", "RELAXATION_LEVELS"]
 
 RELAXATION_LEVELS = (
     "all constraints",
@@ -99,6 +101,34 @@ class SolverOptions:
     limit_gain: float = 0.95
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
+
+    def __post_init__(self) -> None:
+        check_fields(
+            self,
+            "solver",
+            signed=("floor_height",),
+            counts=("max_iterations", "first_frame_iterations", "floor_iterations"),
+            positive=("max_iterations", "first_frame_iterations", "trust_region", "limit_gain"),
+        )
+        if self.limit_gain > 1.0:
+            raise OptionError(f"solver option limit_gain must be in (0, 1], got {self.limit_gain!r}")
+
+
+@dataclass(frozen=True)
+class ContactHolds:
+    """One frame's contact holds, from the planting (:class:`~physmocap.ik.planting.Planting`).
+
+    Attributes:
+        tasks: Soft tasks (contact points pulled onto the floor).
+        constraints: Hard equalities (planted contact points held in place).
+        clearance_sites: Site id -> height (metres) a swing foot's contact site keeps above the floor.
+        clearance_bodies: Body id -> height every geom point of a swing foot's bodies keeps.
+    """
+
+    tasks: tuple = ()
+    constraints: tuple = ()
+    clearance_sites: Mapping[int, float] = field(default_factory=dict)
+    clearance_bodies: Mapping[int, float] = field(default_factory=dict)
 
 
 class FrameSolver:
@@ -180,11 +210,11 @@ class FrameSolver:
         self.q_prev: np.ndarray | None = None
         self._residual: float | None = None
         self._res_cache: tuple[bytes, tuple[float, float]] | None = None
-        self.constraints: list[mink.Task] = []
-        self.extra_tasks: list[mink.Task] = []
+        self._constraints: list[mink.Task] = []
+        self._extra_tasks: list[mink.Task] = []
 
     # -- targets ----------------------------------------------------------------
-    def set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
+    def _set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
         wxyz = xyzw_to_wxyz(orientations)
         for j, (k, task, pc, oc) in enumerate(self.frame_tasks):
@@ -204,11 +234,16 @@ class FrameSolver:
                 self.points.set_costs(np.where(on, self._point_costs, 0.0))
                 self._points_on = on
 
-    def set_clearance(self, sites: dict[int, float], bodies: dict[int, float] | None = None) -> None:
-        """Swing-foot clearance for the next frame: site id -> height above the floor (m),
-        and body id -> height for every geom point of a swing foot's bodies."""
-        self.floor_limit.clearance = dict(sites)
-        self.floor_limit.swing_bodies = dict(bodies or {})
+    def _set_holds(self, holds: "ContactHolds") -> None:
+        self._extra_tasks = list(holds.tasks)
+        self._constraints = list(holds.constraints)
+        self.floor_limit.clearance = dict(holds.clearance_sites)
+        self.floor_limit.swing_bodies = dict(holds.clearance_bodies)
+
+    def forget_previous(self) -> None:
+        """Keep the current pose as the warm start but drop the previous frame, so the
+        next frame has no velocity bound (after the first frame's settling solve)."""
+        self.q_prev = None
 
     def reset(self, q: np.ndarray | None = None) -> None:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""
@@ -227,10 +262,10 @@ class FrameSolver:
 
     def _step(self, level: int) -> np.ndarray:
         opt = self.options
-        tasks = [*self.tasks, self.posture, *self.extra_tasks]
-        constraints = self.constraints if level == 0 else []
+        tasks = [*self.tasks, self.posture, *self._extra_tasks]
+        constraints = self._constraints if level == 0 else []
         if level >= 1:  # equalities softened into high-cost tasks
-            tasks += self.constraints
+            tasks += self._constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
         # mink builds the QP; the trust region goes in as simple bounds, which daqp
         # handles natively (cheaper than 2 nv inequality rows)
@@ -288,7 +323,7 @@ class FrameSolver:
                     self.options.solver,
                     damping=1e-6,
                     limits=self._limits(level),
-                    constraints=(self.constraints if level == 0 and self.constraints else None),
+                    constraints=(self._constraints if level == 0 and self._constraints else None),
                 )
             except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                 return
@@ -305,7 +340,7 @@ class FrameSolver:
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
         rc = 0.0
-        for task in self.constraints:
+        for task in self._constraints:
             rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
         rf = 0.0
         if self.options.floor:
@@ -328,7 +363,7 @@ class FrameSolver:
         overshoot by millimetres and the next step undo it, forever.  Backtracking
         on the hard-constraint residual removes that oscillation.
         """
-        if not self.constraints and not self.options.floor:
+        if not self._constraints and not self.options.floor:
             self.configuration.integrate_inplace(v, 1.0)
             return
         q0 = self.configuration.q.copy()
@@ -356,7 +391,7 @@ class FrameSolver:
         second-order residual, and the solver iterates again to remove it.
         """
         tol = self.options.constraint_tolerance if tol is None else tol
-        return not self.constraints or self._residuals()[0] <= tol
+        return not self._constraints or self._residuals()[0] <= tol
 
     def _floor_ok(self) -> bool:
         """True if no constrained point is below the floor by more than 0.1 mm.
@@ -367,12 +402,30 @@ class FrameSolver:
         """
         return not self.options.floor or self._residuals()[1] <= 1e-4
 
-    def solve_frame(self, first: bool = False) -> tuple[np.ndarray, int, int]:
-        """Iterate the QP for the current targets; returns ``(q, iterations, relaxation level)``.
+    def solve_frame(
+        self,
+        positions: np.ndarray,
+        orientations: np.ndarray,
+        valid: np.ndarray,
+        holds: ContactHolds | None = None,
+        first: bool = False,
+    ) -> tuple[np.ndarray, int, int]:
+        """Solve one frame, warm-started from the previous one; returns
+        ``(q, iterations, relaxation level)`` (``q`` a new array; the inputs are not modified).
+
+        Args:
+            positions: ``(N, 3)`` target positions (metres), in target order.
+            orientations: ``(N, 4)`` target orientations (x-y-z-w).
+            valid: ``(N,)`` False turns a target's task off for this frame.
+            holds: This frame's contact holds (:class:`ContactHolds`); none by default.
+            first: Converge from the rest pose (``first_frame_iterations``)
+                instead of taking ``max_iterations`` from the previous frame.
 
         The relaxation level is the index in :data:`RELAXATION_LEVELS` of the
         strongest relaxation any iteration needed (0 = none).
         """
+        self._set_targets(positions, orientations, valid)
+        self._set_holds(holds or ContactHolds())
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
         self.root_limit.set_previous(self.q_prev)
@@ -381,11 +434,11 @@ class FrameSolver:
             self._settle_from_rest()
         worst = 0
         it = 0
-        base = 0 if self.constraints else 1
+        base = 0 if self._constraints else 1
         self._residual = None  # hard-constraint residual, cached between line searches
         self._res_cache = None  # the constraints may have changed since the last frame
         extra = opt.floor_iterations if opt.floor else 0
-        extra = max(extra, opt.floor_iterations if self.constraints else 0)
+        extra = max(extra, opt.floor_iterations if self._constraints else 0)
         for it in range(1, iters + extra + 1):
             if it > iters and self._floor_ok() and self._constraints_ok():
                 it -= 1

@@ -9,16 +9,17 @@ Everything it does looks only at the current frame and a short, bounded past:
   quantities (root scale, facing, orientation offsets, root start, floor and
   ankle heights; :class:`~physmocap.ik.targets.Calibration`) come from the
   skeleton's rest pose (rotational sources) and the first frame; the floor is
-  the lowest foot point of the first frame unless given (``floor=``).  Offline
+  the lowest foot point of the first frame unless given (``source_floor``).  Offline
   retargeting estimates the floor from the whole clip instead.
 * **Targets per frame** with the same maths as offline
   (:func:`~physmocap.ik.targets.build_targets` with the calibration reused).
 * **Contacts** from :class:`~physmocap.ik.contacts.ContactStream`: a look-behind
   of a few tens of milliseconds; its labels lag offline detection's
   back-dated ones by about 50 ms.
-* **Planting** (:class:`~physmocap.ik.planting.Planting`) and the per-frame IK
-  (:class:`~physmocap.ik.solver.FrameSolver`) are causal already and are the
-  very objects offline retargeting uses.
+* **The per-frame pipeline** (:class:`~physmocap.ik.frame.FrameRetargeter`:
+  planting, then the IK) is the one offline retargeting runs, with causal
+  anchoring of the feet (offline plans them over the whole clip instead).
+  Knee, hand and pelvis contacts are not detected while streaming.
 
 Tracker frames with missing joints go through the causal gap filler
 (:class:`~physmocap.sources.gaps.CausalGapFiller`): short gaps hold the last
@@ -34,14 +35,18 @@ import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
 from ..motion import Motion, Skeleton
-from ..trajectory import Trajectory
-from .contacts import ContactOptions, ContactStream, FloorPlane, contact_points
-from .planting import Planting
-from .retarget import map_motion, plant_options, split_options
-from .solver import FrameSolver
+from ..trajectory import SolverStats, Trajectory
+from .config import RetargetConfig
+from .contacts import ContactStream, Contacts, FloorPlane, contact_points
+from .frame import FrameRetargeter
+from .retarget import map_motion
 from .targets import build_targets
 
-__all__ = ["StreamingRetargeter", "stream_motion"]
+__all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS"]
+
+#: A live frame has a deadline: fewer clean-up iterations than offline by default
+#: (applied when no ``config`` is given).
+STREAMING_DEFAULTS = {"max_iterations": 3, "floor_iterations": 2, "constraint_tolerance": 1e-4}
 
 
 class StreamingRetargeter:
@@ -50,14 +55,15 @@ class StreamingRetargeter:
     Args:
         character: A :class:`~physmocap.models.Character` (or a path / bundled
             name; None = the default humanoid).
+        config: The :class:`~physmocap.ik.config.RetargetConfig`; None takes the
+            defaults with :data:`STREAMING_DEFAULTS`.  ``config.targets.source_floor``
+            is the actor's floor in the source world (metres); None takes it from
+            the first frame.
         skeleton: The source skeleton (names, parents, rest offsets).
         fps: The source frame rate.
         joint_indices: Canonical joint -> source joint index (default: the
             naming profiles, or ``profile`` / ``mapping``).
-        floor: The actor's floor height in the source world (metres); None
-            takes it from the first frame.
-        contact_options: Contact thresholds.
-        **options: Target, solver and planting options, as for
+        **options: Flat option names applied on top of ``config``, as for
             :func:`~physmocap.ik.retarget.retarget`.
 
     Feed frames with :meth:`step`; it returns the character's ``qpos`` (a copy).
@@ -66,14 +72,13 @@ class StreamingRetargeter:
     def __init__(
         self,
         character=None,
+        config: RetargetConfig | None = None,
         *,
         skeleton: Skeleton,
         fps: float,
         joint_indices: dict[str, int] | None = None,
         profile: str | None = None,
         mapping=None,
-        floor: float | None = None,
-        contact_options: ContactOptions | None = None,
         translated: np.ndarray | None = None,
         source: str = "<stream>",
         **options: Any,
@@ -88,27 +93,20 @@ class StreamingRetargeter:
         self.skeleton = skeleton
         self.fps = float(fps)
         self.translated = np.zeros(0, dtype=np.int64) if translated is None else np.asarray(translated, dtype=np.int64)
-        # a live frame has a deadline: fewer clean-up iterations than offline by default
-        options.setdefault("max_iterations", 3)
-        options.setdefault("floor_iterations", 2)
-        options.setdefault("constraint_tolerance", 1e-4)
-        self.target_options, self.solver_options, rest = split_options(options)
-        self.plant_options, rest = plant_options(rest)
-        if rest:
-            raise OptionError(f"unknown streaming option(s) {sorted(rest)}")
-        if self.target_options.source_floor is None and floor is not None:
-            self.target_options.source_floor = float(floor)
-        self.contact_options = contact_options
+        if config is None:
+            config = RetargetConfig().with_options(**STREAMING_DEFAULTS)
+        self.config = config.with_options(**options) if options else config
         self.source = str(source)
         self._profile, self._mapping = profile, mapping
         self.joint_indices = None if joint_indices is None else dict(joint_indices)
         self.points: dict[str, int] = {}
         self.frame = 0
         self.calibration = None
-        self.solver: FrameSolver | None = None
-        self.planting: Planting | None = None
+        self.pipeline: FrameRetargeter | None = None
         self.contacts: ContactStream | None = None
         self.latencies: list[float] = []
+        self.iterations: list[int] = []
+        self.relaxations: list[int] = []
         #: mean joint speed (m/s) into frame 1 above which frame 0 is taken for a reference pose
         self.reference_speed = 4.0
         self._first_world: np.ndarray | None = None
@@ -144,7 +142,7 @@ class StreamingRetargeter:
             except MappingError as exc:
                 raise MappingError(exc.message, path=self.source) from None
         self.points = contact_points(self.joint_indices)
-        targets = build_targets(motion, self.joint_indices, self.character, self.target_options)
+        targets = build_targets(motion, self.joint_indices, self.character, self.config.targets)
         self.calibration = targets.calibration
         floor = self.calibration.floor
         world = motion.world_positions()[0]
@@ -156,15 +154,20 @@ class StreamingRetargeter:
             other = ("right_" + p[5:]) if p.startswith("left_") else ("left_" + p[6:])
             levels[p] = max(0.0, min(h, heights.get(other, h)))
         self.contacts = ContactStream(
-            list(self.points), self.fps, FloorPlane(height=floor, levels=levels), self.contact_options
+            list(self.points), self.fps, FloorPlane(height=floor, levels=levels), self.config.contacts
         )
-        if not (keep_solver and self.solver is not None and self.solver.names == targets.names):
-            self.solver = FrameSolver(
-                self.character, targets.names, targets.has_orientation, self.fps, self.solver_options
+        if keep_solver and self.pipeline is not None and self.pipeline.names == targets.names:
+            self.pipeline.restart_contacts()  # a new calibration; the pose and velocity bounds carry on
+        else:
+            self.pipeline = FrameRetargeter(
+                self.character,
+                targets.names,
+                targets.has_orientation,
+                self.fps,
+                self.config.solver,
+                self.config.plant,
+                anchored=True,
             )
-        self.planting = Planting(
-            self.character, targets.names, self.fps, self.plant_options, floor=self.solver.options.floor_height
-        )
 
     def step(
         self,
@@ -200,44 +203,45 @@ class StreamingRetargeter:
             self._first_world = fk[0][0].copy()
         elif self.frame == 1:
             self._first_world = None
-        assert self.solver is not None and self.planting is not None and self.contacts is not None
+        assert self.pipeline is not None and self.contacts is not None
         targets = build_targets(
             motion, self.joint_indices, self.character, calibration=self.calibration, kinematics=fk
         )
         world = fk[0][0]
         labels = self.contacts.step(np.array([world[j] for j in self.points.values()]))
-        solver = self.solver
-        if first:
-            solver.set_targets(targets.positions[0], targets.orientations[0], targets.valid[0])
-            solver.solve_frame(first=True)
-            solver.q_prev = None
-        pos = targets.positions[0]
-        if self.plant_options.plant:
-            pos, solver.extra_tasks, solver.constraints, _ = self.planting.step(
-                targets.positions[0], labels, solver.configuration.data
-            )
-            solver.set_clearance(self.planting.clearance_sites(), self.planting.clearance_bodies())
-        solver.set_targets(pos, targets.orientations[0], targets.valid[0])
-        q, _, _ = solver.solve_frame(first=False)
+        result = self.pipeline.solve(targets.positions[0], targets.orientations[0], targets.valid[0], labels)
         self.frame += 1
         self.labels.append(labels)
+        self.iterations.append(result.iterations)
+        self.relaxations.append(result.relaxation)
         self.latencies.append(time.perf_counter() - t0)
-        return q.copy()
+        return result.qpos
 
 
-def stream_motion(motion: Motion, character=None, **options: Any) -> Trajectory:
+def stream_motion(motion: Motion, character=None, config: RetargetConfig | None = None, **options: Any) -> Trajectory:
     """Feed a whole motion through a :class:`StreamingRetargeter` frame by frame
-    (what ``physmocap replay`` does as fast as possible); returns the trajectory
-    with per-frame latencies in ``stats["latency"]`` (seconds)."""
+    (what ``physmocap replay`` does as fast as possible).
+
+    The actor's floor is ``config.targets.source_floor`` (or the
+    ``source_floor`` option), else the recording's own (``floor_z`` in its
+    metadata), else the first frame's.  Returns the trajectory with the
+    streamed contact labels and per-frame solver statistics (latency in
+    seconds, the whole frame: targets, contacts and IK)."""
+    mapping = options.pop("mapping", None) or motion.meta.get("source_mapping")
+    if config is None:
+        config = RetargetConfig().with_options(**STREAMING_DEFAULTS)
+    if options:
+        config = config.with_options(**options)
+    if config.targets.source_floor is None and motion.meta.get("floor_z") is not None:
+        config = config.with_options(source_floor=float(motion.meta["floor_z"]))
     retargeter = StreamingRetargeter(
         character,
+        config,
         skeleton=motion.skeleton,
         fps=motion.fps,
         translated=motion.translated,
-        floor=options.pop("floor", motion.meta.get("floor_z")),
-        mapping=options.pop("mapping", None) or motion.meta.get("source_mapping"),
+        mapping=mapping,
         source=motion.source,
-        **options,
     )
     qpos = np.empty((motion.num_frames, retargeter.character.model.nq))
     for t in range(motion.num_frames):
@@ -248,10 +252,16 @@ def stream_motion(motion: Motion, character=None, **options: Any) -> Trajectory:
             assert motion.positions is not None
             conf = None if motion.confidence is None else motion.confidence[t]
             qpos[t] = retargeter.step(positions=motion.positions[t], confidence=conf)
+    labels = {k: np.array([frame[k] for frame in retargeter.labels], dtype=bool) for k in (retargeter.labels[0] if retargeter.labels else {})}
     return Trajectory(
         character=retargeter.character,
         qpos=qpos,
         fps=motion.fps,
         source=motion.source,
-        stats={"latency": np.array(retargeter.latencies), "labels": retargeter.labels},
+        contacts=Contacts(labels=labels, fps=motion.fps, source="streamed") if labels else None,
+        solver=SolverStats(
+            iterations=np.array(retargeter.iterations, dtype=np.int32),
+            relaxation=np.array(retargeter.relaxations, dtype=np.int8),
+            latency=np.array(retargeter.latencies),
+        ),
     )

@@ -32,13 +32,15 @@ All quantities are metres and radians, Z-up, quaternions x-y-z-w.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
 from ..canonical import CANONICAL_NAMES, canonical_parent
-from ..errors import MappingError, warn
+from ..options import check_fields
+from ..errors import MappingError, OptionError, warn
 from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from .calibration import CalibrationPose, calibration_pose
@@ -103,6 +105,15 @@ class TargetOptions:
     scale_root: bool = True
     oriented: tuple[str, ...] = ORIENTED
     source_floor: float | None = None
+
+    def __post_init__(self) -> None:
+        check_fields(self, "target")
+        if self.source_floor is not None and (
+            isinstance(self.source_floor, bool)
+            or not isinstance(self.source_floor, (int, float))
+            or not math.isfinite(self.source_floor)
+        ):
+            raise OptionError(f"target option source_floor must be a finite number (metres), got {self.source_floor!r}")
 
 
 @dataclass(eq=False)

@@ -498,7 +498,7 @@ def outside_stance_mask(traj) -> np.ndarray:
     For "tracking outside stance": while a foot is planted its joints follow the
     plant, not the actor.
     """
-    contacts = traj.stats["contacts"]
+    contacts = traj.contacts
     names = traj.targets.names
     mask = np.ones((traj.num_frames, len(names)), dtype=bool)
     for side in ("left", "right"):

@@ -464,8 +464,8 @@ def fidelity(
 
 def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
-    motion = traj.stats["source_motion"]
-    joints = traj.stats["joint_indices"]
+    motion = traj.source_motion
+    joints = traj.joint_indices
     actor = actor_joint_positions(motion, joints)
     character = character_joint_positions(traj)
     scale = float(getattr(traj.targets, "scale", 1.0)) if traj.targets is not None else 1.0

@@ -49,12 +49,11 @@ def _placement(calibration) -> Placement:
 def preview_input(traj) -> PreviewInput:
     """The preview of a trajectory from :func:`physmocap.retarget` (skeleton and contacts
     included) or read from an NPZ (no source: character only)."""
-    stats = getattr(traj, "stats", None) or {}
-    motion, joints = stats.get("source_motion"), stats.get("joint_indices")
+    motion, joints = traj.source_motion, traj.joint_indices
     cal = getattr(getattr(traj, "targets", None), "calibration", None)
     skeleton = None if motion is None or joints is None or cal is None else source_skeleton(motion, joints, _placement(cal))
-    contacts = getattr(stats.get("contacts"), "labels", None)
-    return PreviewInput(traj, skeleton, contacts, int(stats.get("source_start", 0)))
+    contacts = getattr(traj.contacts, "labels", None)
+    return PreviewInput(traj, skeleton, contacts, int(traj.source_start))
 
 
 def preview_input_with_source(traj, motion, start: int | None = None, profile=None, mapping=None) -> PreviewInput:

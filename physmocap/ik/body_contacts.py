@@ -29,12 +29,13 @@ segment proportions).  Units: metres, seconds.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
 
 from ..errors import OptionError
+from ..options import check_fields
 from .contacts import ContactDetector, ContactOptions, FloorPlane, central_velocity
 
 __all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points"]
@@ -77,12 +78,7 @@ class BodyContactOptions:
     min_gap: float = 0.05
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "enabled":
-                continue
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise OptionError(f"body contact option {f.name} must be a finite number >= 0, got {v!r}")
+        check_fields(self, "body contact")
         for part in ("knee", "hand", "pelvis"):
             if getattr(self, f"{part}_enter") > getattr(self, f"{part}_exit"):
                 raise OptionError(f"body contact option {part}_enter must not exceed {part}_exit (hysteresis)")

@@ -700,19 +700,24 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
             head_chain = chain
     if head_chain:
         pts = _points(t, head_chain)
-        named = _named_groups(t, head_chain, _HEAD_WORDS)
-        by_name = {part: g for part, g in named if part}
-        if "neck" in by_name:
-            b = _pick(t, by_name["neck"], oriented=False)[0]
-            put("neck", b, _by_name(t, b, _HEAD_WORDS, ""))
-        elif pts:
-            put("neck", _pick(t, pts[0], oriented=False)[0], "tree position: first joint of the head branch")
-        head_pts = [g for g in pts if joints["neck"].name not in [t.name(x) for x in g]]
-        if "head" in by_name and t.name(by_name["head"][-1]) != joints["neck"].name:
-            b = _pick(t, by_name["head"], oriented=True)[0]
-            put("head", b, _by_name(t, b, _HEAD_WORDS, ""))
-        elif head_pts:
-            put("head", _pick(t, head_pts[-1], oriented=True)[0], "tree position: last joint of the head branch")
+        by_name = {part: g for part, g in _named_groups(t, head_chain, _HEAD_WORDS) if part}
+        if len(pts) == 1:
+            # neck and head turn in one body: it is the head (its frame follows the actor's head)
+            b = _pick(t, pts[0], oriented=True)[0]
+            put("head", b, _by_name(t, b, _HEAD_WORDS, "the only joint of the head branch")
+                if "head" in by_name or "neck" in by_name else "tree position: the only joint of the head branch")
+            left_out["neck"] = "no neck joint apart from the head's"
+        else:
+            neck_pt = next((g for g in pts if any(x in by_name.get("neck", []) for x in g)), pts[0])
+            head_pt = next((g for g in reversed(pts) if any(x in by_name.get("head", []) for x in g)), pts[-1])
+            if head_pt is neck_pt:
+                head_pt = pts[-1]
+            b = _pick(t, neck_pt, oriented=False)[0]
+            put("neck", b, _by_name(t, b, _HEAD_WORDS, "") if "neck" in by_name else
+                "tree position: first joint of the head branch")
+            b = _pick(t, head_pt, oriented=True)[0]
+            put("head", b, _by_name(t, b, _HEAD_WORDS, "") if "head" in by_name else
+                "tree position: last joint of the head branch")
     else:
         reason = "no head joint" if any(
             "head" in name_parts(t.name(b), _HEAD_WORDS) or "neck" in name_parts(t.name(b), _HEAD_WORDS)

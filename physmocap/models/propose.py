@@ -141,6 +141,7 @@ class Proposal:
     rest_joints: dict[str, float]
     rest_note: str
     notes: list[str] = field(default_factory=list)
+    sites: dict[str, tuple[str, tuple[float, float, float]]] = field(default_factory=dict)  # name -> (body, pos)
 
     def to_toml(self) -> str:
         """The mapping file's text."""
@@ -154,8 +155,14 @@ class Proposal:
             f"up = {_q(self.up)}",
             f"forward = {_q(self.forward)}",
             "",
-            "[joints]",
         ]
+        if self.sites:
+            lines += ["[sites]                       # points the model lacks, added before it is compiled"]
+            for sn, (body, pos) in self.sites.items():
+                xyz = ", ".join(f"{v:.4f}" for v in pos)
+                lines.append(f"{_key(sn)} = {{ body = {_q(body)}, pos = [{xyz}] }}")
+            lines.append("")
+        lines.append("[joints]")
         width = max((len(c) for c in self.joints), default=0)
         for canon in CANONICAL_NAMES:
             g = self.joints.get(canon)
@@ -661,6 +668,15 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
                 body, why = parts[part]
                 put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
 
+    if (_axis_name(t.up), _axis_name(forward)) == ("Z", "X"):
+        sites = _ball_sites(t, {side: model.body(joints[f"{side}_ankle"].name).id
+                                for side in ("left", "right") if f"{side}_toe" not in joints})
+        for side, (site, body, pos) in sites.items():
+            joints[f"{side}_toe"] = Guess(f"{side}_toe", "site", site, "no toe body: the ball of the rigid foot, "
+                                          "3/4 of the sole from the heel, 1/3 of the ankle height up")
+    else:
+        sites = {}
+
     # trunk: from the pelvis to the arms' branching body (either may be above the other)
     if arm_root in t.path_up(pelvis, root):
         # the arms hang on an ancestor of the pelvis: each trunk body turns on its child's joints
@@ -742,7 +758,32 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         rest_joints=rest_joints,
         rest_note=rest_note,
         notes=notes,
+        sites={site: (model.body(body).name, pos) for site, body, pos in sites.values()},
     )
+
+
+def _ball_sites(t: _Tree, ankles: dict[str, int]) -> dict[str, tuple[str, int, tuple[float, float, float]]]:
+    """Side -> (site name, ankle body, position in its frame) of the ball of a foot with no toe body."""
+    from .footprint import foot_contact_points
+
+    if not ankles:
+        return {}
+    found = foot_contact_points(t.m, t.data.qpos, ankles)
+    taken = {t.m.site(i).name for i in range(t.m.nsite)}
+    out = {}
+    for side, points in found.items():
+        body = ankles[side]
+        R, x = t.data.xmat[body].reshape(3, 3), t.data.xpos[body]
+        heel, toe = (R @ pos + x for _, _, pos in points)
+        ball = heel + 0.75 * (toe - heel)
+        sole = min(heel[2], toe[2])
+        ball[2] = sole + (x[2] - sole) / 3.0
+        local = R.T @ (ball - x)
+        name = f"{side}_ball"
+        while name in taken:
+            name += "_proposed"
+        out[side] = (name, body, tuple(round(float(v), 4) + 0.0 for v in local))
+    return out
 
 
 def _missing_reason(canon: str) -> str:
@@ -773,7 +814,7 @@ def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None) -> tuple[dict
     m = t.m
     d = mujoco.MjData(m)
     d.qpos[:] = t.data.qpos
-    body = {c: m.body(g.name).id for c, g in joints.items()}
+    body = {c: m.body(g.name).id for c, g in joints.items() if g.kind == "body"}
     fixes: dict[str, float] = {}
     notes = []
     limbs = {

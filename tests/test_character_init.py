@@ -261,6 +261,36 @@ def test_mesh_feet_and_renamed_bodies(tmp_path):
     assert toe[0] - heel[0] == pytest.approx(0.22, abs=0.01)  # heel of the mesh to the toe box and abs(heel[2]) < 1e-3
 
 
+def test_pelvis_below_a_free_trunk_and_names_on_joints(tmp_path):
+    """Booster-T1-like: the free body is the trunk (arms, head), the legs hang from a waist body
+    below it; arm bodies are AL1..AL4 (the parts are in the joints' names); rigid hands."""
+    mjcf = REPO / "tests" / "fixtures" / "robot_trunk_root.xml"
+    pr = propose_mapping(mjcf)
+    got = {c: g.name for c, g in pr.joints.items()}
+    assert got["pelvis"] == "Waist" and got["spine"] == "Trunk"
+    assert (got["neck"], got["head"]) == ("H1", "H2")
+    assert (got["left_shoulder"], got["left_elbow"], got["left_wrist"]) == ("AL2", "AL3", "left_hand_link")
+    assert (got["right_hip"], got["right_knee"], got["right_ankle"]) == ("Hip_Pitch_Right", "Shank_Right", "right_foot_link")
+    ch = _loads(tmp_path, pr, mjcf)
+    from physmocap import load_motion, retarget
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=30)
+    assert np.all(np.isfinite(traj.qpos))
+
+
+def test_y_up_model_facing_z(tmp_path):
+    """The stilt biped fixture: Y up (gravity), facing +Z, sides as suffixes (thighL)."""
+    mjcf = REPO / "tests" / "fixtures" / "biped.xml"
+    pr = propose_mapping(mjcf)
+    assert (pr.up, pr.forward) == ("Y", "Z")
+    assert pr.joints["left_knee"].name == "shinL" and pr.joints["right_hip"].name == "thighR"
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    assert rest["left_hip"][1] > rest["right_hip"][1] and rest["pelvis"][2] > rest["left_knee"][2]
+
+
 def test_rest_pose_keyframe_or_straightened_zero_pose(tmp_path):
     names = STYLES["left_knee_link"]
     bent = propose_mapping(_write(tmp_path, _robot(names, bent_elbows=True), "bent.xml"))

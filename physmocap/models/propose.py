@@ -224,6 +224,7 @@ class _Tree:
         g = np.array(model.opt.gravity, dtype=float)
         self.up = _snap(-g) if np.linalg.norm(g) > 1e-9 else np.array([0.0, 0.0, 1.0])
         self.h = self.xpos @ self.up
+        self._reach: dict[int, float] = {}
         self.lowest = {}
         for b in reversed(range(model.nbody)):  # children have larger ids than parents
             self.lowest[b] = min([self.h[b]] + [self.lowest[c] for c in self.children[b]])
@@ -252,7 +253,9 @@ class _Tree:
 
     def reach(self, b: int) -> float:
         """Longest distance from ``b``'s origin to a descendant's origin."""
-        return float(max(np.linalg.norm(self.xpos[x] - self.xpos[b]) for x in self.subtree(b)))
+        if b not in self._reach:
+            self._reach[b] = float(max(np.linalg.norm(self.xpos[x] - self.xpos[b]) for x in self.subtree(b)))
+        return self._reach[b]
 
     def path_up(self, b: int, stop: int) -> list[int]:
         """``b``, its parent, ... up to and including ``stop`` (or the world)."""
@@ -342,7 +345,7 @@ def _find_legs(t: _Tree, root: int, path: Path) -> tuple[int, list[int], list[in
     )
 
 
-def _find_arms(t: _Tree, root: int, pelvis: int, legs: list[list[int]], lateral: np.ndarray | None):
+def _find_arms(t: _Tree, root: int, pelvis: int, legs: list[list[int]]):
     """The body the arms branch from and the two arm chains (or None)."""
     excluded = set()
     for leg in legs:
@@ -564,11 +567,15 @@ def _arm_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
             b, how = _pick(t, named[part], oriented=False)
             out[part] = (b, _by_name(t, b, _ARM_WORDS, how))
     wrist_group = named.get("wrist")
-    if wrist_group is None and "hand" in named and any(t.articulated(b) for b in named["hand"]):
-        wrist_group = named["hand"]
+    rigid_hand = False
+    if wrist_group is None and "hand" in named:
+        if any(t.articulated(b) for b in named["hand"]):
+            wrist_group = named["hand"]
+        elif "elbow" in out and np.linalg.norm(t.xpos[named["hand"][0]] - t.xpos[out["elbow"][0]]) > 0.08:
+            wrist_group, rigid_hand = named["hand"][:1], True  # a hand fixed at the forearm's end
     if wrist_group is not None:
         b, how = _pick(t, wrist_group, oriented=False)
-        out["wrist"] = (b, _by_name(t, b, _ARM_WORDS, how))
+        out["wrist"] = (b, _by_name(t, b, _ARM_WORDS, "fixed at the end of the forearm" if rigid_hand else how))
     pts = _points(t, chain)
     if "shoulder" not in out and pts:
         b, _ = _pick(t, pts[0], oriented=False)
@@ -636,7 +643,7 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         notes.append("legs told apart by position: the model is assumed to face +X (MuJoCo's convention)")
     lateral = np.cross(t.up, forward)
 
-    arms = _find_arms(t, root, pelvis, [left_leg, right_leg], lateral)
+    arms = _find_arms(t, root, pelvis, [left_leg, right_leg])
     if arms is None:
         raise MappingError("no recognisable arms: no pair of chains on opposite sides of the trunk", path=p)
     arm_root, arm_a, arm_b = arms

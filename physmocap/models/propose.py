@@ -687,15 +687,17 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
     else:
         sites = {}
 
-    # trunk: from the pelvis to the arms' branching body (either may be above the other)
-    if arm_root in t.path_up(pelvis, root):
-        # the arms hang on an ancestor of the pelvis: each trunk body turns on its child's joints
-        up_path = t.path_up(pelvis, arm_root)
-        trunk = up_path[1:]
-        moves = {up_path[i + 1]: t.articulated(up_path[i]) for i in range(len(up_path) - 1)}
-    else:
-        trunk = list(reversed([b for b in t.path_up(arm_root, pelvis) if b != pelvis]))
-        moves = {b: t.articulated(b) for b in trunk}
+    # trunk: the tree path from the pelvis to the arms' branching body (through their common
+    # ancestor: the arms may hang on the pelvis's parent, as when the free body is the torso)
+    up_a = t.path_up(pelvis, 0)
+    up_b = t.path_up(arm_root, 0)
+    lca = next(x for x in up_a if x in set(up_b))
+    rising = up_a[: up_a.index(lca) + 1]  # pelvis ... lca
+    falling = list(reversed(up_b[: up_b.index(lca)]))  # below lca ... arm_root
+    trunk = rising[1:] + falling
+    moves = {rising[i + 1]: t.articulated(rising[i]) for i in range(len(rising) - 1)}  # turns on its child's joints
+    moves.update({b: t.articulated(b) for b in falling})
+    trunk = [b for b in trunk if b > 0]
     groups: list[list[int]] = []
     for b in trunk:
         if not moves[b] and not groups:

@@ -307,6 +307,17 @@ def test_rest_pose_keyframe_or_straightened_zero_pose(tmp_path):
     assert '[rest]\nkeyframe = "home"' in home.to_toml()
 
 
+def test_zero_pose_outside_a_range_is_clamped(tmp_path):
+    """A knee whose range excludes zero (5.73 to 150 degrees): the rest pose takes its nearest end."""
+    xml = _robot(STYLES["L_KNEE"]).replace('axis="0 1 0" range="0 150"', 'axis="0 1 0" range="5.73 150"')
+    mjcf = _write(tmp_path, xml)
+    pr = propose_mapping(mjcf)
+    knees = {k: v for k, v in pr.rest_joints.items()}
+    assert len(knees) == 2 and all(v == pytest.approx(5.8) for v in knees.values()), knees
+    assert "nearest end of their range" in pr.rest_note
+    _loads(tmp_path, pr, mjcf)  # within range once written and read back
+
+
 def test_name_sides():
     for n in ("left_knee_link", "l_calf_link", "L_KNEE", "LeftLeg", "knee_l", "LKnee", "lfemur", "Left Arm"):
         assert name_side(n) == "left", n

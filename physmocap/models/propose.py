@@ -178,9 +178,9 @@ class Proposal:
         if self.rest_keyframe is not None:
             lines += ["[rest]", f"keyframe = {_q(self.rest_keyframe)}"]
         if self.rest_joints:
-            lines.append("[rest.joints]                 # degrees (hinges)")
+            lines.append("[rest.joints]                 # degrees (hinges), metres (slides)")
             for jn, deg in self.rest_joints.items():
-                lines.append(f"{_key(jn)} = {deg:.1f}")
+                lines.append(f"{_key(jn)} = {deg:.6g}")
         return "\n".join(lines) + "\n"
 
     def report(self) -> list[str]:
@@ -829,6 +829,23 @@ def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None) -> tuple[dict
     body = {c: m.body(g.name).id for c, g in joints.items() if g.kind == "body"}
     fixes: dict[str, float] = {}
     notes = []
+    # a zero outside a joint's range: the nearest bound (0.1 degree inside, as the file rounds)
+    clamped = []
+    for j in range(m.njnt):
+        if int(m.jnt_type[j]) not in (_HINGE, _SLIDE) or not m.jnt_limited[j]:
+            continue
+        adr = int(m.jnt_qposadr[j])
+        lo, hi = (float(v) for v in m.jnt_range[j])
+        if lo <= d.qpos[adr] <= hi:
+            continue
+        k, step = (180.0 / math.pi, 10.0) if int(m.jnt_type[j]) == _HINGE else (1.0, 1e4)
+        v = math.ceil(lo * k * step) / step if d.qpos[adr] < lo else math.floor(hi * k * step) / step
+        v = min(max(v, lo * k), hi * k)
+        d.qpos[adr] = v / k
+        fixes[m.joint(j).name] = float(v)
+        clamped.append(m.joint(j).name)
+    if clamped:
+        notes.append(f"{', '.join(clamped)} set to the nearest end of their range (zero is outside it)")
     limbs = {
         "arm": (("shoulder", "elbow", "wrist"), ("shoulder", "elbow", "hand_end")),
         "leg": (("hip", "knee", "ankle"),),

@@ -271,7 +271,7 @@ def run_init(args: argparse.Namespace) -> int:
             ch = load_character(args.path, tmp)
         except MappingError as exc:
             raise MappingError(f"the proposed mapping does not load ({exc.message}); "
-                               "write one by hand (see README, Robots)", path=args.path) from None
+                               "write one by hand (README, Characters)", path=args.path) from None
     finally:
         os.unlink(tmp)
     print(f"  checked: loads as a character, height {ch.height:.2f} m, hip height {ch.hip_height:.2f} m, "

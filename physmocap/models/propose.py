@@ -22,11 +22,15 @@ one, else the zero pose):
    must lie flat).  The wrist is a joint centre: the hand's end, when the model has one,
    steers the wrist's last DOF (tracking the whole hand frame swung the G1's wrist roll
    to 66 degrees on the PyMO walk, against 35 this way).
-6. **Trunk**: articulation points between the pelvis and the arms' branching body are
-   spine (then chest); a head branch with joints gives neck and head.  A robot whose
-   head has no joint gets no neck, head or head end (the loader treats them as optional).
-7. **Rest pose**: with no keyframe, an elbow or knee that the zero pose bends by more
-   than 20 degrees is straightened in ``[rest.joints]``.
+   A hand body fixed at the forearm's end is the wrist.  A foot without a toe body gets a
+   ball-of-foot site on its ankle body (``[sites]``; foot planting needs a toe point).
+6. **Trunk**: articulation points on the tree path between the pelvis and the arms'
+   branching body are spine (then chest); a head branch with joints gives neck and head
+   (one such body is the head).  A robot whose head has no joint gets no neck, head or head
+   end (the loader treats the neck as optional).
+7. **Rest pose**: with no keyframe, a joint whose zero is outside its range takes the
+   nearest end, and an elbow or knee that the zero pose bends by more than 20 degrees is
+   straightened (``[rest.joints]``).
 
 Nothing here is specific to a robot.  Joints the model does not have are left out and
 reported.  Errors (:class:`~physmocap.errors.InputError`,

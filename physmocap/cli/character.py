@@ -1,4 +1,5 @@
-"""``physmocap character``: describe a character (``info``) and build a scaled humanoid (``scale``)."""
+"""``physmocap character``: describe a character (``info``), build a scaled humanoid (``scale``),
+propose a mapping file for a robot MJCF (``init``)."""
 
 from __future__ import annotations
 
@@ -56,6 +57,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     scale.add_argument("--mass", type=float, metavar="KG", help="actor's body mass in kg")
     scale.set_defaults(func=run_scale)
+
+    init = csub.add_parser(
+        "init",
+        help="propose a mapping file for a humanoid MJCF (a robot) from its body names and tree",
+        description=(
+            "Propose a mapping file for a humanoid MJCF: the free-joint body is the pelvis, the legs and "
+            "arms are found by the kinematic tree, their sides and parts by name (left_/l_/L_/Left, hip, "
+            "knee, calf, ankle, shoulder, elbow, wrist...) or by position. Prints the TOML on stdout (or "
+            "writes it with -o) and what it guessed on stderr. Use it with --map, or name it "
+            "<stem>.map.toml beside the MJCF."
+        ),
+    )
+    init.add_argument("path", metavar="ROBOT.xml", help="MJCF file of a humanoid with a free joint")
+    init.add_argument("-o", "--output", metavar="ROBOT.map.toml", help="write the mapping here (default: stdout)")
+    init.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
+    init.set_defaults(func=run_init)
 
     def _no_action(args: argparse.Namespace) -> int:
         p.print_help(sys.stderr)
@@ -222,4 +239,48 @@ def run_scale(args: argparse.Namespace) -> int:
         f"hip height {ch.hip_height:.3f} m, mass {ch.total_mass:.1f} kg",
         file=sys.stderr,
     )
+    return 0
+
+
+def run_init(args: argparse.Namespace) -> int:
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from ..errors import MappingError, OutputError
+    from ..fileio import atomic_open, check_not_input, check_writable
+    from ..models import load_character
+    from ..models.propose import propose_mapping
+
+    out = Path(args.output) if args.output else None
+    if out is not None:
+        check_not_input([out], [args.path])
+        if out.exists() and not out.is_dir() and not args.force:
+            raise OutputError("exists; use --force to overwrite it", path=out)
+        check_writable(out)
+    proposal = propose_mapping(args.path)
+    text = proposal.to_toml()
+    for line in proposal.report():
+        print(line, file=sys.stderr)
+    # the proposal must load as a character: check it before handing it over
+    fd, tmp = tempfile.mkstemp(prefix="physmocap-init-", suffix=".map.toml")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        try:
+            ch = load_character(args.path, tmp)
+        except MappingError as exc:
+            raise MappingError(f"the proposed mapping does not load ({exc.message}); "
+                               "write one by hand (README, Characters)", path=args.path) from None
+    finally:
+        os.unlink(tmp)
+    print(f"  checked: loads as a character, height {ch.height:.2f} m, hip height {ch.hip_height:.2f} m, "
+          f"foot contacts {', '.join(n for side in ch.contacts.values() for n in side) or 'none'}",
+          file=sys.stderr)
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        with atomic_open(out) as fh:
+            fh.write(text)
+        print(f"wrote {out}", file=sys.stderr)
     return 0

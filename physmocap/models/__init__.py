@@ -15,6 +15,9 @@ Public API::
 * :mod:`~physmocap.models.velocity`: peak joint speeds (biomechanics literature).
 * :mod:`~physmocap.models.humanoid_builder`: generates ``assets/mjcf/humanoid.xml``.
 * :mod:`~physmocap.models.geometry`: geom extents, lowest and highest points.
+* :mod:`~physmocap.models.footprint`: heel and toe points found on the feet's geometry.
+* :mod:`~physmocap.models.propose`: a mapping proposed for a humanoid MJCF from its names and
+  tree (``physmocap character init``).
 """
 
 from .character import DEFAULT_CHARACTER, Character, bundled_characters, load_character

@@ -32,12 +32,25 @@ from .geometry import character_geoms, highest_z, lowest_z
 from .mapping import AXES, Mapping, TrackedFrame, implicit_mapping, read_mapping
 from .velocity import FALLBACK_DEG_S, human_velocity_limit
 
-__all__ = ["Character", "TrackedFrame", "load_character", "bundled_characters", "DEFAULT_CHARACTER"]
+__all__ = [
+    "Character",
+    "TrackedFrame",
+    "load_character",
+    "bundled_characters",
+    "DEFAULT_CHARACTER",
+    "CHARACTER_REQUIRED",
+]
 
 #: Name of the default character.
 DEFAULT_CHARACTER = "humanoid"
 
 _LIMITED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+
+#: Canonical joints a character must map.  A source skeleton must provide every
+#: required joint (:data:`physmocap.canonical.REQUIRED_JOINTS`), but a robot may lack
+#: a neck or wrists: those are optional on the character's side.
+CHARACTER_OPTIONAL = ("neck", "left_wrist", "right_wrist")
+CHARACTER_REQUIRED: tuple[str, ...] = tuple(j for j in REQUIRED_JOINTS if j not in CHARACTER_OPTIONAL)
 
 
 @dataclass
@@ -247,7 +260,7 @@ def load_character(
         mp = implicit_mapping(model)
     where = mp_file if mp_file is not None else mjcf
     tracked = _resolve_frames(mp, model)
-    missing = [j for j in REQUIRED_JOINTS if j not in tracked]
+    missing = [j for j in CHARACTER_REQUIRED if j not in tracked]
     if missing:
         hint = "[joints]" if mp_file is not None else "no mapping file found (give --map or write <stem>.map.toml);"
         raise MappingError(

@@ -1,7 +1,9 @@
 """Character mapping files (TOML): which site or body of an MJCF is which canonical joint.
 
-A mapping file sits beside its model as ``<stem>.map.toml``.  Every table is
-optional except ``[joints]``::
+A mapping file sits beside its model as ``<stem>.map.toml``
+(``physmocap character init MODEL.xml`` proposes one, :mod:`physmocap.models.propose`).
+Every table is optional except ``[joints]``; a character must map the pelvis, hips,
+knees, ankles, shoulders and elbows (neck and wrists are optional)::
 
     [character]
     name = "robot"            # default: the MJCF file's stem

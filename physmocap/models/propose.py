@@ -1,0 +1,897 @@
+"""Propose a mapping file for a humanoid MJCF from its body names and kinematic tree.
+
+``physmocap character init ROBOT.xml`` calls :func:`propose_mapping`, which works on
+the compiled model in its rest pose (a ``rest`` or ``home`` keyframe if the model has
+one, else the zero pose):
+
+1. **Root**: the body of the free joint.  Up is against gravity (``opt.gravity``).
+2. **Legs**: descending from the root, the first body with two child branches that
+   both reach the lowest body origins is the pelvis; each branch, followed down to its
+   lowest leaf, is a leg.
+3. **Arms**: among the branches left (not legs, not above the pelvis's path to the
+   root), the pair of chains on opposite sides with the longest similar reach.
+4. **Sides** from name tokens (``left_``, ``l_``, ``L_``, ``_l``, ``Left``...) of the
+   chain's bodies and joints; when the names do not tell, from the lateral position in
+   the rest pose (MuJoCo's convention: a model faces +X, its left is +Y).
+5. **Parts** along each chain by name keywords (hip, thigh, knee, calf, shin, shank,
+   ankle, foot, toe, shoulder, upper_arm, elbow, forearm, wrist, hand...), else by chain
+   position (hip first, knee at mid-height, ankle last articulation point).  Among the
+   bodies of one part (a 3-DOF hip is often three bodies), a joint centre takes the body
+   nearest the point closest to the part's joint axes (ties: the earlier body); the ankle
+   takes the last articulated body, whose frame turns with every DOF of the foot (the sole
+   must lie flat).  The wrist is a joint centre: the hand's end, when the model has one,
+   steers the wrist's last DOF (tracking the whole hand frame swung the G1's wrist roll
+   to 66 degrees on the PyMO walk, against 35 this way).
+   A hand body fixed at the forearm's end is the wrist.  A foot without a toe body gets a
+   ball-of-foot site on its ankle body (``[sites]``; foot planting needs a toe point).
+6. **Trunk**: articulation points on the tree path between the pelvis and the arms'
+   branching body are spine (then chest); a head branch with joints gives neck and head
+   (one such body is the head).  A robot whose head has no joint gets no neck, head or head
+   end (the loader treats the neck as optional).
+7. **Rest pose**: with no keyframe, a joint whose zero is outside its range takes the
+   nearest end, and an elbow or knee that the zero pose bends by more than 20 degrees is
+   straightened (``[rest.joints]``).
+
+Nothing here is specific to a robot.  Joints the model does not have are left out and
+reported.  Errors (:class:`~physmocap.errors.InputError`,
+:class:`~physmocap.errors.MappingError`) name the file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..canonical import CANONICAL_NAMES
+from ..errors import InputError, MappingError
+
+__all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts"]
+
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+_HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+_SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+
+# -- names -----------------------------------------------------------------------------
+
+_LEFT = {"left", "l", "lft", "lt"}
+_RIGHT = {"right", "r", "rgt", "rt"}
+
+#: Keyword -> part.  A body named like a segment is the segment's proximal joint
+#: (a thigh's origin is the hip, a calf's the knee, a forearm's the elbow).
+_LEG_WORDS = {
+    "hip": "hip", "thigh": "hip", "femur": "hip", "upleg": "hip", "upperleg": "hip",
+    "knee": "knee", "calf": "knee", "shin": "knee", "shank": "knee", "tibia": "knee",
+    "lowerleg": "knee", "leg": "knee",
+    "ankle": "ankle", "foot": "ankle", "talus": "ankle",
+    "toe": "toe", "toes": "toe", "toebase": "toe", "ball": "toe",
+}
+_ARM_WORDS = {
+    "clavicle": "clavicle", "collar": "clavicle", "scapula": "clavicle",
+    "shoulder": "shoulder", "upperarm": "shoulder", "humerus": "shoulder", "arm": "shoulder",
+    "elbow": "elbow", "forearm": "elbow", "lowerarm": "elbow", "radius": "elbow", "ulna": "elbow",
+    "wrist": "wrist", "hand": "hand", "palm": "hand",
+}
+_HEAD_WORDS = {"neck": "neck", "cervical": "neck", "head": "head", "skull": "head"}
+_ALL_WORDS = {**_LEG_WORDS, **_ARM_WORDS, **_HEAD_WORDS}
+_BIGRAMS = {
+    ("up", "leg"): "upleg", ("upper", "leg"): "upperleg", ("lower", "leg"): "lowerleg",
+    ("upper", "arm"): "upperarm", ("lower", "arm"): "lowerarm", ("fore", "arm"): "forearm",
+    ("toe", "base"): "toebase",
+}
+
+
+def _tokens(name: str) -> list[str]:
+    """``LeftUpLeg`` -> left, up, leg; ``l_calf_link`` -> l, calf, link; ``L_KNEE`` -> l, knee."""
+    spaced = re.sub(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", " ", name)
+    raw = [t.lower() for t in re.split(r"[^A-Za-z]+|\s+", spaced) if t]
+    out: list[str] = []
+    i = 0
+    while i < len(raw):
+        if i + 1 < len(raw) and (raw[i], raw[i + 1]) in _BIGRAMS:
+            out.append(_BIGRAMS[(raw[i], raw[i + 1])])
+            i += 2
+            continue
+        t = raw[i]
+        # "lfemur", "rknee": a one-letter side glued to a keyword
+        if t not in _ALL_WORDS and len(t) > 2 and t[0] in "lr" and t[1:] in _ALL_WORDS:
+            out += [t[0], t[1:]]
+        else:
+            out.append(t)
+        i += 1
+    return out
+
+
+def name_side(name: str) -> str | None:
+    """``"left"``, ``"right"`` or None, from a name's tokens."""
+    toks = set(_tokens(name))
+    left, right = bool(toks & _LEFT), bool(toks & _RIGHT)
+    if left != right:
+        return "left" if left else "right"
+    return None
+
+
+def name_parts(name: str, words: dict[str, str]) -> list[str]:
+    """Parts (``hip``, ``knee``...) a name's tokens mention, in order, for one vocabulary."""
+    return [words[t] for t in _tokens(name) if t in words]
+
+
+# -- the proposal ------------------------------------------------------------------------
+
+
+@dataclass
+class Guess:
+    """One canonical joint's proposed frame and the reason for it."""
+
+    canonical: str
+    kind: str  # "body" or "site"
+    name: str
+    why: str
+
+
+@dataclass
+class Proposal:
+    """A proposed mapping for one MJCF (see the module docstring)."""
+
+    mjcf: Path
+    name: str
+    up: str
+    forward: str
+    joints: dict[str, Guess]
+    left_out: dict[str, str]
+    rest_keyframe: str | None
+    rest_joints: dict[str, float]
+    rest_note: str
+    notes: list[str] = field(default_factory=list)
+    sites: dict[str, tuple[str, tuple[float, float, float]]] = field(default_factory=dict)  # name -> (body, pos)
+
+    def to_toml(self) -> str:
+        """The mapping file's text."""
+        lines = [
+            f"# Mapping proposed by `physmocap character init` for {self.mjcf.name}.",
+            "# Check it with `physmocap character info MODEL.xml --map THIS.map.toml`; edit as needed.",
+            "# Foot contacts: none listed, so the heel and toe are found on the feet's collision geoms.",
+            "",
+            "[character]",
+            f"name = {_q(self.name)}",
+            f"up = {_q(self.up)}",
+            f"forward = {_q(self.forward)}",
+            "",
+        ]
+        if self.sites:
+            lines += ["[sites]                       # points the model lacks, added before it is compiled"]
+            for sn, (body, pos) in self.sites.items():
+                xyz = ", ".join(f"{v:.4f}" for v in pos)
+                lines.append(f"{_key(sn)} = {{ body = {_q(body)}, pos = [{xyz}] }}")
+            lines.append("")
+        lines.append("[joints]")
+        width = max((len(c) for c in self.joints), default=0)
+        for canon in CANONICAL_NAMES:
+            g = self.joints.get(canon)
+            if g is not None:
+                value = _q(f"{g.kind}:{g.name}")
+                lines.append(f"{canon:<{width}} = {value:<34} # {g.why}")
+        if self.left_out:
+            lines.append("# left out (the model has no such joint): " + ", ".join(self.left_out))
+        lines += ["", f"# rest pose: {self.rest_note}"]
+        if self.rest_keyframe is not None:
+            lines += ["[rest]", f"keyframe = {_q(self.rest_keyframe)}"]
+        if self.rest_joints:
+            lines.append("[rest.joints]                 # degrees (hinges), metres (slides)")
+            for jn, deg in self.rest_joints.items():
+                lines.append(f"{_key(jn)} = {deg:.6g}")
+        return "\n".join(lines) + "\n"
+
+    def report(self) -> list[str]:
+        """What was guessed, one line each (for stderr)."""
+        out = [f"{self.mjcf}: proposed mapping for {self.name!r} (up {self.up}, forward {self.forward})"]
+        for canon in CANONICAL_NAMES:
+            g = self.joints.get(canon)
+            if g is not None:
+                out.append(f"  {canon:<15} -> {g.kind}:{g.name}  ({g.why})")
+        if self.left_out:
+            out.append("  left out: " + "; ".join(f"{c} ({why})" for c, why in self.left_out.items()))
+        out.append(f"  rest pose: {self.rest_note}")
+        out += [f"  note: {n}" for n in self.notes]
+        return out
+
+
+def _q(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _key(s: str) -> str:
+    return s if re.fullmatch(r"[A-Za-z0-9_-]+", s) else _q(s)
+
+
+# -- the model ---------------------------------------------------------------------------
+
+
+class _Tree:
+    """Bodies, their children and rest-pose geometry of a compiled model."""
+
+    def __init__(self, model: mujoco.MjModel, qpos: np.ndarray):
+        self.m = model
+        self.children: dict[int, list[int]] = {b: [] for b in range(model.nbody)}
+        for b in range(1, model.nbody):
+            self.children[int(model.body_parentid[b])].append(b)
+        d = mujoco.MjData(model)
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(model, d)
+        self.data = d
+        self.xpos = d.xpos.copy()
+        g = np.array(model.opt.gravity, dtype=float)
+        self.up = _snap(-g) if np.linalg.norm(g) > 1e-9 else np.array([0.0, 0.0, 1.0])
+        self.h = self.xpos @ self.up
+        self._reach: dict[int, float] = {}
+        self.lowest = {}
+        for b in reversed(range(model.nbody)):  # children have larger ids than parents
+            self.lowest[b] = min([self.h[b]] + [self.lowest[c] for c in self.children[b]])
+
+    def name(self, b: int) -> str:
+        return self.m.body(b).name
+
+    def joints(self, b: int) -> list[int]:
+        start, n = int(self.m.body_jntadr[b]), int(self.m.body_jntnum[b])
+        return [j for j in range(start, start + n) if int(self.m.jnt_type[j]) != _FREE] if n > 0 else []
+
+    def articulated(self, b: int) -> bool:
+        return bool(self.joints(b))
+
+    def names(self, b: int) -> list[str]:
+        """The body's name and its joints' names."""
+        return [self.name(b)] + [self.m.joint(j).name for j in self.joints(b)]
+
+    def subtree(self, b: int) -> list[int]:
+        out, stack = [], [b]
+        while stack:
+            x = stack.pop()
+            out.append(x)
+            stack += self.children[x]
+        return out
+
+    def reach(self, b: int) -> float:
+        """Longest distance from ``b``'s origin to a descendant's origin."""
+        if b not in self._reach:
+            self._reach[b] = float(max(np.linalg.norm(self.xpos[x] - self.xpos[b]) for x in self.subtree(b)))
+        return self._reach[b]
+
+    def path_up(self, b: int, stop: int) -> list[int]:
+        """``b``, its parent, ... up to and including ``stop`` (or the world)."""
+        out = [b]
+        while b != stop and b > 0:
+            b = int(self.m.body_parentid[b])
+            out.append(b)
+        return out
+
+
+def _snap(v: np.ndarray) -> np.ndarray:
+    i = int(np.argmax(np.abs(v)))
+    out = np.zeros(3)
+    out[i] = math.copysign(1.0, float(v[i]))
+    return out
+
+
+def _axis_name(v: np.ndarray) -> str:
+    i = int(np.argmax(np.abs(v)))
+    return ("-" if v[i] < 0 else "") + "XYZ"[i]
+
+
+def _load(path: Path) -> mujoco.MjModel:
+    if not path.exists():
+        raise InputError("MJCF file not found", path=path)
+    if path.is_dir():
+        raise InputError("is a directory, expected an MJCF file", path=path)
+    try:
+        return mujoco.MjModel.from_xml_path(os.fspath(path))
+    except (ValueError, OSError) as exc:
+        msg = " ".join(str(exc).split())
+        raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
+
+
+def _rest(model: mujoco.MjModel) -> tuple[np.ndarray, str | None]:
+    for key in ("rest", "home"):
+        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)
+        if k >= 0:
+            return model.key_qpos[k].copy(), key
+    return model.qpos0.copy(), None
+
+
+# -- chains --------------------------------------------------------------------------------
+
+
+def _descend_lowest(t: _Tree, b: int) -> list[int]:
+    chain = [b]
+    while t.children[chain[-1]]:
+        chain.append(min(t.children[chain[-1]], key=lambda c: t.lowest[c]))
+    return chain
+
+
+def _descend_longest(t: _Tree, b: int) -> list[int]:
+    chain = [b]
+    while t.children[chain[-1]]:
+        x = chain[-1]
+        chain.append(max(t.children[x], key=lambda c: float(np.linalg.norm(t.xpos[c] - t.xpos[b])) + t.reach(c)))
+    return chain
+
+
+def _find_legs(t: _Tree, root: int, path: Path) -> tuple[int, list[int], list[int]]:
+    """The pelvis (where the legs branch) and the two leg chains."""
+    low = t.lowest[root]
+    span = t.h[root] - low
+    if span <= 1e-3:
+        raise MappingError("no recognisable legs: no body hangs below the free-joint body in the rest pose", path=path)
+    tol = max(0.15 * span, 0.02)
+    x = root
+    while True:
+        kids = [c for c in t.children[x] if t.lowest[c] <= low + tol]
+        if len(kids) >= 2:
+            kids.sort(key=lambda c: t.lowest[c])
+            a, b = kids[0], kids[1]
+            la, lb = _descend_lowest(t, a), _descend_lowest(t, b)
+            if len(la) < 2 or len(lb) < 2:
+                raise MappingError(
+                    f"no recognisable legs: the branches below {t.name(x)!r} have fewer than two bodies each", path=path
+                )
+            return x, la, lb
+        if len(kids) == 0:
+            break
+        x = kids[0]
+    raise MappingError(
+        "no recognisable legs: no body has two branches reaching down to the feet "
+        f"(looked below {t.name(root)!r}, the free-joint body)",
+        path=path,
+    )
+
+
+def _find_arms(t: _Tree, root: int, pelvis: int, legs: list[list[int]]):
+    """The body the arms branch from and the two arm chains (or None)."""
+    excluded = set()
+    for leg in legs:
+        excluded |= set(t.subtree(leg[0]))
+    spine_path = set(t.path_up(pelvis, root))
+    leg_len = sum(float(np.linalg.norm(t.xpos[leg[i + 1]] - t.xpos[leg[i]])) for leg in legs[:1] for i in range(len(leg) - 1))
+    best = None
+    for x in t.subtree(root):
+        if x in excluded:
+            continue
+        kids = [c for c in t.children[x] if c not in excluded and c not in spine_path and c != pelvis]
+        reach = {c: t.reach(c) + float(np.linalg.norm(t.xpos[c] - t.xpos[x])) for c in kids}
+        for i, a in enumerate(kids):
+            for b in kids[i + 1:]:
+                ra, rb = reach[a], reach[b]
+                if min(ra, rb) < 0.25 * leg_len or min(ra, rb) < 0.7 * max(ra, rb):
+                    continue
+                if len(t.subtree(a)) < 2 or len(t.subtree(b)) < 2:
+                    continue
+                # opposite sides: the two bases apart horizontally
+                d = t.xpos[a] - t.xpos[b]
+                d_h = d - (d @ t.up) * t.up
+                if np.linalg.norm(d_h) < 0.04 or abs(d @ t.up) > 0.5 * np.linalg.norm(d_h) + 0.02:
+                    continue
+                score = ra + rb
+                if best is None or score > best[0]:
+                    best = (score, x, a, b)
+    if best is None:
+        return None
+    _, x, a, b = best
+    return x, _descend_longest(t, a), _descend_longest(t, b)
+
+
+def _chain_side(t: _Tree, chain: list[int]) -> str | None:
+    votes = {"left": 0, "right": 0}
+    for b in chain:
+        for n in t.names(b):
+            s = name_side(n)
+            if s:
+                votes[s] += 1
+    if votes["left"] != votes["right"]:
+        return "left" if votes["left"] > votes["right"] else "right"
+    return None
+
+
+def _sides(t: _Tree, a: list[int], b: list[int], lateral: np.ndarray) -> tuple[list[int], list[int], str]:
+    """(left chain, right chain, how the sides were told)."""
+    sa, sb = _chain_side(t, a), _chain_side(t, b)
+    if sa and sb and sa != sb:
+        return (a, b, "name") if sa == "left" else (b, a, "name")
+    if (sa and not sb) or (sb and not sa):
+        if (sa or "") == "left" or (sb or "") == "right":
+            return a, b, "name"
+        return b, a, "name"
+    ya = float(t.xpos[a[0]] @ lateral)
+    yb = float(t.xpos[b[0]] @ lateral)
+    if abs(ya - yb) < 1e-6:  # bases on the midline: compare the chains' mean lateral positions
+        ya = float(np.mean([t.xpos[x] @ lateral for x in a]))
+        yb = float(np.mean([t.xpos[x] @ lateral for x in b]))
+    return (a, b, "position") if ya > yb else (b, a, "position")
+
+
+# -- parts along a chain ---------------------------------------------------------------------
+
+
+def _axes_point(t: _Tree, bodies: list[int]) -> np.ndarray | None:
+    """The point closest (least squares) to the hinge axes of ``bodies`` (None for < 2 axes)."""
+    A = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    n = 0
+    for b in bodies:
+        for j in t.joints(b):
+            if int(t.m.jnt_type[j]) != _HINGE:
+                continue
+            u = t.data.xaxis[j] / np.linalg.norm(t.data.xaxis[j])
+            P = np.eye(3) - np.outer(u, u)
+            A += P
+            rhs += P @ t.data.xanchor[j]
+            n += 1
+    if n < 2 or np.linalg.matrix_rank(A, tol=1e-6) < 3:
+        return None
+    return np.linalg.solve(A, rhs)
+
+
+def _by_name(t: _Tree, b: int, words: dict[str, str], how: str) -> str:
+    """``name 'calf'``: the keyword of ``b``'s name (or of its joints' names) that told its part."""
+    for n in t.names(b):
+        hit = next((w for w in _tokens(n) if w in words), None)
+        if hit:
+            return f"name {hit!r}" + (f", {how}" if how else "")
+    return "name" + (f", {how}" if how else "")
+
+
+def _pick(t: _Tree, group: list[int], oriented: bool) -> tuple[int, str]:
+    """The body of a part's group standing for its joint, and how it was picked."""
+    art = [b for b in group if t.articulated(b)]
+    if not art:
+        return group[0], ""
+    if len(art) == 1:
+        return art[0], ""
+    if oriented:
+        return art[-1], f"last of {len(art)} articulated bodies"
+    p = _axes_point(t, art)
+    if p is None:
+        return art[0], f"first of {len(art)} articulated bodies"
+    dist = [float(np.linalg.norm(t.xpos[b] - p)) for b in art]
+    best = min(range(len(art)), key=lambda i: (round(dist[i], 3), i))
+    return art[best], f"nearest the joint axes' meeting point of {len(art)} bodies"
+
+
+def _named_groups(t: _Tree, chain: list[int], words: dict[str, str]) -> list[tuple[str, list[int]]]:
+    """Consecutive runs of bodies of ``chain`` whose names mention the same part."""
+    groups: list[tuple[str, list[int]]] = []
+    for b in chain:
+        parts = name_parts(t.name(b), words)
+        if not parts:
+            for n in t.names(b)[1:]:
+                parts = name_parts(n, words)
+                if parts:
+                    break
+        part = parts[0] if parts else None
+        if part is None:
+            groups.append(("", [b]))
+        elif groups and groups[-1][0] == part:
+            groups[-1][1].append(b)
+        else:
+            groups.append((part, [b]))
+    return groups
+
+
+def _points(t: _Tree, chain: list[int]) -> list[list[int]]:
+    """Articulation points of a chain: articulated bodies, merged when their origins are within 2 cm."""
+    pts: list[list[int]] = []
+    for b in chain:
+        if not t.articulated(b):
+            continue
+        if pts and np.linalg.norm(t.xpos[b] - t.xpos[pts[-1][-1]]) < 0.02:
+            pts[-1].append(b)
+        else:
+            pts.append([b])
+    return pts
+
+
+def _leg_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
+    """``hip``/``knee``/``ankle``/``toe`` -> (body, why) for one leg."""
+    groups = _named_groups(t, chain, _LEG_WORDS)
+    named = {p: g for p, g in groups if p}
+    out: dict[str, tuple[int, str]] = {}
+    for part in ("hip", "knee", "ankle"):
+        if part in named:
+            b, how = _pick(t, named[part], oriented=(part == "ankle"))
+            out[part] = (b, _by_name(t, b, _LEG_WORDS, how))
+    # toe: a toe-named body after the ankle (or an articulated body beyond it)
+    if "toe" in named:
+        out["toe"] = (named["toe"][0], _by_name(t, named["toe"][0], _LEG_WORDS, ""))
+    pts = _points(t, chain)
+    if len(pts) >= 3:
+        heights = [float(t.h[p[0]]) for p in pts]
+        if "hip" not in out:
+            b, how = _pick(t, pts[0], oriented=False)
+            out["hip"] = (b, "tree position: first articulation point of the leg")
+        if "ankle" not in out:
+            # the last articulation point not level with the sole (a toe joint is)
+            sole = min(heights)
+            top = t.h[out["hip"][0]]
+            cand = [i for i, p in enumerate(pts) if heights[i] > sole + 0.02 * (top - sole) or i == 0]
+            i_ank = cand[-1] if len(cand) > 2 else len(pts) - 1
+            b, _ = _pick(t, pts[i_ank], oriented=True)
+            out["ankle"] = (b, "tree position: last articulation point above the sole")
+            if "toe" not in out and i_ank < len(pts) - 1:
+                out["toe"] = (pts[i_ank + 1][0], "tree position: articulated body beyond the ankle")
+        if "knee" not in out:
+            hip_i = next(i for i, p in enumerate(pts) if out["hip"][0] in p) if any(out["hip"][0] in p for p in pts) else 0
+            ank_i = next((i for i, p in enumerate(pts) if out["ankle"][0] in p), len(pts) - 1)
+            mid = 0.5 * (t.h[out["hip"][0]] + t.h[out["ankle"][0]])
+            between = list(range(hip_i + 1, ank_i))
+            if between:
+                i = min(between, key=lambda i: abs(heights[i] - mid))
+                b, _ = _pick(t, pts[i], oriented=False)
+                out["knee"] = (b, "tree position: articulation point at mid-leg")
+    if "toe" not in out and "ankle" in out:
+        after = chain[chain.index(out["ankle"][0]) + 1:]
+        art = [b for b in after if t.articulated(b)]
+        if art:
+            out["toe"] = (art[0], "tree position: articulated body beyond the ankle")
+    return out
+
+
+def _arm_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
+    """``clavicle``/``shoulder``/``elbow``/``wrist``/``hand_end`` -> (body, why) for one arm."""
+    groups = _named_groups(t, chain, _ARM_WORDS)
+    # "shoulder" then a distinct "arm" body: the first is a clavicle (LeftShoulder -> LeftArm)
+    merged: list[tuple[str, list[int]]] = []
+    for part, g in groups:
+        if merged and merged[-1][0] == part and part:
+            merged[-1][1].extend(g)
+        else:
+            merged.append((part, list(g)))
+    named: dict[str, list[int]] = {}
+    for part, g in merged:
+        if part and part not in named:
+            named[part] = g
+    sh = named.get("shoulder", [])
+    if len(sh) >= 2:
+        tokens = [set(_tokens(t.name(b))) for b in sh]
+        arm_only = [i for i, tk in enumerate(tokens) if "shoulder" not in tk]
+        sh_only = [i for i, tk in enumerate(tokens) if "shoulder" in tk]
+        if arm_only and sh_only and max(sh_only) < min(arm_only):
+            a, b = sh[max(sh_only)], sh[min(arm_only)]
+            if np.linalg.norm(t.xpos[a] - t.xpos[b]) > 0.05 and "clavicle" not in named:
+                named["clavicle"] = [sh[i] for i in sh_only]
+                named["shoulder"] = [sh[i] for i in arm_only]
+    out: dict[str, tuple[int, str]] = {}
+    if "clavicle" in named:
+        b, how = _pick(t, named["clavicle"], oriented=False)
+        out["clavicle"] = (b, _by_name(t, b, _ARM_WORDS, how))
+    for part in ("shoulder", "elbow"):
+        if part in named:
+            b, how = _pick(t, named[part], oriented=False)
+            out[part] = (b, _by_name(t, b, _ARM_WORDS, how))
+    wrist_group = named.get("wrist")
+    rigid_hand = False
+    if wrist_group is None and "hand" in named:
+        if any(t.articulated(b) for b in named["hand"]):
+            wrist_group = named["hand"]
+        elif "elbow" in out and np.linalg.norm(t.xpos[named["hand"][0]] - t.xpos[out["elbow"][0]]) > 0.08:
+            wrist_group, rigid_hand = named["hand"][:1], True  # a hand fixed at the forearm's end
+    if wrist_group is not None:
+        b, how = _pick(t, wrist_group, oriented=False)
+        out["wrist"] = (b, _by_name(t, b, _ARM_WORDS, "fixed at the end of the forearm" if rigid_hand else how))
+    pts = _points(t, chain)
+    if "shoulder" not in out and pts:
+        b, _ = _pick(t, pts[0], oriented=False)
+        out["shoulder"] = (b, "tree position: first articulation point of the arm")
+    if "elbow" not in out:
+        s_i = next((i for i, p in enumerate(pts) if out["shoulder"][0] in p), 0)
+        # the elbow: the first articulation point clearly away (> 8 cm) from the shoulder
+        far = [i for i in range(s_i + 1, len(pts))
+               if np.linalg.norm(t.xpos[pts[i][0]] - t.xpos[out["shoulder"][0]]) > 0.08]
+        if far:
+            b, _ = _pick(t, pts[far[0]], oriented=False)
+            out["elbow"] = (b, "tree position: first articulation point 8 cm or more from the shoulder")
+            if "wrist" not in out:
+                e_pt = far[0]
+                far2 = [i for i in range(e_pt + 1, len(pts))
+                        if np.linalg.norm(t.xpos[pts[i][0]] - t.xpos[b]) > 0.08]
+                if far2:
+                    w, _ = _pick(t, [x for i in far2 for x in pts[i]
+                                     if np.linalg.norm(t.xpos[x] - t.xpos[pts[far2[0]][0]]) < 0.1], oriented=False)
+                    out["wrist"] = (w, "tree position: articulation point 8 cm or more beyond the elbow")
+    if "wrist" in out:
+        last = chain[-1]
+        w = out["wrist"][0]
+        if last != w and chain.index(last) > chain.index(w) and np.linalg.norm(t.xpos[last] - t.xpos[w]) > 0.02:
+            out["hand_end"] = (last, "tree position: end of the arm chain")
+    return out
+
+
+# -- the whole body --------------------------------------------------------------------------
+
+
+def propose_mapping(path: str | os.PathLike) -> Proposal:
+    """Propose a mapping for the humanoid MJCF at ``path`` (see the module docstring).
+
+    Raises:
+        InputError: the file is missing or MuJoCo cannot load it.
+        MappingError: no free joint, no recognisable legs or arms.
+    """
+    p = Path(path)
+    model = _load(p)
+    free = [j for j in range(model.njnt) if int(model.jnt_type[j]) == _FREE]
+    if not free:
+        raise MappingError("no free joint: a character needs a floating base (<freejoint/> on its root body)", path=p)
+    if len(free) > 1:
+        raise MappingError(f"{len(free)} free joints: a character has exactly one floating base", path=p)
+    root = int(model.jnt_bodyid[free[0]])
+    qpos, key = _rest(model)
+    t = _Tree(model, qpos)
+    notes: list[str] = []
+
+    pelvis, leg_a, leg_b = _find_legs(t, root, p)
+    # lateral axis of the MuJoCo convention (faces +X): left = up x forward
+    fwd0 = np.array([1.0, 0.0, 0.0]) if abs(t.up[0]) < 0.5 else np.array([0.0, 1.0, 0.0])
+    lateral = np.cross(t.up, fwd0)
+    left_leg, right_leg, leg_how = _sides(t, leg_a, leg_b, lateral)
+    if leg_how == "name":
+        d = t.xpos[left_leg[0]] - t.xpos[right_leg[0]]
+        d = d - (d @ t.up) * t.up
+        if np.linalg.norm(d) < 1e-6:
+            d = np.mean([t.xpos[x] for x in left_leg], axis=0) - np.mean([t.xpos[x] for x in right_leg], axis=0)
+            d = d - (d @ t.up) * t.up
+        forward = _snap(np.cross(d, t.up)) if np.linalg.norm(d) > 1e-6 else fwd0
+    else:
+        forward = fwd0
+        notes.append("legs told apart by position: the model is assumed to face +X (MuJoCo's convention)")
+    lateral = np.cross(t.up, forward)
+
+    arms = _find_arms(t, root, pelvis, [left_leg, right_leg])
+    if arms is None:
+        raise MappingError("no recognisable arms: no pair of chains on opposite sides of the trunk", path=p)
+    arm_root, arm_a, arm_b = arms
+    left_arm, right_arm, arm_how = _sides(t, arm_a, arm_b, lateral)
+
+    joints: dict[str, Guess] = {}
+    left_out: dict[str, str] = {}
+
+    def put(canon: str, body: int, why: str) -> None:
+        joints[canon] = Guess(canon, "body", t.name(body), why)
+
+    put("pelvis", pelvis, "the free-joint body" if pelvis == root else "tree position: where the legs branch")
+
+    for side, chain, how in (("left", left_leg, leg_how), ("right", right_leg, leg_how)):
+        parts = _leg_parts(t, chain)
+        for part in ("hip", "knee", "ankle"):
+            if part not in parts:
+                raise MappingError(f"no recognisable legs: cannot tell the {side} {part} on the chain "
+                                   f"{', '.join(t.name(b) for b in chain)}", path=p)
+        for part in ("hip", "knee", "ankle", "toe"):
+            if part in parts:
+                body, why = parts[part]
+                put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
+    for side, chain, how in (("left", left_arm, arm_how), ("right", right_arm, arm_how)):
+        parts = _arm_parts(t, chain)
+        for part in ("shoulder", "elbow"):
+            if part not in parts:
+                raise MappingError(f"no recognisable arms: cannot tell the {side} {part} on the chain "
+                                   f"{', '.join(t.name(b) for b in chain)}", path=p)
+        for part in ("clavicle", "shoulder", "elbow", "wrist", "hand_end"):
+            if part in parts:
+                body, why = parts[part]
+                put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
+
+    if (_axis_name(t.up), _axis_name(forward)) == ("Z", "X"):
+        sites = _ball_sites(t, {side: model.body(joints[f"{side}_ankle"].name).id
+                                for side in ("left", "right") if f"{side}_toe" not in joints})
+        for side, (site, body, pos) in sites.items():
+            joints[f"{side}_toe"] = Guess(f"{side}_toe", "site", site, "no toe body: the ball of the rigid foot, "
+                                          "3/4 of the sole from the heel, 1/3 of the ankle height up")
+    else:
+        sites = {}
+
+    # trunk: the tree path from the pelvis to the arms' branching body (through their common
+    # ancestor: the arms may hang on the pelvis's parent, as when the free body is the torso)
+    up_a = t.path_up(pelvis, 0)
+    up_b = t.path_up(arm_root, 0)
+    lca = next(x for x in up_a if x in set(up_b))
+    rising = up_a[: up_a.index(lca) + 1]  # pelvis ... lca
+    falling = list(reversed(up_b[: up_b.index(lca)]))  # below lca ... arm_root
+    trunk = rising[1:] + falling
+    moves = {rising[i + 1]: t.articulated(rising[i]) for i in range(len(rising) - 1)}  # turns on its child's joints
+    moves.update({b: t.articulated(b) for b in falling})
+    trunk = [b for b in trunk if b > 0]
+    groups: list[list[int]] = []
+    for b in trunk:
+        if not moves[b] and not groups:
+            continue
+        if np.linalg.norm(t.xpos[b] - t.xpos[pelvis]) < 0.02:
+            continue  # a joint at the pelvis itself (a waist yaw body sharing its origin)
+        if groups and (not moves[b] or np.linalg.norm(t.xpos[b] - t.xpos[groups[-1][-1]]) < 0.02):
+            groups[-1].append(b)
+        else:
+            groups.append([b])
+    if groups:
+        put("spine", groups[0][-1], "tree position: first trunk joint above the pelvis")
+        if len(groups) >= 2:
+            put("chest", groups[-1][-1], "tree position: last trunk joint below the arms")
+    # head: articulated branch of the arms' body going up, not an arm
+    arm_set = set(t.subtree(left_arm[0])) | set(t.subtree(right_arm[0]))
+    trunk_set = set(trunk) | {pelvis} | set(t.subtree(left_leg[0])) | set(t.subtree(right_leg[0]))
+    shoulder_h = 0.5 * (t.h[left_arm[0]] + t.h[right_arm[0]])
+    head_chain: list[int] = []
+    for c in t.children[arm_root]:
+        if c in arm_set or c in trunk_set:
+            continue
+        sub = [x for x in t.subtree(c) if t.articulated(x)]
+        if not sub:
+            continue
+        chain = _descend_longest(t, c)
+        if max(t.h[x] for x in chain) > shoulder_h and len(chain) > len(head_chain):
+            head_chain = chain
+    if head_chain:
+        pts = _points(t, head_chain)
+        by_name = {part: g for part, g in _named_groups(t, head_chain, _HEAD_WORDS) if part}
+        if len(pts) == 1:
+            # neck and head turn in one body: it is the head (its frame follows the actor's head)
+            b = _pick(t, pts[0], oriented=True)[0]
+            put("head", b, _by_name(t, b, _HEAD_WORDS, "the only joint of the head branch")
+                if "head" in by_name or "neck" in by_name else "tree position: the only joint of the head branch")
+            left_out["neck"] = "no neck joint apart from the head's"
+        else:
+            neck_pt = next((g for g in pts if any(x in by_name.get("neck", []) for x in g)), pts[0])
+            head_pt = next((g for g in reversed(pts) if any(x in by_name.get("head", []) for x in g)), pts[-1])
+            if head_pt is neck_pt:
+                head_pt = pts[-1]
+            b = _pick(t, neck_pt, oriented=False)[0]
+            put("neck", b, _by_name(t, b, _HEAD_WORDS, "") if "neck" in by_name else
+                "tree position: first joint of the head branch")
+            b = _pick(t, head_pt, oriented=True)[0]
+            put("head", b, _by_name(t, b, _HEAD_WORDS, "") if "head" in by_name else
+                "tree position: last joint of the head branch")
+    else:
+        reason = "no head joint" if any(
+            "head" in name_parts(t.name(b), _HEAD_WORDS) or "neck" in name_parts(t.name(b), _HEAD_WORDS)
+            for b in t.subtree(root)) else "no head or neck body"
+        for c in ("neck", "head"):
+            left_out[c] = reason
+
+    for canon in CANONICAL_NAMES:
+        if canon not in joints and canon not in left_out:
+            left_out[canon] = _missing_reason(canon)
+
+    rest_joints, rest_note = _rest_fix(t, joints, key)
+    name = p.stem
+    return Proposal(
+        mjcf=p,
+        name=name,
+        up=_axis_name(t.up),
+        forward=_axis_name(forward),
+        joints=joints,
+        left_out=left_out,
+        rest_keyframe=key,
+        rest_joints=rest_joints,
+        rest_note=rest_note,
+        notes=notes,
+        sites={site: (model.body(body).name, pos) for site, body, pos in sites.values()},
+    )
+
+
+def _ball_sites(t: _Tree, ankles: dict[str, int]) -> dict[str, tuple[str, int, tuple[float, float, float]]]:
+    """Side -> (site name, ankle body, position in its frame) of the ball of a foot with no toe body."""
+    from .footprint import foot_contact_points
+
+    if not ankles:
+        return {}
+    found = foot_contact_points(t.m, t.data.qpos, ankles)
+    taken = {t.m.site(i).name for i in range(t.m.nsite)}
+    out = {}
+    for side, points in found.items():
+        body = ankles[side]
+        R, x = t.data.xmat[body].reshape(3, 3), t.data.xpos[body]
+        heel, toe = (R @ pos + x for _, _, pos in points)
+        ball = heel + 0.75 * (toe - heel)
+        sole = min(heel[2], toe[2])
+        ball[2] = sole + (x[2] - sole) / 3.0
+        local = R.T @ (ball - x)
+        name = f"{side}_ball"
+        while name in taken:
+            name += "_proposed"
+        out[side] = (name, body, tuple(round(float(v), 4) + 0.0 for v in local))
+    return out
+
+
+def _missing_reason(canon: str) -> str:
+    stem = canon.split("_", 1)[1] if canon.startswith(("left_", "right_")) else canon
+    return {
+        "chest": "one trunk joint at most",
+        "spine": "no trunk joint between the pelvis and the arms",
+        "head_end": "no head tip body",
+        "clavicle": "no clavicle body",
+        "wrist": "no wrist body",
+        "hand_end": "no hand beyond the wrist",
+        "toe": "no toe body",
+        "toe_end": "no toe tip body",
+    }.get(stem, "not found")
+
+
+def _bend_deg(t: _Tree, d: mujoco.MjData, a: int, b: int, c: int) -> float:
+    u = d.xpos[b] - d.xpos[a]
+    v = d.xpos[c] - d.xpos[b]
+    cos = float(u @ v / (np.linalg.norm(u) * np.linalg.norm(v) + 1e-12))
+    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+
+
+def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None) -> tuple[dict[str, float], str]:
+    """With no keyframe: straighten elbows and knees the zero pose bends (hinge of the middle body)."""
+    if key is not None:
+        return {}, f"keyframe {key!r}"
+    m = t.m
+    d = mujoco.MjData(m)
+    d.qpos[:] = t.data.qpos
+    body = {c: m.body(g.name).id for c, g in joints.items() if g.kind == "body"}
+    fixes: dict[str, float] = {}
+    notes = []
+    # a zero outside a joint's range: the nearest bound (0.1 degree inside, as the file rounds)
+    clamped = []
+    for j in range(m.njnt):
+        if int(m.jnt_type[j]) not in (_HINGE, _SLIDE) or not m.jnt_limited[j]:
+            continue
+        adr = int(m.jnt_qposadr[j])
+        lo, hi = (float(v) for v in m.jnt_range[j])
+        if lo <= d.qpos[adr] <= hi:
+            continue
+        k, step = (180.0 / math.pi, 10.0) if int(m.jnt_type[j]) == _HINGE else (1.0, 1e4)
+        v = math.ceil(lo * k * step) / step if d.qpos[adr] < lo else math.floor(hi * k * step) / step
+        v = min(max(v, lo * k), hi * k)
+        d.qpos[adr] = v / k
+        fixes[m.joint(j).name] = float(v)
+        clamped.append(m.joint(j).name)
+    if clamped:
+        notes.append(f"{', '.join(clamped)} set to the nearest end of their range (zero is outside it)")
+    limbs = {
+        "arm": (("shoulder", "elbow", "wrist"), ("shoulder", "elbow", "hand_end")),
+        "leg": (("hip", "knee", "ankle"),),
+    }
+    for side in ("left", "right"):
+        for limb, options in limbs.items():
+            triple = next((o for o in options if all(f"{side}_{x}" in body for x in o)), None)
+            if triple is None:
+                continue
+            ka, kb, kc = (body[f"{side}_{x}"] for x in triple)
+            mujoco.mj_kinematics(m, d)
+            bend = _bend_deg(t, d, ka, kb, kc)
+            if bend <= 20.0:
+                continue
+            hinges = [j for x in [kb] + _bodies_between(t, kb, kc) for j in t.joints(x)
+                      if int(m.jnt_type[j]) == _HINGE]
+            # the hinge that straightens the limb most (1-degree grid over its range)
+            best = None
+            for j in dict.fromkeys(hinges):
+                adr = int(m.jnt_qposadr[j])
+                lo, hi = (m.jnt_range[j] if m.jnt_limited[j] else (-math.pi, math.pi))
+                keep = d.qpos[adr]
+                for deg in range(int(math.ceil(math.degrees(lo))), int(math.floor(math.degrees(hi))) + 1):
+                    d.qpos[adr] = math.radians(deg)
+                    mujoco.mj_kinematics(m, d)
+                    e = _bend_deg(t, d, ka, kb, kc)
+                    if best is None or e < best[0] - 1e-9:
+                        best = (e, j, deg)
+                d.qpos[adr] = keep
+            if best is not None and best[0] < bend - 10.0:
+                e, j, deg = best
+                d.qpos[int(m.jnt_qposadr[j])] = math.radians(deg)
+                fixes[m.joint(j).name] = float(deg)
+                notes.append(f"{m.joint(j).name} = {deg} deg straightens the {side} {limb} "
+                             f"(bent {bend:.0f} deg at zero)")
+    note = "zero pose (no 'rest' or 'home' keyframe)"
+    if notes:
+        note += ", with " + "; ".join(notes)
+    return fixes, note
+
+
+def _bodies_between(t: _Tree, top: int, bottom: int) -> list[int]:
+    """Bodies from ``bottom`` up to (not including) ``top``, if ``top`` is an ancestor."""
+    path = t.path_up(bottom, top)
+    return path[:-1] if path and path[-1] == top else []

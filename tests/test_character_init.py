@@ -1,0 +1,455 @@
+"""``physmocap character init`` (issue 13): a mapping proposed from an MJCF's names and tree.
+
+Synthetic robots named in the usual ways (``left_knee_link``, ``l_calf_link``, ``L_KNEE``,
+``LeftLeg``, anonymous ``b7``), one without toes, wrists or neck, one with mesh feet; the
+proposal must load as a character unedited.  On the Unitree G1 (../shared) it must pick the
+bundled, hand-written mapping's bodies for the major joints and retarget the walk alike.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from conftest import REPO, SHARED_DATA, shared_file
+from physmocap.cli import main
+from physmocap.errors import InputError, MappingError
+from physmocap.models import load_character
+from physmocap.models.propose import name_side, propose_mapping
+
+G1 = SHARED_DATA.parent / "robots" / "unitree_g1" / "g1_mocap_29dof.xml"
+G1_BUNDLED = REPO / "assets" / "mjcf" / "robots" / "g1_mocap_29dof.map.toml"
+
+# -- a synthetic humanoid robot, named by a style --------------------------------------------
+
+_MESH_FOOT = (
+    '<mesh name="foot_mesh" vertex="-0.06 -0.04 -0.06  0.14 -0.04 -0.06  -0.06 0.04 -0.06  0.14 0.04 -0.06 '
+    '-0.06 -0.04 -0.01  0.14 -0.04 -0.01  -0.06 0.04 -0.01  0.14 0.04 -0.01"/>'
+)
+
+
+def _robot(names: dict, *, arms=True, toes=True, wrists=True, neck=True, clavicle=False, mesh_feet=False,
+           bent_elbows=False, keyframe=None) -> str:
+    """MJCF text of a small humanoid robot (Z up, facing +X).  ``names[part]`` is a format
+    string with ``{s}`` for the side token (``names['left']``/``names['right']``), or a list of
+    them for a part made of several bodies at one origin (a 3-DOF hip)."""
+    jn = [0]
+
+    def joint(axis, rng="-90 90"):
+        jn[0] += 1
+        return f'<joint name="{names.get("joint", "j{n}").format(n=jn[0])}" axis="{axis}" range="{rng}"/>'
+
+    def nest(part, side, pos, axes, inner, geom="", rng="-90 90"):
+        ns = names[part] if isinstance(names[part], list) else [names[part]]
+        ns = [n.format(s=names.get(side, "")) for n in ns]
+        axes = (list(axes) * 3)[: len(ns)]
+        out = inner
+        for i in reversed(range(len(ns))):
+            body_geom = geom if i == len(ns) - 1 else ""
+            out = f'<body name="{ns[i]}" pos="{pos if i == 0 else "0 0 0"}">{joint(axes[i], rng)}{body_geom}{out}</body>'
+        return out
+
+    def leg(side, y):
+        foot = ('<geom type="mesh" mesh="foot_mesh"/>' if mesh_feet
+                else '<geom type="box" size="0.1 0.04 0.025" pos="0.04 0 -0.035"/>')
+        toe = nest("toe", side, "0.14 0 -0.045", ["0 1 0"], "", '<geom type="box" size="0.02 0.04 0.015"/>',
+                   "-30 60") if toes else ""
+        ankle = nest("ankle", side, "0 0 -0.4", ["0 1 0", "1 0 0"], toe, foot, "-40 40")
+        knee = nest("knee", side, "0 0 -0.4", ["0 1 0"], ankle,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04"/>', "0 150")
+        return nest("hip", side, f"0 {y} -0.08", ["0 0 1", "1 0 0", "0 1 0"], knee,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.05"/>')
+
+    def arm(side, y):
+        sign = 1 if y > 0 else -1
+        hand_end = f'<body name="{names["hand_end"].format(s=names[side])}" pos="0 0 -0.08"/>' if "hand_end" in names else ""
+        wrist = nest("wrist", side, "0.25 0 0" if bent_elbows else "0 0 -0.25", ["1 0 0"], hand_end,
+                     '<geom type="box" size="0.03 0.02 0.04" pos="0 0 -0.04"/>') if wrists else ""
+        fore = '0 0 0 0.25 0 0' if bent_elbows else '0 0 0 0 0 -0.25'
+        elbow = nest("elbow", side, "0 0 -0.28", ["0 1 0"], wrist,
+                     f'<geom type="capsule" fromto="{fore}" size="0.03"/>', "-60 120" if bent_elbows else "-150 5")
+        shoulder_pos = f"0 {0.15 * sign:.2f} 0.02" if clavicle else f"0 {y} 0.28"
+        out = nest("shoulder", side, shoulder_pos, ["0 1 0", "1 0 0", "0 0 1"], elbow,
+                   '<geom type="capsule" fromto="0 0 0 0 0 -0.28" size="0.035"/>')
+        if clavicle:
+            out = nest("clavicle", side, f"0 {0.05 * sign:.2f} 0.26", ["1 0 0"], out, "", "-20 20")
+        return out
+
+    head_geom = '<geom type="sphere" size="0.1" pos="0 0 0.1"/>'
+    if neck:
+        head = nest("head", None, "0 0 0.08", ["0 0 1"], "", head_geom)
+        head = nest("neck", None, "0 0 0.33", ["0 1 0"], head, "")
+    else:
+        head = '<geom type="sphere" size="0.1" pos="0 0 0.45"/>'
+    torso = nest("torso", None, "0 0 0.1", ["0 1 0"], head + (arm("left", 0.2) + arm("right", -0.2) if arms else ""),
+                 '<geom type="box" size="0.08 0.14 0.15" pos="0 0 0.15"/>', "-30 30")
+    waist = nest("waist", None, "0 0 0.1", ["0 0 1"], torso, "", "-60 60")
+    key = ""
+    if keyframe:
+        key = f'<keyframe><key name="{keyframe}" qpos="{" ".join(["0"] * 7)} {{rest}}"/></keyframe>'
+    xml = (
+        '<mujoco model="fixture"><compiler angle="degree" boundmass="0.01" boundinertia="0.0001"/>'
+        f'<asset>{_MESH_FOOT if mesh_feet else ""}</asset><worldbody>'
+        f'<body name="{names["pelvis"]}" pos="0 0 0.95"><freejoint/>'
+        '<geom type="box" size="0.08 0.12 0.06"/>'
+        f'{leg("left", 0.1)}{leg("right", -0.1)}{waist}</body></worldbody>{key}</mujoco>'
+    )
+    return xml
+
+
+def _write(tmp_path, xml: str, name="robot.xml"):
+    if "{rest}" in xml:  # a keyframe: the zero pose with the free joint's quaternion set
+        import mujoco
+
+        m = mujoco.MjModel.from_xml_string(xml.replace("<keyframe>", "<!--").replace("</keyframe>", "-->"))
+        q = m.qpos0.copy()
+        xml = xml.replace(f'qpos="{" ".join(["0"] * 7)} {{rest}}"', 'qpos="' + " ".join(f"{v:g}" for v in q) + '"')
+    p = tmp_path / name
+    p.write_text(xml)
+    return p
+
+
+STYLES = {
+    # G1 / H1 style: left_knee_link, a hip of three bodies at one origin
+    "left_knee_link": {
+        "left": "left", "right": "right", "pelvis": "pelvis",
+        "hip": ["{s}_hip_yaw_link", "{s}_hip_roll_link", "{s}_hip_pitch_link"],
+        "knee": "{s}_knee_link", "ankle": ["{s}_ankle_pitch_link", "{s}_ankle_roll_link"],
+        "toe": "{s}_toe_link", "shoulder": ["{s}_shoulder_pitch_link", "{s}_shoulder_roll_link", "{s}_shoulder_yaw_link"],
+        "elbow": "{s}_elbow_link", "wrist": "{s}_wrist_roll_link", "hand_end": "{s}_hand_tip",
+        "waist": "waist_yaw_link", "torso": "torso_link", "neck": "neck_link", "head": "head_link",
+        "joint": "joint_{n}",
+    },
+    # Unitree quadruped-like segment names: l_thigh_link, l_calf_link
+    "l_calf_link": {
+        "left": "l", "right": "r", "pelvis": "base",
+        "hip": ["{s}_hip_link", "{s}_thigh_link"], "knee": "{s}_calf_link", "ankle": "{s}_foot_link",
+        "toe": "{s}_toe_link", "shoulder": ["{s}_shoulder_link", "{s}_upper_arm_link"],
+        "elbow": "{s}_forearm_link", "wrist": "{s}_hand_link",
+        "waist": "abdomen", "torso": "chest_link", "neck": "neck", "head": "head",
+    },
+    # upper case, one body per joint: L_KNEE
+    "L_KNEE": {
+        "left": "L", "right": "R", "pelvis": "PELVIS", "hip": "{s}_HIP", "knee": "{s}_KNEE",
+        "ankle": "{s}_ANKLE", "toe": "{s}_TOE", "shoulder": "{s}_SHOULDER", "elbow": "{s}_ELBOW",
+        "wrist": "{s}_WRIST", "waist": "WAIST", "torso": "TORSO", "neck": "NECK", "head": "HEAD",
+        "joint": "J{n}",
+    },
+    # animation rig names: LeftUpLeg, LeftLeg, LeftShoulder (a clavicle) then LeftArm
+    "LeftLeg": {
+        "left": "Left", "right": "Right", "pelvis": "Hips", "hip": "{s}UpLeg", "knee": "{s}Leg",
+        "ankle": "{s}Foot", "toe": "{s}ToeBase", "clavicle": "{s}Shoulder", "shoulder": "{s}Arm",
+        "elbow": "{s}ForeArm", "wrist": "{s}Hand", "waist": "Spine", "torso": "Spine1", "neck": "Neck",
+        "head": "Head",
+    },
+    # no usable names at all: sides by position, parts by tree position
+    "anonymous": {
+        "left": "a", "right": "b", "pelvis": "base", "hip": ["b1{s}", "b2{s}", "b3{s}"], "knee": "b4{s}",
+        "ankle": ["b5{s}", "b6{s}"], "toe": "b7{s}", "shoulder": ["b8{s}", "b9{s}", "b10{s}"],
+        "elbow": "b11{s}", "wrist": "b12{s}", "waist": "b13", "torso": "b14", "neck": "b15", "head": "b16",
+    },
+}
+
+#: canonical joint -> expected body (format string, {s} = side token) per style
+EXPECTED = {
+    "left_knee_link": {
+        "pelvis": "pelvis", "spine": "waist_yaw_link", "chest": "torso_link", "neck": "neck_link",
+        "head": "head_link", "hip": "{s}_hip_yaw_link", "knee": "{s}_knee_link",
+        "ankle": "{s}_ankle_roll_link", "toe": "{s}_toe_link", "shoulder": "{s}_shoulder_pitch_link",
+        "elbow": "{s}_elbow_link", "wrist": "{s}_wrist_roll_link", "hand_end": "{s}_hand_tip",
+    },
+    "l_calf_link": {
+        "pelvis": "base", "hip": "{s}_hip_link", "knee": "{s}_calf_link", "ankle": "{s}_foot_link",
+        "toe": "{s}_toe_link", "shoulder": "{s}_shoulder_link", "elbow": "{s}_forearm_link",
+        "wrist": "{s}_hand_link", "neck": "neck", "head": "head",
+    },
+    "L_KNEE": {
+        "pelvis": "PELVIS", "hip": "{s}_HIP", "knee": "{s}_KNEE", "ankle": "{s}_ANKLE", "toe": "{s}_TOE",
+        "shoulder": "{s}_SHOULDER", "elbow": "{s}_ELBOW", "wrist": "{s}_WRIST", "neck": "NECK", "head": "HEAD",
+    },
+    "LeftLeg": {
+        "pelvis": "Hips", "hip": "{s}UpLeg", "knee": "{s}Leg", "ankle": "{s}Foot", "toe": "{s}ToeBase",
+        "clavicle": "{s}Shoulder", "shoulder": "{s}Arm", "elbow": "{s}ForeArm", "wrist": "{s}Hand",
+        "spine": "Spine", "chest": "Spine1", "neck": "Neck", "head": "Head",
+    },
+    "anonymous": {
+        "pelvis": "base", "hip": "b1{s}", "knee": "b4{s}", "ankle": "b6{s}", "toe": "b7{s}",
+        "shoulder": "b8{s}", "elbow": "b11{s}", "wrist": "b12{s}",
+    },
+}
+
+_CENTER = {"pelvis", "spine", "chest", "neck", "head", "head_end"}
+
+
+def _expected(style: str) -> dict[str, str]:
+    names = STYLES[style]
+    out = {}
+    for part, body in EXPECTED[style].items():
+        if part in _CENTER:
+            out[part] = body
+        else:
+            for side in ("left", "right"):
+                out[f"{side}_{part}"] = body.format(s=names[side])
+    return out
+
+
+def _loads(tmp_path, proposal, mjcf):
+    mp = tmp_path / "proposed.map.toml"
+    mp.write_text(proposal.to_toml())
+    return load_character(mjcf, mp)
+
+
+@pytest.mark.parametrize("style", list(STYLES))
+def test_naming_styles(tmp_path, style):
+    xml = _robot(STYLES[style], clavicle=style == "LeftLeg")
+    mjcf = _write(tmp_path, xml)
+    pr = propose_mapping(mjcf)
+    got = {c: g.name for c, g in pr.joints.items()}
+    for canon, body in _expected(style).items():
+        assert got.get(canon) == body, (canon, got.get(canon), body, "\n".join(pr.report()))
+    assert (pr.up, pr.forward) == ("Z", "X")
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    assert rest["left_hip"][1] > rest["right_hip"][1]  # left is +Y when facing +X
+    assert rest["left_shoulder"][1] > rest["right_shoulder"][1]
+    assert set(ch.contacts) == {"left", "right"}  # found on the feet's geoms
+    if style == "anonymous":
+        assert any("position" in g.why for g in pr.joints.values())
+
+
+def test_robot_without_toes_wrists_or_neck(tmp_path):
+    mjcf = _write(tmp_path, _robot(STYLES["left_knee_link"], toes=False, wrists=False, neck=False))
+    pr = propose_mapping(mjcf)
+    for canon in ("neck", "head", "left_wrist", "right_wrist", "left_hand_end", "left_toe_end"):
+        assert canon not in pr.joints and canon in pr.left_out
+    joints_table = pr.to_toml().split("[joints]")[1].split("# left out")[0]
+    assert "left_wrist" not in joints_table and "neck" not in joints_table
+    # a rigid foot still has a ball: a site on the ankle's body, 3/4 of the sole from the heel
+    toe = pr.joints["left_toe"]
+    assert toe.kind == "site" and pr.sites[toe.name][0] == "left_ankle_roll_link"
+    ch = _loads(tmp_path, pr, mjcf)
+    assert "neck" not in ch.tracked and "left_wrist" not in ch.tracked
+    assert ch.tracked["left_elbow"].name == "left_elbow_link"
+    rest = ch.rest_positions()
+    assert 0.08 < rest["left_toe"][0] - rest["left_ankle"][0] < 0.12 and 0.0 < rest["left_toe"][2] < 0.03
+
+    # and it retargets: the walk's legs follow the actor's
+    from physmocap import load_motion, retarget
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=90)
+    fid = trajectory_fidelity(traj)
+    assert np.all(np.isfinite(traj.qpos))
+    assert max(fid.segments[s].median_deg for s in ("left_thigh", "right_thigh", "left_shank", "right_shank")) < 12.0
+
+
+def test_mesh_feet_and_renamed_bodies(tmp_path):
+    """Mesh feet (the contact points come from the mesh's hull) and names in upper case."""
+    mjcf = _write(tmp_path, _robot(STYLES["L_KNEE"], mesh_feet=True))
+    ch = _loads(tmp_path, propose_mapping(mjcf), mjcf)
+    import mujoco
+
+    d = mujoco.MjData(ch.model)
+    d.qpos[:] = ch.rest_qpos
+    mujoco.mj_kinematics(ch.model, d)
+    heel = d.site_xpos[ch.model.site(ch.contacts["left"][0]).id]
+    toe = d.site_xpos[ch.model.site(ch.contacts["left"][-1]).id]
+    assert toe[0] - heel[0] == pytest.approx(0.22, abs=0.01)  # heel of the mesh to the toe box and abs(heel[2]) < 1e-3
+
+
+def test_pelvis_below_a_free_trunk_and_names_on_joints(tmp_path):
+    """Booster-T1-like: the free body is the trunk (arms, head), the legs hang from a waist body
+    below it; arm bodies are AL1..AL4 (the parts are in the joints' names); rigid hands."""
+    mjcf = REPO / "tests" / "fixtures" / "robot_trunk_root.xml"
+    pr = propose_mapping(mjcf)
+    got = {c: g.name for c, g in pr.joints.items()}
+    assert got["pelvis"] == "Waist" and got["spine"] == "Trunk"
+    assert (got["neck"], got["head"]) == ("H1", "H2")
+    assert (got["left_shoulder"], got["left_elbow"], got["left_wrist"]) == ("AL2", "AL3", "left_hand_link")
+    assert (got["right_hip"], got["right_knee"], got["right_ankle"]) == ("Hip_Pitch_Right", "Shank_Right", "right_foot_link")
+    ch = _loads(tmp_path, pr, mjcf)
+    from physmocap import load_motion, retarget
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=30)
+    assert np.all(np.isfinite(traj.qpos))
+
+
+def test_y_up_model_facing_z(tmp_path):
+    """The stilt biped fixture: Y up (gravity), facing +Z, sides as suffixes (thighL)."""
+    mjcf = REPO / "tests" / "fixtures" / "biped.xml"
+    pr = propose_mapping(mjcf)
+    assert (pr.up, pr.forward) == ("Y", "Z")
+    assert pr.joints["left_knee"].name == "shinL" and pr.joints["right_hip"].name == "thighR"
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    assert rest["left_hip"][1] > rest["right_hip"][1] and rest["pelvis"][2] > rest["left_knee"][2]
+
+
+def test_rest_pose_keyframe_or_straightened_zero_pose(tmp_path):
+    names = STYLES["left_knee_link"]
+    bent = propose_mapping(_write(tmp_path, _robot(names, bent_elbows=True), "bent.xml"))
+    assert bent.rest_keyframe is None and "zero pose" in bent.rest_note
+    elbows = {k: v for k, v in bent.rest_joints.items()}
+    assert len(elbows) == 2 and all(abs(abs(v) - 90) <= 1 for v in elbows.values()), elbows
+    ch = _loads(tmp_path, bent, tmp_path / "bent.xml")
+    rest = ch.rest_positions()
+    arm = rest["left_wrist"] - rest["left_shoulder"]
+    assert arm[2] < -0.5  # straightened: the wrist hangs below the shoulder
+
+    home = propose_mapping(_write(tmp_path, _robot(names, keyframe="home"), "home.xml"))
+    assert home.rest_keyframe == "home" and not home.rest_joints and "'home'" in home.rest_note
+    assert '[rest]\nkeyframe = "home"' in home.to_toml()
+
+
+def test_zero_pose_outside_a_range_is_clamped(tmp_path):
+    """A knee whose range excludes zero (5.73 to 150 degrees): the rest pose takes its nearest end."""
+    xml = _robot(STYLES["L_KNEE"]).replace('axis="0 1 0" range="0 150"', 'axis="0 1 0" range="5.73 150"')
+    mjcf = _write(tmp_path, xml)
+    pr = propose_mapping(mjcf)
+    knees = {k: v for k, v in pr.rest_joints.items()}
+    assert len(knees) == 2 and all(v == pytest.approx(5.8) for v in knees.values()), knees
+    assert "nearest end of their range" in pr.rest_note
+    _loads(tmp_path, pr, mjcf)  # within range once written and read back
+
+
+def test_name_sides():
+    for n in ("left_knee_link", "l_calf_link", "L_KNEE", "LeftLeg", "knee_l", "LKnee", "lfemur", "Left Arm"):
+        assert name_side(n) == "left", n
+    for n in ("right_knee_link", "r_calf_link", "R_KNEE", "RightLeg", "knee_R", "rfemur"):
+        assert name_side(n) == "right", n
+    for n in ("pelvis", "torso_link", "link3", "lower_leg", "Leg"):
+        assert name_side(n) is None, n
+
+
+# -- the command -----------------------------------------------------------------------------
+
+
+def test_cli_stdout_and_guesses_on_stderr(tmp_path, capsys):
+    mjcf = _write(tmp_path, _robot(STYLES["l_calf_link"]))
+    assert main(["character", "init", str(mjcf)]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("# Mapping proposed") and "[joints]" in out
+    assert "left_knee" in err and "-> body:l_calf_link" in err and "name 'calf'" in err
+    assert "left out:" in err and "rest pose: zero pose" in err and "checked: loads" in err
+
+
+def test_cli_output_file_refuses_to_overwrite(tmp_path, capsys):
+    mjcf = _write(tmp_path, _robot(STYLES["L_KNEE"]))
+    out = tmp_path / "robot.map.toml"
+    assert main(["character", "init", str(mjcf), "-o", str(out)]) == 0
+    first = out.read_text()
+    out.write_text("# mine\n")
+    capsys.readouterr()
+    assert main(["character", "init", str(mjcf), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("physmocap: error: ") and "--force" in err and err.count("\n") == 1
+    assert out.read_text() == "# mine\n"
+    assert main(["character", "init", str(mjcf), "-o", str(out), "--force"]) == 0
+    assert out.read_text() == first
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no temporary left
+    # found beside the model by its name: no --map needed
+    assert load_character(mjcf).tracked["left_knee"].name == "L_KNEE"
+
+
+@pytest.mark.parametrize(
+    "xml, message",
+    [
+        ('<mujoco><worldbody><body name="a"><geom size="0.1"/></body></worldbody></mujoco>', "no free joint"),
+        ('<mujoco><worldbody><body name="a"><freejoint/><geom size="0.1"/><body name="b" pos="0 0 0.3">'
+         '<joint/><geom size="0.05"/></body></body></worldbody></mujoco>', "no recognisable legs"),
+        ('<mujoco><worldbody><body name="a"><freejoint/><geom size="0.1"/>'
+         '<body name="b" pos="0 0 -0.5"><joint/><geom size="0.05"/></body></body></worldbody></mujoco>',
+         "no recognisable legs"),
+        ('<mujoco><worldbody><body name="a"', "MuJoCo cannot load this MJCF"),
+        ("not xml at all", "MuJoCo cannot load this MJCF"),
+    ],
+)
+def test_cli_bad_models_one_line(tmp_path, capsys, xml, message):
+    mjcf = tmp_path / "bad.xml"
+    mjcf.write_text(xml)
+    assert main(["character", "init", str(mjcf)]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.startswith(f"physmocap: error: {mjcf}: ") and message in err and err.count("\n") == 1, err
+
+
+def test_missing_file_and_armless_robot(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        propose_mapping(tmp_path / "nope.xml")
+    armless = _write(tmp_path, _robot(STYLES["L_KNEE"], arms=False))
+    with pytest.raises(MappingError, match="no recognisable arms"):
+        propose_mapping(armless)
+
+
+# -- the Unitree G1 (shared data) ---------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def g1_proposal():
+    if not G1.exists():
+        pytest.skip(f"the Unitree G1 model is not here: {G1} (../shared absent)")
+    return propose_mapping(G1)
+
+
+MAJOR = ("pelvis", "spine") + tuple(
+    f"{side}_{part}" for side in ("left", "right")
+    for part in ("hip", "knee", "ankle", "toe", "shoulder", "elbow", "wrist", "hand_end")
+)
+
+
+def test_g1_major_joints_match_the_bundled_mapping(g1_proposal):
+    from physmocap.models.mapping import read_mapping
+
+    bundled = read_mapping(G1_BUNDLED).joints
+    got = g1_proposal.joints
+    for canon in MAJOR:
+        assert got[canon].name == bundled[canon].name, canon
+    assert "neck" in g1_proposal.left_out  # the G1 has no neck joint
+    # the zero pose bends the elbows: straightened (the bundled file, by hand: 90 degrees)
+    assert set(g1_proposal.rest_joints) == {"left_elbow_joint", "right_elbow_joint"}
+    assert all(75 <= v <= 95 for v in g1_proposal.rest_joints.values())
+
+
+def test_g1_proposal_retargets_like_the_bundled_mapping(g1_proposal, tmp_path):
+    import mujoco
+
+    from physmocap import load_motion, retarget
+
+    mp = tmp_path / "g1.map.toml"
+    mp.write_text(g1_proposal.to_toml())
+    motion = load_motion(shared_file("pymo_walk.bvh"))
+    trajs = []
+    for m in (mp, G1_BUNDLED):
+        ch = load_character(G1, m)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            trajs.append((ch, retarget(motion, ch, progress=False, end=60, plant=False)))
+    (cp, tp), (cb, tb) = trajs
+    assert np.all(np.isfinite(tp.qpos)) and tp.qpos.shape == tb.qpos.shape
+    dp, db = mujoco.MjData(cp.model), mujoco.MjData(cb.model)
+    worst = 0.0
+    for qp, qb in zip(tp.qpos, tb.qpos):
+        dp.qpos[:], db.qpos[:] = qp, qb
+        mujoco.mj_kinematics(cp.model, dp)
+        mujoco.mj_kinematics(cb.model, db)
+        for canon in MAJOR:
+            b = cb.tracked[canon].name
+            worst = max(worst, float(np.linalg.norm(dp.body(b).xpos - db.body(b).xpos)))
+    assert worst < 0.02, f"proposed vs bundled mapping: bodies {worst * 100:.1f} cm apart"
+
+
+def test_g1_cli_writes_a_mapping_that_retargets(g1_proposal, tmp_path, capsys):
+    out = tmp_path / "g1.map.toml"
+    assert main(["character", "init", str(G1), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "left_knee       -> body:left_knee_link" in err and "neck (no head joint)" in err
+    npz = tmp_path / "walk.npz"
+    assert main(["retarget", str(shared_file("pymo_walk.bvh")), "--character", str(G1), "--map", str(out),
+                 "--end", "60", "--no-plant", "--quiet", "-o", str(npz)]) == 0
+    assert npz.exists()

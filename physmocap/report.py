@@ -254,7 +254,12 @@ def _fidelity_table(fid: dict | None) -> list[str]:
             "m/s",
             f"{_fmt(vz['character_p99'])} ({_fmt(vz['actor_p99_scaled'])})",
         ],
-        ["velocity-cap saturation", "frames", f"{sat['frames']} ({_fmt(100 * sat['share'])} %)"],
+        ["velocity-cap saturation, any joint", "frames", f"{sat['frames']} ({_fmt(100 * sat['share'])} %)"],
+        [
+            "velocity-cap saturation, worst joint",
+            "% frames",
+            f"{_fmt(100 * sat.get('worst_joint_share', 0.0))} ({sat.get('worst_joint') or '-'})",
+        ],
     ]
     out += [""] + _table(["figure", "unit", "value"], rows, {2})
     return out

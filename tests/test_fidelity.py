@@ -202,3 +202,30 @@ def test_foot_plan_is_continuous_and_plants():
     assert step[down].max() <= 0.3 / fps * 1.01
     assert step.max() <= 1.5 * np.abs(plan.xy).max() / 7 + 1e-9
     assert np.allclose(plan.xy[t < 0.1], 0.0) and np.allclose(plan.xy[t > 1.6], plan.xy[-1])
+
+
+def test_velocity_saturation_names_the_worst_joint():
+    """Any-joint frames and the worst single joint's share, on a hand-made trajectory."""
+    from physmocap.metrics.fidelity import fidelity, saturation_matrix
+    from physmocap.models import load_character
+
+    ch = load_character()
+    model = ch.model
+    limits = dict(list(ch.velocity_limits.items())[:3])
+    names = list(limits)
+    F, fps = 101, 100.0
+    qpos = np.tile(np.array(ch.rest_qpos, dtype=float), (F, 1))
+    a, b = (int(model.joint(n).qposadr[0]) for n in names[:2])
+    # joint a at its cap on 4 transitions, joint b on 2 others, b below its cap elsewhere
+    for t in (10, 11, 12, 13):
+        qpos[t + 1 :, a] += limits[names[0]] / fps
+    for t in (50, 60):
+        qpos[t + 1 :, b] += limits[names[1]] / fps
+    qpos[80:, b] += 0.5 * limits[names[1]] / fps
+    m = saturation_matrix(model, qpos, fps, limits)
+    assert m.shape == (F - 1, 3) and m[:, 0].sum() == 4 and m[:, 1].sum() == 2 and not m[:, 2].any()
+    empty = {"left_hip": np.zeros((F, 3)), "right_hip": np.zeros((F, 3))}
+    fid = fidelity(empty, empty, fps, model=model, qpos=qpos, velocity_limits=limits, floor_contact=False)
+    assert fid.saturated_frames.size == 6 and abs(fid.saturated_share - 0.06) < 1e-12
+    assert fid.saturated_joint == names[0] and abs(fid.saturated_joint_share - 0.04) < 1e-12
+    assert fid.as_dict()["velocity_saturation"]["worst_joint"] == names[0]

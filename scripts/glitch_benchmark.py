@@ -4,7 +4,10 @@
 For every BVH in ../shared/data: first the untouched clip (share of frames flagged = false
 positives), then the clip with glitches injected into random animated joints: spikes (1-3
 frames, 20-120 degrees about a random axis), segments (0.05-0.5 s offsets, 20-120 degrees),
-flips (180 degrees, 1-10 frames) and frozen joints (0.1-0.5 s held while moving).  Prints per
+flips (180 degrees, 1-10 frames), frozen joints (0.1-0.5 s held while moving) and anatomical
+glitches (a knee or elbow bent backwards past its range of motion, from 1 to 90 degrees past
+it, log-uniform, for 1 frame to 0.5 s: the joint's rotation turned about its own hinge axis
+so that the signed flexion of :mod:`physmocap.clean.anatomy` reads the injected value).  Prints per
 type the frame-level precision, recall and F1 of detection (a (joint, frame) pair is a
 sample) and the joint-position RMS error against the clean clip before and after correction
 over the injected frames.
@@ -24,13 +27,14 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
-TYPES = ("spike", "segment", "flip", "frozen")
+TYPES = ("spike", "segment", "flip", "frozen", "anatomical")
 
 
 def inject(motion, rng: np.random.Generator, per_type: int):
     """A copy of ``motion`` with glitches, and the truth: type -> set of (joint, frame)."""
     import dataclasses
 
+    from physmocap.clean.anatomy import bend_past_range
     from physmocap.ik.retarget import default_start
     from physmocap.rotations import Rotation, quat_mul
 
@@ -47,6 +51,8 @@ def inject(motion, rng: np.random.Generator, per_type: int):
             j = int(rng.choice(moving))
             if kind == "spike":
                 n = int(rng.integers(1, 4))
+            elif kind == "anatomical":
+                n = max(1, int(round(np.exp(rng.uniform(0.0, np.log(0.5 * fps))))))
             elif kind == "segment":
                 n = int(round(rng.uniform(0.05, 0.5) * fps))
             elif kind == "flip":
@@ -57,7 +63,15 @@ def inject(motion, rng: np.random.Generator, per_type: int):
             lo, hi = max(0, a - int(fps)), min(F, a + n + int(fps))
             if taken[lo:hi, j].any():
                 continue
-            if kind == "frozen":
+            if kind == "anatomical":
+                side, limb = str(rng.choice(["left", "right"])), str(rng.choice(["knee", "elbow"]))
+                excess = float(np.exp(rng.uniform(0.0, np.log(90.0))))
+                bent = bend_past_range(dataclasses.replace(motion, rotations=R), f"{side}_{limb}", range(a, a + n), excess)
+                if bent is None or taken[lo:hi, bent[0]].any():
+                    continue
+                j = bent[0]
+                R[a : a + n, j] = bent[1]
+            elif kind == "frozen":
                 if np.max(np.abs(np.diff(R[a : a + n + 1, j], axis=0))) < 1e-4:
                     continue  # the joint does not move there: nothing to freeze
                 R[a : a + n, j] = R[a - 1, j]

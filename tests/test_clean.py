@@ -91,3 +91,84 @@ def test_cli_writes_a_drop_in_replacement(walk, tmp_path, capsys):
     assert changed and all(k - motion_line in (100, 101) for k in changed)
     assert '"kind": "spike"' in rep.read_text()
     assert main(["clean", str(src), "-o", str(tmp_path / "x.mp4")]) == 2
+
+
+def test_untouched_walk_is_within_its_ranges_of_motion(walk):
+    from physmocap.clean.detect import anatomical_glitches
+
+    assert anatomical_glitches(walk) == []
+
+
+@pytest.mark.parametrize("joint,excess,frames", [("left_knee", 2.0, range(250, 255)), ("right_elbow", 60.0, range(100, 101))])
+def test_hyperextension_is_found_named_and_repaired(walk, joint, excess, frames):
+    from physmocap.clean.anatomy import bend_past_range, motion_angles
+    from physmocap.ik.retarget import map_motion
+
+    j, new = bend_past_range(walk, joint, frames, excess)
+    R = np.array(walk.rotations, copy=True)
+    R[list(frames)] = R[list(frames)]
+    R[list(frames), j] = new
+    bad = dataclasses.replace(walk, rotations=R)
+    fixed, report = clean(bad)
+    side, limb = joint.split("_")
+    mine = [g for g in report.glitches if g.movement == f"{side} {limb} hyperextension"]
+    assert len(mine) == 1, report.table()
+    g = mine[0]
+    assert (g.start, g.end) == (frames[0], frames[-1]) and g.joint == walk.skeleton.names[j]
+    assert g.plane == "sagittal" and g.corrected == "slerp"
+    # a sudden bend is a spike that names its movement; its excess is the anatomical glitch's severity
+    from physmocap.clean.detect import anatomical_glitches
+
+    alone = [a for a in anatomical_glitches(bad) if a.movement == g.movement]
+    assert len(alone) == 1 and abs(alone[0].severity - excess) < 1e-6
+    # repaired: back within the range, only that joint on those frames changed
+    angles, _ = motion_angles(fixed, map_motion(fixed))
+    assert np.all(angles[f"{joint}_flexion"][list(frames)] > -10.0)
+    untouched = np.ones(walk.num_frames, bool)
+    untouched[list(frames)] = False
+    assert np.array_equal(fixed.rotations[untouched], bad.rotations[untouched])
+
+
+def test_long_out_of_range_span_is_reported_not_changed(walk):
+    from physmocap.clean.anatomy import bend_past_range
+
+    frames = range(100, 100 + int(walk.fps))  # 1 s: longer than a glitch
+    j, new = bend_past_range(walk, "left_knee", frames, 20.0)
+    R = np.array(walk.rotations, copy=True)
+    R[list(frames), j] = new
+    bad = dataclasses.replace(walk, rotations=R)
+    fixed, report = clean(bad)
+    mine = [g for g in report.glitches if g.kind == "anatomical"]
+    assert mine and all(not g.corrected for g in mine)
+    assert "left knee hyperextension (sagittal)" in report.table()
+
+
+def test_angles_do_not_depend_on_the_files_euler_order(walk, tmp_path):
+    from physmocap.clean.anatomy import motion_angles
+    from physmocap.export.bvh import write_bvh
+    from physmocap.ik.retarget import map_motion
+
+    path = write_bvh(walk.slice_frames(0, 120), tmp_path / "xyz.bvh", rotation_order="XYZ", precision=9)
+    other = load_motion(path)
+    a, _ = motion_angles(walk.slice_frames(0, 120), map_motion(walk))
+    b, _ = motion_angles(other, map_motion(other))
+    assert set(a) == set(b)
+    for k in a:
+        np.testing.assert_allclose(a[k], b[k], atol=1e-3, err_msg=k)
+
+
+def test_unmappable_skeleton_names_the_joints_it_cannot_check(tmp_path):
+    from physmocap.clean.detect import anatomical_glitches
+
+    text = (
+        "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "  JOINT b\n  {\n    OFFSET 0 10 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n    {\n      OFFSET 0 10 0\n    }\n  }\n}\n"
+        "MOTION\nFrames: 3\nFrame Time: 0.0333\n" + "0 0 0 0 0 0 0 0 0\n" * 3
+    )
+    path = tmp_path / "stick.bvh"
+    path.write_text(text)
+    m = load_motion(path)
+    with pytest.warns(Warning, match="cannot check ranges of motion for joints .*left_knee"):
+        assert anatomical_glitches(m) == []
+    _, report = clean(m)  # the other checks still run
+    assert report.frames == 3

@@ -1,6 +1,8 @@
 """Glitch detection and repair in the source's own skeleton (``physmocap clean``).
 
-* :mod:`.detect`: spikes, flips, discontinuities, frozen joints, bone stretch, gaps.
+* :mod:`.detect`: spikes, flips, discontinuities, frozen joints, bone stretch, gaps, and
+  anatomical glitches (:mod:`.anatomy`: a joint beyond its range of motion, named by
+  anatomical movement).
 * :mod:`.correct`: interpolation over the repairable ones, nothing else touched.
 
 ``clean(motion) -> (Motion, GlitchReport)``.
@@ -35,13 +37,17 @@ class GlitchReport:
         }
 
     def table(self) -> str:
-        """A readable table: type, joint, frames, severity, correction."""
+        """A readable table: type, joint, anatomical movement, frames, severity, correction."""
         if not self.glitches:
             return f"{self.source}: no glitch found in {self.frames} frames\n"
-        rows = [f"{'type':14s} {'joint':22s} {'frames':>13s} {'severity':>10s}  corrected"]
+        rows = [f"{'type':14s} {'joint':22s} {'movement':34s} {'frames':>13s} {'severity':>10s}  corrected"]
         for g in self.glitches:
             frames = f"{g.start}" if g.start == g.end else f"{g.start}-{g.end}"
-            rows.append(f"{g.kind:14s} {g.joint:22s} {frames:>13s} {g.severity:7.1f} {g.unit:3s}  {g.corrected or 'reported only'}")
+            movement = f"{g.movement} ({g.plane})" if g.movement else "-"
+            rows.append(
+                f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.1f} {g.unit:3s}  "
+                f"{g.corrected or 'reported only'}"
+            )
         return "\n".join(rows) + "\n"
 
 

@@ -20,7 +20,14 @@ from .detect import Glitch
 __all__ = ["correct_glitches"]
 
 #: Glitch kinds that are repaired (the others are reported only).
-REPAIRED = {"spike": "rotation", "flip": "rotation", "frozen": "rotation", "bone_stretch": "position", "gap": "position"}
+REPAIRED = {
+    "spike": "rotation",
+    "flip": "rotation",
+    "frozen": "rotation",
+    "anatomical": "rotation",
+    "bone_stretch": "position",
+    "gap": "position",
+}
 
 
 def _slerp(q0: np.ndarray, q1: np.ndarray, n: int) -> np.ndarray:
@@ -41,7 +48,7 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
     F = motion.num_frames
     out = []
     for g in glitches:
-        how = REPAIRED.get(g.kind)
+        how = REPAIRED.get(g.kind) if g.repairable else None
         arr = rot if how == "rotation" else pos if how == "position" else None
         a, b = g.start - 1, g.end + 1
         if arr is None or (a < 0 and b >= F):

@@ -17,6 +17,9 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
 * **Bone stretch** (positional sources): a bone whose length departs from its median by
   more than ``stretch_ratio``.
 * **Gaps** (positional sources): runs of zero confidence.
+* **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion
+  (:mod:`.anatomy`), named by movement and plane ("left knee hyperextension",
+  sagittal); spans longer than ``max_glitch_time`` are reported only.
 
 Each :class:`Glitch` names its type, the joint, the frames (inclusive, in the motion's
 numbering) and a severity (degrees or metres).
@@ -30,7 +33,7 @@ import numpy as np
 
 from ..motion import Motion
 
-__all__ = ["CleanOptions", "Glitch", "detect_glitches", "joint_angles_step"]
+__all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
 
 
 @dataclass(frozen=True)
@@ -49,6 +52,11 @@ class CleanOptions:
         flip_deg: A glitch whose jump is at least this large is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (positional).
+        rom_soft_margin: Degrees added, for the anatomical check, to each range of motion
+            that performers exceed (the ``"default"`` ranges of :mod:`physmocap.models.rom`
+            already carry a 15 degree margin over the largest clinical value; dancers'
+            hips and trunks go further).  Anatomical stops (knee and elbow
+            hyperextension) get none.
     """
 
     jump_deg: float = 10.0
@@ -60,6 +68,7 @@ class CleanOptions:
     flip_deg: float = 150.0
     frozen_time: float = 0.1
     stretch_ratio: float = 0.1
+    rom_soft_margin: float = 15.0
 
     def __post_init__(self) -> None:
         for name, v in asdict(self).items():
@@ -69,7 +78,11 @@ class CleanOptions:
 
 @dataclass(frozen=True)
 class Glitch:
-    """One glitch: ``kind`` on ``joint`` over frames ``start..end`` (inclusive)."""
+    """One glitch: ``kind`` on ``joint`` over frames ``start..end`` (inclusive).
+
+    ``movement`` and ``plane`` name the anatomical movement of an ``anatomical`` glitch
+    ("left knee hyperextension", "sagittal"); ``repairable`` is False for one the
+    correction must leave alone (an out-of-range span too long to be a glitch)."""
 
     kind: str
     joint: str
@@ -78,6 +91,9 @@ class Glitch:
     severity: float
     unit: str = "deg"
     corrected: str = field(default="", compare=False)
+    movement: str = ""
+    plane: str = ""
+    repairable: bool = field(default=True, compare=False)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -208,4 +224,72 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
                 d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
                 for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
                     glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt))
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
+
+
+def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch]) -> list[Glitch]:
+    """An out-of-range span inside a spike or flip of the same joint is that glitch's
+    anatomical movement, not a second glitch: name the movement on it instead."""
+    import dataclasses
+
+    out = list(glitches)
+    for a in anatomical:
+        for i, g in enumerate(out):
+            if g.joint == a.joint and g.kind in ("spike", "flip") and g.start <= a.start and a.end <= g.end:
+                if not g.movement:
+                    out[i] = dataclasses.replace(g, movement=a.movement, plane=a.plane)
+                break
+        else:
+            out.append(a)
+    return out
+
+
+def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
+    """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion.
+
+    A skeleton whose limbs cannot be mapped to the canonical joints gets one warning
+    naming the joints whose ranges cannot be checked; the other detectors still run."""
+    import warnings
+
+    from ..errors import MappingError, warn
+    from ..ik.retarget import map_motion
+    from .anatomy import MOVEMENTS, beyond_range, motion_angles, movement_range
+
+    opt = options or CleanOptions()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ji = map_motion(motion)
+    except MappingError:
+        ji = {}
+    angles, _ = motion_angles(motion, ji)
+    unchecked = sorted({m.joint for m in MOVEMENTS if m.key not in angles})
+    if unchecked:
+        warn(f"{motion.source}: cannot check ranges of motion for joints {', '.join(unchecked)} (not mapped)")
+    names = motion.skeleton.names
+    out: list[Glitch] = []
+    longest = opt.max_glitch_time * float(motion.fps)
+    for m in MOVEMENTS:
+        if m.key not in angles:
+            continue
+        carrier = m.joint if m.joint != "spine" else next((c for c in ("chest", "spine") if c in ji), None)
+        if carrier is None or carrier not in ji:
+            continue
+        lo, hi = movement_range(m, opt.rom_soft_margin)
+        where = m.joint.replace("_", " ") if m.joint != "spine" else "trunk"
+        for start, end, direction, excess in beyond_range(angles[m.key], lo, hi):
+            name = m.positive if direction == "positive" else m.negative
+            out.append(
+                Glitch(
+                    "anatomical",
+                    names[ji[carrier]],
+                    start,
+                    end,
+                    excess,
+                    movement=f"{where} {name}",
+                    plane=m.plane,
+                    repairable=end - start + 1 <= longest,
+                )
+            )
+    return out

@@ -25,7 +25,7 @@ import numpy as np
 from .errors import OptionError, OutputError
 from .fileio import atomic_open
 
-__all__ = ["require_matplotlib", "write_plots", "PLOT_FILES"]
+__all__ = ["require_matplotlib", "write_plots", "plot_directory", "save_png", "shade_spans", "PLOT_FILES"]
 
 PLOT_FILES = ("contacts.png", "feet.png", "joints.png")
 _COLORS = {"heel": "#d62728", "toe": "#1f77b4"}
@@ -43,10 +43,33 @@ def require_matplotlib():
     return figure
 
 
+def plot_directory(directory: str | os.PathLike) -> Path:
+    """``directory`` as a :class:`Path`, created if missing (not its parents); a clear
+    :class:`OutputError` if it is a file or cannot be made."""
+    d = Path(directory)
+    if d.exists() and not d.is_dir():
+        raise OutputError("plot output is not a directory", path=d)
+    try:
+        d.mkdir(parents=False, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the plot directory: {exc.strerror}", path=d) from None
+    return d
+
+
+def save_png(fig, path: Path) -> Path:
+    """Write a figure as a PNG, atomically, with no timestamp or software tag."""
+    return _save(fig, path)
+
+
 def _save(fig, path: Path) -> Path:
     with atomic_open(path, "wb") as fh:
         fig.savefig(fh, format="png", dpi=80, metadata={"Software": None})
     return path
+
+
+def shade_spans(ax, mask: np.ndarray, t: np.ndarray, color: str = "#2ca02c", alpha: float = 0.15) -> None:
+    """Shade the runs of ``mask`` over times ``t`` on axes ``ax``."""
+    _shade(ax, mask, t, color, alpha)
 
 
 def _shade(ax, mask: np.ndarray, t: np.ndarray, color: str = "#2ca02c", alpha: float = 0.15) -> None:
@@ -194,13 +217,7 @@ def write_plots(traj, source_motion=None, contacts=None, directory: str | os.Pat
         The files written.
     """
     figure_mod = require_matplotlib()
-    d = Path(directory)
-    if d.exists() and not d.is_dir():
-        raise OutputError("plot output is not a directory", path=d)
-    try:
-        d.mkdir(parents=False, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the plot directory: {exc.strerror}", path=d) from None
+    d = plot_directory(directory)
     if source_motion is not None and joint_indices is None:
         from .sources.profiles import map_skeleton
 

@@ -172,3 +172,44 @@ def test_unmappable_skeleton_names_the_joints_it_cannot_check(tmp_path):
         assert anatomical_glitches(m) == []
     _, report = clean(m)  # the other checks still run
     assert report.frames == 3
+
+
+def test_left_right_swap_on_positions_is_found_and_traded_back(walk):
+    from physmocap.motion import Motion
+
+    W = walk.world_positions()
+    names = list(walk.skeleton.names)
+    jl, jr = names.index("LeftLeg"), names.index("RightLeg")
+    P = W.copy()
+    P[200:210, [jl, jr]] = P[200:210, [jr, jl]]
+    fixed, report = clean(Motion(walk.skeleton, walk.fps, positions=P, source="swapped"))
+    swaps = [g for g in report.glitches if g.kind == "lr_swap"]
+    assert {(g.joint, g.start, g.end) for g in swaps} == {("LeftLeg", 200, 209), ("RightLeg", 200, 209)}
+    assert all(g.corrected == "swapped back" for g in swaps)
+    assert not [g for g in report.glitches if g.kind == "bone_stretch"]  # explained by the swap
+    np.testing.assert_array_equal(fixed.positions, W)
+    _, untouched = clean(Motion(walk.skeleton, walk.fps, positions=W, source="walk"))
+    assert not untouched.glitches
+
+
+def test_cli_plots_mark_the_glitched_spans(walk, tmp_path, capsys):
+    pytest.importorskip("matplotlib")
+    from physmocap.clean.anatomy import bend_past_range
+    from physmocap.export.bvh import write_bvh
+
+    j, new = bend_past_range(walk, "left_knee", range(300, 306), 25.0)
+    R = np.array(walk.rotations, copy=True)
+    R[300:306, j] = new
+    src = tmp_path / "knee.bvh"
+    write_bvh(dataclasses.replace(walk, rotations=R), src)
+    plots = tmp_path / "plots"
+    assert main(["clean", str(src), "--plots", str(plots)]) == 0
+    out = capsys.readouterr().out
+    assert "left knee hyperextension (sagittal)" in out
+    names = sorted(p.name for p in plots.iterdir())
+    assert "anatomy.png" in names and f"{walk.skeleton.names[j]}.png" in names
+    first = (plots / "anatomy.png").read_bytes()
+    assert first[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["clean", str(src), "--plots", str(plots)]) == 0
+    assert (plots / "anatomy.png").read_bytes() == first  # deterministic
+    assert main(["clean", str(src), "--plots", str(src)]) == 2  # a file, not a directory

@@ -3,7 +3,8 @@
 A rotational glitch is replaced by the spherical interpolation between the joint's last
 good rotation before it and its first good one after it (at the clip's ends the nearest
 good rotation is held), so no new discontinuity appears; a positional one (bone stretch,
-gap) by linear interpolation of the joint's position.  Discontinuities (a jump with no
+gap) by linear interpolation of the joint's position; a left/right swap by trading the
+two joints' positions back over the span.  Discontinuities (a jump with no
 return) are reported, not changed: the motion after them may be the real one.
 """
 
@@ -39,6 +40,21 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, n: int) -> np.ndarray:
     return s(np.arange(1, n + 1) / (n + 1)).as_quat()
 
 
+def _twin(name: str, names: dict[str, int]) -> int | None:
+    """Index of the joint named like ``name`` with the other side (``Left``/``Right``,
+    ``left_``/``right_``, ``L``/``R`` prefixes), or None."""
+    import re
+
+    swaps = [("Left", "Right"), ("left", "right"), ("LEFT", "RIGHT"), ("L", "R"), ("l", "r")]
+    for a, b in swaps:
+        for x, y in ((a, b), (b, a)):
+            for pattern in (rf"^{x}(?=[_A-Z\d]|$)", rf"(?<=[_\s]){x}(?=[_\s]|$)", rf"^{x}_"):
+                other = re.sub(pattern, y, name, count=1)
+                if other != name and other in names:
+                    return names[other]
+    return None
+
+
 def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches interpolated over, and the glitch list
     with ``corrected`` filled in ("slerp", "linear" or "" for reported only)."""
@@ -47,7 +63,19 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
     pos = None if motion.positions is None else np.array(motion.positions, copy=True)
     F = motion.num_frames
     out = []
+    names_of = motion.skeleton.names
+    swapped: set[tuple[int, int, int]] = set()
     for g in glitches:
+        if g.kind == "lr_swap" and pos is not None:
+            # trade the pair back (once per pair and span; both joints carry the glitch)
+            j = names[g.joint]
+            twin = _twin(names_of[j], names)
+            key = (min(j, twin), g.start, g.end) if twin is not None else None
+            if key is not None and key not in swapped:
+                swapped.add(key)
+                pos[g.start : g.end + 1, [j, twin]] = pos[g.start : g.end + 1, [twin, j]]
+            out.append(dataclasses.replace(g, corrected="swapped back" if key is not None else ""))
+            continue
         how = REPAIRED.get(g.kind) if g.repairable else None
         arr = rot if how == "rotation" else pos if how == "position" else None
         a, b = g.start - 1, g.end + 1

@@ -17,6 +17,7 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
 * **Bone stretch** (positional sources): a bone whose length departs from its median by
   more than ``stretch_ratio``.
 * **Gaps** (positional sources): runs of zero confidence.
+* **Left/right swaps** (positional sources): a left joint and its right twin trading places.
 * **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion
   (:mod:`.anatomy`), named by movement and plane ("left knee hyperextension",
   sagittal); spans longer than ``max_glitch_time`` are reported only.
@@ -57,6 +58,8 @@ class CleanOptions:
             already carry a 15 degree margin over the largest clinical value; dancers'
             hips and trunks go further).  Anatomical stops (knee and elbow
             hyperextension) get none.
+        swap_min_distance: A left joint and its right twin this far apart (metres) or more
+            can be seen trading places (positional sources).
     """
 
     jump_deg: float = 10.0
@@ -69,6 +72,7 @@ class CleanOptions:
     frozen_time: float = 0.1
     stretch_ratio: float = 0.1
     rom_soft_margin: float = 15.0
+    swap_min_distance: float = 0.05
 
     def __post_init__(self) -> None:
         for name, v in asdict(self).items():
@@ -206,6 +210,8 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
     if motion.positions is not None:
         P = np.asarray(motion.positions, dtype=float)
         parents = motion.skeleton.parents
+        swaps = _lr_swaps(motion, P, opt)
+        glitches += swaps
         for j, p in enumerate(parents):
             if p < 0:
                 continue
@@ -216,6 +222,8 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
             bad = np.abs(length - med) > opt.stretch_ratio * med
             d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
             for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
+                if any(g.start <= s and e <= g.end and names.index(g.joint) in (j, p) for g in swaps):
+                    continue  # the bone only looks stretched because its joint traded places
                 dev = float(np.nanmax(np.abs(length[s : e + 1] - med)))
                 glitches.append(Glitch("bone_stretch", names[j], int(s), int(e), dev, unit="m"))
         if motion.confidence is not None:
@@ -242,6 +250,48 @@ def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch]) -> list[
                 break
         else:
             out.append(a)
+    return out
+
+
+def _lr_swaps(motion: Motion, P: np.ndarray, opt: CleanOptions) -> list[Glitch]:
+    r"""Left/right swaps on a joint-position source: spans where a left joint and its right
+    twin trade places.
+
+    For a pair with positions :math:`l, r`, the frame-to-frame motion kept is
+    :math:`d_k(t) = |l_t - l_{t-1}| + |r_t - r_{t-1}|` and swapped
+    :math:`d_s(t) = |l_t - r_{t-1}| + |r_t - l_{t-1}|`; a swap toggles on a frame where
+    :math:`d_s < d_k / 4` while the two are at least ``swap_min_distance`` apart (a labeller
+    trading two markers or a tracker flipping the body).  The span runs from a toggle to the
+    next (to the clip's end if none comes back); reported on both joints.
+    """
+    import warnings
+
+    from ..errors import MappingError
+    from ..ik.retarget import map_motion
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ji = map_motion(motion)
+    except MappingError:
+        return []
+    names = motion.skeleton.names
+    out: list[Glitch] = []
+    F = P.shape[0]
+    for canon, jl in ji.items():
+        if not canon.startswith("left_") or f"right_{canon[5:]}" not in ji:
+            continue
+        jr = ji[f"right_{canon[5:]}"]
+        L, R = P[:, jl], P[:, jr]
+        keep = np.linalg.norm(L[1:] - L[:-1], axis=1) + np.linalg.norm(R[1:] - R[:-1], axis=1)
+        swap = np.linalg.norm(L[1:] - R[:-1], axis=1) + np.linalg.norm(R[1:] - L[:-1], axis=1)
+        apart = np.linalg.norm(L - R, axis=1)
+        with np.errstate(invalid="ignore"):
+            toggle = (swap < 0.25 * keep) & (apart[1:] > opt.swap_min_distance) & (apart[:-1] > opt.swap_min_distance)
+        events = (np.flatnonzero(toggle) + 1).tolist()
+        for a, b in zip(events[::2], events[1::2] + [F]):
+            for j in (jl, jr):
+                out.append(Glitch("lr_swap", names[j], int(a), int(b - 1), float(np.nanmedian(apart[a:b])), unit="m"))
     return out
 
 

@@ -14,16 +14,23 @@ from ..fileio import atomic_open, check_not_input, check_writable
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "clean",
-        help="find and repair capture glitches (spikes, flips, frozen joints)",
+        help="find and repair capture glitches (spikes, flips, frozen joints, out-of-range joints, swaps)",
         description=(
-            "Detect glitches in the source skeleton (spikes, flips, discontinuities, frozen joints; "
-            "bone stretch and gaps on joint-position sources), repair the repairable ones by "
-            "interpolating over them, and write the same file layout (a drop-in replacement)."
+            "Detect glitches in the source skeleton (spikes, flips, discontinuities, frozen joints, "
+            "joints beyond their range of motion named by anatomical movement; bone stretch, gaps and "
+            "left/right swaps on joint-position sources), repair the repairable ones by interpolating "
+            "over them, and write the same file layout (a drop-in replacement)."
         ),
     )
     p.add_argument("input", metavar="INPUT", help="motion file (.bvh, ...) or 'example'")
     p.add_argument("-o", "--output", help="cleaned BVH (same hierarchy, channels, frames and frame time)")
     p.add_argument("--report", metavar="GLITCHES.json", help="write the glitch list as JSON")
+    p.add_argument(
+        "--plots",
+        metavar="DIR",
+        help="write PNGs: anatomical angles with their ranges and the spans beyond them, and each glitched "
+        "joint's speed with its glitched spans (needs matplotlib)",
+    )
     p.set_defaults(func=run)
 
 
@@ -37,6 +44,10 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.output)
     if args.report:
         check_writable(args.report)
+    if args.plots:
+        from ..plots import require_matplotlib
+
+        require_matplotlib()
     check_not_input([args.output, args.report], [args.input])
     motion = load_motion(args.input)
     if args.output and not motion.is_rotational:
@@ -48,6 +59,11 @@ def run(args: argparse.Namespace) -> int:
 
         write_bvh(fixed, args.output)
         print(f"wrote {args.output}", file=sys.stderr)
+    if args.plots:
+        from ..clean.plots import write_glitch_plots
+
+        for path in write_glitch_plots(motion, report.glitches, args.plots):
+            print(f"wrote {path}", file=sys.stderr)
     if args.report:
         with atomic_open(args.report) as fh:
             json.dump(report.as_dict(), fh, indent=2, sort_keys=True, allow_nan=False)

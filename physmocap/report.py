@@ -72,6 +72,8 @@ ROWS: tuple[tuple[str, str | None, str, float], ...] = (
     ("Penetration: max", "penetration.max_mm", "mm", 1.0),
     ("  mean (penetrating frames)", "penetration.mean_mm", "mm", 1.0),
     ("  frames > 1 mm", "penetration.share_over_1mm", "%", 100.0),
+    ("Self-penetration (limbs, trunk): max", "self_penetration.max_mm", "mm", 1.0),
+    ("  frames > 2 mm", "self_penetration.share_over_2mm", "%", 100.0),
     ("Hovering in contact: median", "hovering.median_mm", "mm", 1.0),
     ("  p95", "hovering.p95_mm", "mm", 1.0),
     ("Joint-limit violations", "joint_limits.count", "", 1.0),

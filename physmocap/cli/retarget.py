@@ -49,6 +49,11 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-iterations", type=int, help="IK iterations per frame")
     p.add_argument("--no-floor", action="store_true", help="do not constrain the character above the floor")
     p.add_argument("--no-velocity-limits", action="store_true", help="do not bound joint speeds")
+    p.add_argument(
+        "--no-self-collision",
+        action="store_true",
+        help="let the limbs pass through each other and the trunk (faster, mostly on mesh robots)",
+    )
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -112,6 +117,8 @@ def retarget_from_args(args: argparse.Namespace):
         options["floor"] = False
     if args.no_velocity_limits:
         options["velocity_limits"] = False
+    if getattr(args, "no_self_collision", False):
+        options["self_collision"] = False
     if args.no_plant:
         options["plant"] = False
     return retarget(

@@ -9,6 +9,8 @@ QP's step :math:`\\Delta q` (tangent space) satisfies :math:`G \\Delta q \\le h`
   ``v_max * dt`` instead, which would let several iterations add up.
 * :class:`FloorLimit` keeps the lowest point of every geom of the character
   (and every declared contact site) above the floor plane ``z = floor``.
+* :class:`RootStepLimit` bounds the free root's motion per frame.
+* :class:`SelfCollisionLimit` keeps limb geoms out of each other.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from ..models.geometry import geom_candidates
 from ..models.geometry import is_visual_only
 
-__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit"]
+__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit", "SelfCollisionLimit"]
 
 
 class FrameStepLimit(mink.Limit):
@@ -312,3 +314,98 @@ class RootStepLimit(mink.Limit):
         keep = np.isfinite(h)
         return mink.Constraint(G=self._G[keep], h=h[keep])
 
+
+
+class SelfCollisionLimit(mink.Limit):
+    r"""Limb geoms keep out of each other (:func:`physmocap.models.selfcollision.self_collision_pairs`).
+
+    For each geom pair :math:`(a, b)` within ``activation`` of each other, with
+    signed distance :math:`d` (``mj_geomDistance``; negative when they overlap),
+    nearest points :math:`p_a, p_b` and unit normal :math:`n` from :math:`p_a` to
+    :math:`p_b`, the linearised distance must stay at least the margin :math:`m`:
+
+    .. math::
+
+        n^T (J_b(p_b) - J_a(p_a))\,\Delta q \;\ge\;
+        \begin{cases} m - d & d \ge m \\ \min(m - d,\ r) & d < m \end{cases}
+
+    so a pair may close up to the margin, and a pair already inside it (or
+    overlapping) must move apart, by at most ``recovery`` :math:`r` per
+    iteration.  ``activation`` is larger than a fast limb travels in one frame
+    (8 cm: 5 m/s at 60 Hz), so no pair is first seen already overlapping; pairs
+    whose bounding spheres are farther apart than that are skipped before the
+    narrow phase.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        pairs: Sequence[tuple[int, int]],
+        margin: float = 0.0,
+        activation: float = 0.08,
+        recovery: float = 0.005,
+    ) -> None:
+        self.model = model
+        self.recovery = float(recovery)
+        self.pairs = np.array(list(pairs), dtype=int).reshape(-1, 2)
+        self.margin = float(margin)
+        self.activation = float(activation)
+        self._rsum = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]] if len(self.pairs) else np.zeros(0)
+        self._fromto = np.empty(6)
+        self._cache: tuple[bytes, list] | None = None
+        self._ja = np.empty((3, model.nv))
+        self._jb = np.empty((3, model.nv))
+
+    def near_pairs(self, data: mujoco.MjData) -> np.ndarray:
+        """Indices of the pairs whose bounding spheres are within ``activation``."""
+        if not len(self.pairs):
+            return np.zeros(0, dtype=int)
+        diff = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
+        bound = self._rsum + self.activation
+        return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= bound * bound)
+
+    def _close(self, data: mujoco.MjData) -> list[tuple[int, float, np.ndarray]]:
+        """``(pair index, signed distance, fromto (6,))`` of the pairs closer than
+        ``activation``, cached per configuration (the solver asks several times)."""
+        key = data.qpos.tobytes()
+        if self._cache is not None and self._cache[0] == key:
+            return self._cache[1]
+        out = []
+        for k in self.near_pairs(data):
+            g1, g2 = self.pairs[k]
+            d = mujoco.mj_geomDistance(self.model, data, int(g1), int(g2), self.activation, self._fromto)
+            if d < self.activation:
+                out.append((int(k), float(d), self._fromto.copy()))
+        self._cache = (key, out)
+        return out
+
+    def distances(self, data: mujoco.MjData) -> np.ndarray:
+        """Signed distances of every pair (capped at ``activation``), metres."""
+        out = np.full(len(self.pairs), self.activation)
+        for k, d, _ in self._close(data):
+            out[k] = d
+        return out
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        model, data = self.model, configuration.data
+        rows, h = [], []
+        for k, d, fromto in self._close(data):
+            g1, g2 = (int(x) for x in self.pairs[k])
+            pa, pb = fromto[:3], fromto[3:]
+            n = pb - pa
+            norm = np.linalg.norm(n)
+            if norm < 1e-9:
+                continue
+            n /= norm
+            if d < 0:  # overlapping: fromto runs from b's deepest point into a's surface
+                n = -n
+            mujoco.mj_jac(model, data, self._ja, None, pa, int(model.geom_bodyid[g1]))
+            mujoco.mj_jac(model, data, self._jb, None, pb, int(model.geom_bodyid[g2]))
+            rows.append(-(n @ (self._jb - self._ja)))
+            # the distance may shrink to the margin; a pair inside it must move apart, by at
+            # most ``recovery`` per iteration (so that the QP stays feasible)
+            h.append(d - self.margin if d >= self.margin else -min(self.margin - d, self.recovery))
+        if not rows:
+            return mink.Constraint()
+        return mink.Constraint(G=np.array(rows), h=np.array(h))

@@ -22,7 +22,7 @@ is tried in turn, and the frame is reported):
 
 1. soften the equality constraints (planted contacts) into high-cost tasks;
 2. drop the frame-to-frame velocity bound;
-3. drop the floor;
+3. drop the floor and the self-collision constraint;
 4. keep only the joint limits, with extra damping;
 5. hold the previous frame's pose.
 
@@ -43,7 +43,7 @@ import qpsolvers
 from ..errors import OptionError
 from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
-from .limits import FloorLimit, FrameStepLimit, RootStepLimit
+from .limits import FloorLimit, FrameStepLimit, RootStepLimit, SelfCollisionLimit
 from .tasks import SitesPositionTask
 from .targets import weight_of
 
@@ -53,7 +53,7 @@ RELAXATION_LEVELS = (
     "all constraints",
     "contact equalities softened",
     "velocity limits dropped",
-    "floor dropped",
+    "floor and self-collision dropped",
     "joint limits only",
     "previous pose held",
 )
@@ -80,6 +80,10 @@ class SolverOptions:
         constraint_tolerance: Planted contacts further than this (metres) from
             their anchor trigger those extra iterations.
         trust_region: Largest change of any coordinate in one QP step (rad or m).
+        self_collision: Keep the limbs' collision geoms out of each other and out of
+            the trunk (:class:`~physmocap.ik.limits.SelfCollisionLimit`, pairs from
+            :func:`~physmocap.models.selfcollision.self_collision_pairs`).
+        self_collision_margin: Gap (metres) those geoms keep; 0 lets them touch.
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: qpsolvers backend name.
@@ -99,6 +103,8 @@ class SolverOptions:
     constraint_tolerance: float = 5e-5
     trust_region: float = 0.5
     limit_gain: float = 0.95
+    self_collision: bool = True
+    self_collision_margin: float = 0.0
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
 
@@ -201,6 +207,14 @@ class FrameSolver:
             margin=opt.floor_margin,
             activation=max(0.03, 3.0 / fps),
         )
+        self.self_limit = None
+        self._first = False
+        if opt.self_collision:
+            from ..models.selfcollision import self_collision_pairs
+
+            pairs = self_collision_pairs(character)
+            if pairs:
+                self.self_limit = SelfCollisionLimit(model, pairs, margin=opt.self_collision_margin)
         # hinge/slide joints with limits, for the final clamp
         lim = (model.jnt_limited.astype(bool)) & np.isin(
             model.jnt_type, [mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE]
@@ -258,6 +272,8 @@ class FrameSolver:
             limits.append(self.step_limit)
         if level <= 3 and self.options.floor:
             limits.append(self.floor_limit)
+        if level <= 3 and self.self_limit is not None and not self._first:
+            limits.append(self.self_limit)
         return limits
 
     def _step(self, level: int) -> np.ndarray:
@@ -393,6 +409,14 @@ class FrameSolver:
         tol = self.options.constraint_tolerance if tol is None else tol
         return not self._constraints or self._residuals()[0] <= tol
 
+    def _apart_ok(self) -> bool:
+        """True if no self-collision pair is more than 1 mm inside its margin (the
+        constraint is linearised too; the solver then iterates again)."""
+        if self.self_limit is None or self._first:
+            return True
+        d = self.self_limit.distances(self.configuration.data)
+        return not d.size or float(d.min()) >= self.options.self_collision_margin - 1e-3
+
     def _floor_ok(self) -> bool:
         """True if no constrained point is below the floor by more than 0.1 mm.
 
@@ -426,6 +450,9 @@ class FrameSolver:
         """
         self._set_targets(positions, orientations, valid)
         self._set_holds(holds or ContactHolds())
+        # converging from the rest pose is no motion: the limbs may pass each other on the way
+        # (from the next frame on, a pair left overlapping is pushed apart)
+        self._first = bool(first)
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
         self.root_limit.set_previous(self.q_prev)
@@ -438,9 +465,9 @@ class FrameSolver:
         self._residual = None  # hard-constraint residual, cached between line searches
         self._res_cache = None  # the constraints may have changed since the last frame
         extra = opt.floor_iterations if opt.floor else 0
-        extra = max(extra, opt.floor_iterations if self._constraints else 0)
+        extra = max(extra, opt.floor_iterations if (self._constraints or self.self_limit is not None) else 0)
         for it in range(1, iters + extra + 1):
-            if it > iters and self._floor_ok() and self._constraints_ok():
+            if it > iters and self._floor_ok() and self._constraints_ok() and self._apart_ok():
                 it -= 1
                 break
             level = base
@@ -457,7 +484,7 @@ class FrameSolver:
                 worst = 5
                 break
             self._line_search(v)
-            if np.max(np.abs(v)) < opt.tolerance and self._floor_ok() and self._constraints_ok():
+            if np.max(np.abs(v)) < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
                 break
         if opt.floor and worst < 3 and not self._floor_ok():
             self._project_floor(base)

@@ -40,6 +40,7 @@ __all__ = [
     "joint_limit_violations",
     "velocity_violations",
     "penetration",
+    "self_penetration",
     "lowest_heights",
     "geom_lowest_heights",
     "smoothness",
@@ -158,6 +159,39 @@ def penetration(model: mujoco.MjModel, qpos: np.ndarray, floor: float = 0.0) -> 
     }
 
 
+def self_penetration(character, qpos: np.ndarray) -> dict:
+    """Limbs passing through each other or the trunk (the pairs of
+    :func:`physmocap.models.selfcollision.self_collision_pairs`): deepest overlap in mm,
+    share of frames overlapping more than 2 mm, and the worst pair's geom names."""
+    from ..models.selfcollision import pair_distances, self_collision_pairs
+
+    model = character.model
+    pairs = self_collision_pairs(character)
+    if not pairs or qpos.shape[0] == 0:
+        return {"max_mm": 0.0, "share_over_2mm": 0.0, "worst_pair": None, "pairs": len(pairs)}
+    data = mujoco.MjData(model)
+    worst = np.empty(qpos.shape[0])
+    which = np.empty(qpos.shape[0], dtype=int)
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        d = pair_distances(model, data, pairs)
+        which[t] = int(np.argmin(d))
+        worst[t] = d[which[t]]
+    depth = np.maximum(-worst, 0.0) * 1000.0
+    t = int(np.argmax(depth))
+
+    def name(g: int) -> str:
+        return model.geom(g).name or f"{model.body(model.geom_bodyid[g]).name} geom {g}"
+
+    return {
+        "max_mm": float(depth.max()),
+        "share_over_2mm": float(np.mean(depth > 2.0)),
+        "worst_pair": None if depth[t] <= 0 else f"{name(pairs[which[t]][0])} / {name(pairs[which[t]][1])}",
+        "pairs": len(pairs),
+    }
+
+
 def smoothness(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> dict:
     """Mean absolute joint acceleration (rad/s^2) and jerk (rad/s^3) over hinge joints."""
     j = _hinges(model)
@@ -240,6 +274,7 @@ def trajectory_metrics(traj, contacts=None) -> dict:
         "joint_limits": joint_limit_violations(model, traj.qpos),
         "velocity": velocity_violations(model, traj.qpos, traj.fps, traj.character.velocity_limits),
         "penetration": penetration(model, traj.qpos),
+        "self_penetration": self_penetration(traj.character, traj.qpos),
         "smoothness": smoothness(model, traj.qpos, traj.fps),
     }
     if traj.targets is not None:

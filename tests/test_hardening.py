@@ -132,3 +132,105 @@ def test_outputs_carry_no_absolute_paths(tmp_path, capsys):
         assert str(z["mjcf_path"]) == "../chars/robot.xml" and str(z["source"]) == "example"
     capsys.readouterr()
     assert main(["report", str(out)]) == 0
+
+
+# --- part 2: structure, sizes and types of every input ------------------------------------
+def _npy(arr) -> bytes:
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def _npy_header(shape) -> bytes:
+    import io
+
+    from numpy.lib import format as npformat
+
+    buf = io.BytesIO()
+    npformat.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def minimal_trajectory():
+    """The arrays of a tiny valid trajectory NPZ of the bundled humanoid (3 frames standing)."""
+    import numpy as np
+
+    from physmocap.models import load_character
+
+    nq = load_character("humanoid").model.nq
+    qpos = np.zeros((3, nq))
+    qpos[:, 2], qpos[:, 3] = 1.0, 1.0
+    return {"qpos": qpos, "fps": np.array(30.0), "mjcf_path": np.array("humanoid"), "source": np.array("example")}
+
+
+@pytest.mark.parametrize("command", ["inspect", "report"])
+def test_npz_bombs_are_refused_from_the_zip_directory(tmp_path, capsys, monkeypatch, command):
+    """Every NPZ reader checks the members' uncompressed sizes before unpacking, and that each
+    array's header declares exactly the bytes its member holds."""
+    import zipfile
+
+    import physmocap.fileio as fileio
+
+    monkeypatch.setattr(fileio, "MAX_NPZ_BYTES", 1 << 20)  # 1 MB: the bomb below unpacks to 2 MB
+    key = "positions" if command == "inspect" else "qpos"
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        z.writestr(f"{key}.npy", _npy_header(((2 << 20) // 72, 3, 3)) + bytes(((2 << 20) // 72) * 72))
+    assert bomb.stat().st_size < 20000
+    assert main([command, str(bomb)]) == 2
+    line = _one_line(capsys)
+    assert "bomb.npz" in line and "would unpack to 2 MB" in line
+    liar = tmp_path / "liar.npz"  # a header declaring 10^12 frames over 72 stored bytes
+    with zipfile.ZipFile(liar, "w") as z:
+        z.writestr(f"{key}.npy", _npy_header((10**12, 3, 3)) + bytes(72))
+    assert main([command, str(liar)]) == 2
+    line = _one_line(capsys)
+    assert "liar.npz" in line and f"array '{key}'" in line and "declares shape" in line
+
+
+@pytest.mark.parametrize(
+    "field, value, needle",
+    [
+        ("fps", "thirty", "'fps' must be a number"),
+        ("fps", 1e308, "'fps' is 1e+308"),
+        ("source_start", -5, "'source_start' is -5"),
+        ("source_start", "x", "'source_start' must be an integer"),
+        ("target_names", "abc", "'target_names' must be a 1-D array of strings"),
+        ("target_names", [b"\xff\xfe"], "'target_names'[0] is not UTF-8"),
+        ("mjcf_path", b"\xff.xml", "'mjcf_path'[0] is not UTF-8"),
+        ("qpos", [["a"]], "'qpos' must be a (frames, nq) array of numbers"),
+        ("qpos", "far", "beyond 1000"),
+        ("plain", None, "a single .npy array"),
+    ],
+)
+def test_trajectory_npz_fields_are_checked(tmp_path, capsys, minimal_trajectory, field, value, needle):
+    import numpy as np
+
+    data = dict(minimal_trajectory)
+    path = tmp_path / "traj.npz"
+    if field == "plain":
+        path.write_bytes(_npy(data["qpos"]))
+    else:
+        if value == "far":
+            value = data["qpos"] + 1e300
+        data[field] = np.array(value)
+        if field == "target_names":  # with the other target arrays, so only the names are wrong
+            data.update(target_positions=np.zeros((3, 1, 3)), target_orientations=np.zeros((3, 1, 4)),
+                        target_has_orientation=np.zeros(1, bool), target_valid=np.ones((3, 1), bool))
+        np.savez(path, **data)
+    assert main(["report", str(path), "--no-source"]) == 2
+    line = _one_line(capsys)
+    assert "traj.npz" in line and needle in line, line
+
+
+def test_minimal_trajectory_is_accepted(tmp_path, capsys, minimal_trajectory):
+    import numpy as np
+
+    path = tmp_path / "traj.npz"
+    np.savez(path, **minimal_trajectory)
+    assert main(["report", str(path), "--no-source"]) == 0

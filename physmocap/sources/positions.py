@@ -301,31 +301,15 @@ def _read_csv_long(
 
 
 def _read_npz(path: Path) -> RawPositions:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            files = list(z.files)
-            arrays: dict[str, np.ndarray] = {}
-            for key in files:
-                try:
-                    arrays[key] = z[key]
-                except ValueError:
-                    raise InputError(
-                        f"array {key!r} holds Python objects, which physmocap does not unpickle; "
-                        "store joint names as a string array (np.array(names, dtype=str))",
-                        path=path,
-                    ) from None
-    except InputError:
-        raise
-    except Exception as exc:  # zipfile / format errors
-        raise InputError(f"not a readable NPZ archive ({type(exc).__name__}: {exc})", path=path) from None
+    from ..fileio import npz_array, npz_strings, npz_text, read_npz
+
+    arrays = read_npz(path, "a readable NPZ archive of tracker positions")
     if "positions" not in arrays:
         raise InputError(f"NPZ has no 'positions' array (F, J, 3); it has {sorted(arrays)}", path=path)
-    pos = arrays["positions"]
-    if pos.ndim != 3 or pos.shape[2] != 3 or not np.issubdtype(pos.dtype, np.number):
-        raise InputError(f"'positions' must be a numeric (F, J, 3) array, got {pos.dtype} {pos.shape}", path=path)
+    pos = npz_array(arrays["positions"], "positions", path, ("F", "J", 3))
     F, J = pos.shape[:2]
-    names_arr = arrays.get("names", arrays.get("joint_names"))
-    if names_arr is None:
+    names_key = "names" if "names" in arrays else "joint_names"
+    if names_key not in arrays:
         names = known_layout(J)
         if names is None:
             raise InputError(
@@ -334,27 +318,27 @@ def _read_npz(path: Path) -> RawPositions:
                 path=path,
             )
     else:
-        if names_arr.shape != (J,) or names_arr.dtype.kind not in "US":
-            raise InputError(f"'names' must be ({J},) strings, got {names_arr.dtype} {names_arr.shape}", path=path)
-        names = [str(n) for n in names_arr.astype(str)]
+        names = npz_strings(arrays[names_key], names_key, path, J)
     conf = arrays.get("confidence")
-    if conf is not None and (conf.shape != (F, J) or not np.issubdtype(conf.dtype, np.number)):
-        raise InputError(f"'confidence' must be a numeric ({F}, {J}) array, got {conf.shape}", path=path)
-    times = arrays.get("times", arrays.get("time"))
-    if times is not None and times.shape != (F,):
-        raise InputError(f"'times' must be ({F},) seconds, got {times.shape}", path=path)
+    if conf is not None:
+        conf = npz_array(conf, "confidence", path, (F, J))
+    times_key = "times" if "times" in arrays else "time"
+    times = arrays.get(times_key)
+    if times is not None:
+        times = npz_array(times, times_key, path, (F,))
     options: dict[str, Any] = {}
     for key in _HEADER_OPTIONS:
         if key in arrays:
             a = arrays[key]
-            options[key] = a.item() if a.ndim == 0 else a.tolist()
-    return RawPositions(
-        names,
-        pos.astype(float),
-        None if conf is None else conf.astype(float),
-        None if times is None else times.astype(float),
-        options,
-    )
+            if a.dtype.kind in "US":
+                options[key] = npz_text(a, key, path)
+            elif a.size == 1 and a.dtype.kind in "biuf":
+                options[key] = a.reshape(-1)[0].item()
+            elif key == "floor_plane" and a.ndim == 1 and a.size <= 4 and a.dtype.kind in "iuf":
+                options[key] = a.tolist()
+            else:
+                raise InputError(f"'{key}' must be a single value, got {a.dtype} {a.shape}", path=path)
+    return RawPositions(names, pos, conf, times, options)
 
 
 def _reject_constant(name: str) -> float:

@@ -234,3 +234,86 @@ def test_minimal_trajectory_is_accepted(tmp_path, capsys, minimal_trajectory):
     path = tmp_path / "traj.npz"
     np.savez(path, **minimal_trajectory)
     assert main(["report", str(path), "--no-source"]) == 0
+
+
+@pytest.fixture(scope="module")
+def small_mcap(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mcap") / "walk.mcap"
+    assert main(["convert", "example", str(path), "--end", "10"]) == 0
+    return path
+
+
+def _rewrite_mcap(src, dst, meta_fn=None, msg_fn=None):
+    """Copy an MCAP, changing its skeleton metadata and / or its transform messages."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as fh, open(dst, "wb") as out:
+        reader = make_reader(fh)
+        w = Writer(out)
+        w.start()
+        schemas, chans = {}, {}
+        for s, c, m in reader.iter_messages():
+            if s.id not in schemas:
+                schemas[s.id] = w.register_schema(s.name, s.encoding, s.data)
+            if c.id not in chans:
+                chans[c.id] = w.register_channel(c.topic, c.message_encoding, schemas[s.id], c.metadata)
+            data = msg_fn(m.data) if msg_fn and c.topic.endswith("/tf") else m.data
+            w.add_message(chans[c.id], m.log_time, data, m.publish_time)
+        for md in reader.iter_metadata():
+            meta = dict(md.metadata)
+            if meta_fn:
+                meta_fn(meta)
+            w.add_metadata(md.name, meta)
+        w.finish()
+
+
+DEEP = "[" * 100000 + "]" * 100000
+BIG = "9" * 400
+
+
+@pytest.mark.parametrize(
+    "key, value, needle",
+    [
+        ("parents", '"abc"', "'parents' must be a list of 38 integers"),
+        ("parents", "[-1" + ", 99" * 37 + "]", "'parents' item 1 is 99"),
+        ("parents", "[-1" + f", {BIG}" * 37 + "]", "'parents' item 1 must be an integer"),
+        ("joints", "5", "'joints' must be a list of strings"),
+        ("joints", DEEP, "'joints' is not valid JSON (nested deeper than 64 levels)"),
+        ("offsets", '"x"', "'offsets' must be a list of 38 [x, y, z]"),
+        ("offsets", f"[[{BIG}, 0, 0]]", "'offsets' must be a list of 38"),
+        ("translated", "[500]", "'translated' must list joint indices"),
+        ("translated", '"a"', "'translated' must be a list of integers"),
+        ("num_frames", "1000000", "'num_frames' is 1e+06; expected an integer from 1 to 50"),
+        ("num_frames", BIG, "'num_frames' must be an integer"),
+        ("start_time_ns", BIG, "'start_time_ns' must be an integer"),
+        ("fps", "1e308", "'fps' is 1e+308"),
+        ("source_unit_scale", "1e400", "'source_unit_scale' is inf"),
+        ("meta", DEEP, "'meta' is not valid JSON (nested deeper"),
+    ],
+)
+def test_mcap_skeleton_metadata_is_checked(tmp_path, capsys, small_mcap, key, value, needle):
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(small_mcap, bad, meta_fn=lambda m: m.__setitem__(key, value))
+    assert main(["inspect", str(bad)]) == 2
+    line = _one_line(capsys)
+    assert "bad.mcap" in line and "skeleton /skeleton" in line and needle in line, line
+
+
+@pytest.mark.parametrize(
+    "old, new, needle",
+    [
+        (b'"w":1.0', b'"w":1e308', "'rotation' is not a rotation (quaternion norm inf)"),
+        (b'"w":1.0', b'"w":' + BIG.encode(), "field 'w' must be a finite number, got inf"),
+        (b'"sec":0', b'"sec":1e20', "timestamp sec and nsec must be non-negative integers"),
+        (b'"sec":0', b'"sec":100000000000000000000', "timestamp sec and nsec must be non-negative integers"),
+        (b'"sec":0', b'"sec":4611686019', "timestamp 4.61169e+09 s is out of range"),
+        (b'"transforms":[', b'"x":' + DEEP.encode() + b',"transforms":[', "invalid JSON (nested deeper than 64"),
+    ],
+)
+def test_mcap_messages_are_checked(tmp_path, capsys, small_mcap, old, new, needle):
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(small_mcap, bad, msg_fn=lambda d: d.replace(old, new, 1))
+    assert main(["inspect", str(bad)]) == 2
+    line = _one_line(capsys)
+    assert "bad.mcap" in line and "message 0 on /skeleton/tf" in line and needle in line, line

@@ -317,3 +317,29 @@ def test_mcap_messages_are_checked(tmp_path, capsys, small_mcap, old, new, needl
     assert main(["inspect", str(bad)]) == 2
     line = _one_line(capsys)
     assert "bad.mcap" in line and "message 0 on /skeleton/tf" in line and needle in line, line
+
+
+@pytest.mark.parametrize("shape, needle", [("deep", "nested more than 100 levels"), ("wide", "more than 1000 joints")])
+def test_huge_bvh_hierarchies_are_refused_quickly(tmp_path, capsys, shape, needle):
+    """A 20,000-deep chain (or 20,000 siblings) is refused at the joint that passes the limit."""
+    import time
+
+    n = 20000
+    lines = ["HIERARCHY", "ROOT Hips", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    if shape == "deep":
+        for i in range(n):
+            lines += [f"JOINT J{i}", "{", "OFFSET 0 0.001 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+        lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * n
+    else:
+        for i in range(n):
+            lines += [f"JOINT J{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation", "}"]
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.033", " ".join(["0"] * (6 + 3 * n))]
+    path = tmp_path / "huge.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    t0 = time.perf_counter()
+    assert main(["convert", str(path), str(tmp_path / "out.bvh")]) == 2
+    assert time.perf_counter() - t0 < 5
+    line = _one_line(capsys)
+    assert "huge.bvh:" in line and needle in line, line
+    assert not (tmp_path / "out.bvh").exists()

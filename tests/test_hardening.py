@@ -343,3 +343,34 @@ def test_huge_bvh_hierarchies_are_refused_quickly(tmp_path, capsys, shape, needl
     line = _one_line(capsys)
     assert "huge.bvh:" in line and needle in line, line
     assert not (tmp_path / "out.bvh").exists()
+
+
+def _jsonl_frame(t=None, names=("head", "left_hip", "right_hip")) -> str:
+    import json
+
+    frame = {"joints": {n: [0.1 * i, 0.0, 1.0] for i, n in enumerate(names)}}
+    if t is not None:
+        frame["time"] = t
+    return json.dumps(frame)
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ('{"fps": 30, "x": ' + "[" * 100000 + "]" * 100000 + "}\n" + _jsonl_frame(), ":1: invalid JSON (nested deeper"),
+        ('{"fps": 30, "joint_names": 5}\n' + _jsonl_frame(), "'joint_names' must be a list of names"),
+        (_jsonl_frame(0) + "\n" + _jsonl_frame(0).replace('"time": 0', '"time": ' + "9" * 400),
+         ":2: 'time' must be a finite number of seconds"),
+        ('{"fps": 30}\n' + _jsonl_frame(0) + "\n" + _jsonl_frame(1e20), "times do not fit"),
+        (_jsonl_frame(0) + "\n" + _jsonl_frame(1e-300), "median spacing gives 1e+300 fps"),
+        ('{"fps": 30}\n' + "\n".join(_jsonl_frame(names=[f"j{i}_{k}" for k in range(4)]) for i in range(225)),
+         "900 samples would be spread over 225 frames x 900 joints"),
+        ('{"fps": 30}\n' + _jsonl_frame(names=[f"j{k}" for k in range(1001)]), "1001 joints; physmocap reads at most 1000"),
+    ],
+)
+def test_jsonl_structure_and_numbers_are_checked(tmp_path, capsys, text, needle):
+    path = tmp_path / "bad.jsonl"
+    path.write_text(text)
+    assert main(["inspect", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "bad.jsonl" in line and needle in line, line

@@ -54,6 +54,22 @@ FPS_RANGE = (0.1, 10000.0)
 MAX_DISTANCE = 1000.0
 
 
+def check_grid(path: str | os.PathLike, frames: float, joints: int, samples: int) -> None:
+    """Refuse to lay ``samples`` values read from a file out as a ``frames x joints`` grid
+    much larger than the file holds (sparse frame numbers, times or joint names would
+    otherwise allocate gigabytes from a small file), or with more joints than any skeleton."""
+    from ..motion import MAX_JOINTS
+
+    if joints > MAX_JOINTS:
+        raise InputError(f"{joints} joints; physmocap reads at most {MAX_JOINTS}", path=path)
+    if frames * joints > 16 * samples + 100_000:
+        raise InputError(
+            f"{samples} samples would be spread over {frames:.6g} frames x {joints} joints; the recording "
+            "is too sparse to hold as a clip (a wrong frame rate, or corrupt frame numbers or times)",
+            path=path,
+        )
+
+
 def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
     """Refuse numbers no capture holds, naming the file, frame and joint: a frame rate outside
     0.1-10,000 Hz, offsets or positions farther than a kilometre, non-finite or zero-norm

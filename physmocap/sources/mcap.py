@@ -42,6 +42,7 @@ from ..errors import InputError, OptionError, warn
 from ..fileio import parse_json
 from ..motion import MAX_JOINTS, Motion, Skeleton, forward_kinematics
 from ..rotations import Rotation, quat_mul, up_axis_matrix
+from . import check_grid
 
 __all__ = ["read_mcap", "list_skeletons"]
 
@@ -227,19 +228,6 @@ def _max_frames(distinct_times: int) -> int:
     return 4 * distinct_times + 10
 
 
-def _check_grid(path: Path, F: int, columns: int, samples: int) -> None:
-    """Refuse a frame grid far larger than the samples the file holds (it would be
-    allocated as ``F x columns`` arrays)."""
-    if columns > MAX_JOINTS:
-        raise InputError(f"{columns} joints (transform frames); physmocap reads at most {MAX_JOINTS}", path=path)
-    if F * columns > 16 * samples + 100_000:
-        raise InputError(
-            f"{samples} samples would be spread over {F} frames x {columns} joints; the recording is "
-            "too sparse to hold as a clip (a wrong fps, or corrupt timestamps)",
-            path=path,
-        )
-
-
 def _frame_grid(
     path: Path, times: Sequence[int], fps: float | None, start: int | None
 ) -> tuple[np.ndarray, float, int]:
@@ -357,7 +345,7 @@ def _read_tf(
 
     idx, fps, F = _frame_grid(path, [s[0] for s in samples], fps, start)
     N = len(sorted_ids)
-    _check_grid(path, F, N, len(samples))
+    check_grid(path, F, N, len(samples))
     trans = np.zeros((F, N, 3))
     rots = np.zeros((F, N, 4))
     rots[..., 3] = 1.0
@@ -658,7 +646,7 @@ def _read_poses(
     if len(names) != J:
         raise InputError(f"topic {ch.topic}: {J} poses per frame but {len(names)} joint names", path=path)
     idx, fps, F = _frame_grid(path, [t for t, _ in frames], fps, None)
-    _check_grid(path, F, J, sum(len(p) for _, p in frames))
+    check_grid(path, F, J, sum(len(p) for _, p in frames))
     pos = np.full((F, J, 3), np.nan)
     for i, (_, pts) in zip(idx, frames):
         if len(pts) == J:

@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 import re
@@ -56,6 +55,8 @@ import numpy as np
 
 from ..canonical import CANONICAL_NAMES, canonical_parent
 from ..errors import InputError, MappingError, OptionError, warn
+from ..fileio import parse_json
+from . import FPS_RANGE, check_grid
 from ..motion import Motion, Skeleton
 from .gaps import fill_gaps, invalid_samples
 from .sensor import Ground, default_foot_height, estimate_ground, guess_units, level_rotation, to_world, unit_scale
@@ -285,6 +286,7 @@ def _read_csv_long(
     rank = np.empty(len(keys), dtype=int)
     rank[order] = np.arange(len(keys))
     F, J = len(keys), len(names)
+    check_grid(path, F, J, len(entries))
     pos = np.full((F, J, 3), np.nan)
     conf = np.ones((F, J)) if cc is not None else None
     times = np.full(F, np.nan) if time_col is not None else None
@@ -341,27 +343,23 @@ def _read_npz(path: Path) -> RawPositions:
     return RawPositions(names, pos, conf, times, options)
 
 
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"non-finite number {name}")
-
-
 def _read_jsonl(path: Path) -> RawPositions:
     options: dict[str, Any] = {}
     frames: list[tuple[int, dict]] = []
     try:
-        fh = open(path, encoding="utf-8-sig")
+        data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read the file: {exc.strerror}", path=path) from None
-    with fh:
-        try:
-            lines = fh.read().splitlines()
-        except UnicodeDecodeError:
-            raise InputError("not a UTF-8 text file", path=path) from None
+    try:
+        lines = data.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(f"not a UTF-8 text file (byte 0x{data[exc.start]:02x})", path=path, line=line) from None
     for ln, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
-            obj = json.loads(line, parse_constant=lambda c: math.nan)
+            obj = parse_json(line, nan_constants=True)
         except ValueError as exc:
             raise InputError(f"invalid JSON ({exc})", path=path, line=ln) from None
         if not isinstance(obj, dict):
@@ -376,7 +374,10 @@ def _read_jsonl(path: Path) -> RawPositions:
                     options[k] = v
     if not frames:
         raise InputError("no frames: expected lines like {\"joints\": {\"head\": [x, y, z]}}", path=path)
-    names: list[str] = [str(n) for n in options.pop("joint_names", [])]
+    listed = options.pop("joint_names", [])
+    if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+        raise InputError("'joint_names' must be a list of names", path=path)
+    names: list[str] = list(listed)
     col = {n: i for i, n in enumerate(names)}
     parsed = []
     any_time = False
@@ -403,11 +404,13 @@ def _read_jsonl(path: Path) -> RawPositions:
             vals.append((col[name], _jsonl_joint(v, path, ln, name)))
         t = obj.get("time", obj.get("timestamp"))
         if t is not None:
-            if isinstance(t, bool) or not isinstance(t, (int, float)):
-                raise InputError(f"'time' must be a number of seconds, got {t!r}", path=path, line=ln)
+            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+                raise InputError(f"'time' must be a finite number of seconds, got {str(t)[:40]}", path=path,
+                                 line=ln)
             any_time = True
         parsed.append((vals, t))
     F, J = len(parsed), len(names)
+    check_grid(path, F, J, sum(len(vals) for vals, _ in parsed))
     pos = np.full((F, J, 3), np.nan)
     conf = np.zeros((F, J))
     has_conf = False
@@ -500,15 +503,23 @@ def _uniform_frames(
         if dt.size == 0:
             raise InputError("all frames have the same time; give fps=", path=path)
         fps = 1.0 / float(np.median(dt))
+        lo, hi = FPS_RANGE
+        if not lo <= fps <= hi:
+            raise InputError(
+                f"the times' median spacing gives {fps:.6g} fps, outside {lo:g}-{hi:g}; give fps=", path=path
+            )
     if np.any(np.diff(times) < 0):
         order = np.argsort(times, kind="stable")
         pos, t = pos[order], t[order]
         conf = None if conf is None else conf[order]
         t = t - t.min()
-    idx = np.rint(t * fps).astype(np.int64)
+    fidx = np.rint(t * fps)  # float: no int64 overflow before the check
+    if not fidx.max() + 1 <= 4 * len(fidx) + 10:
+        raise InputError(
+            f"times do not fit {fps:g} fps (they would span {fidx.max() + 1:.6g} frames); give fps=", path=path
+        )
+    idx = fidx.astype(np.int64)
     F = int(idx.max()) + 1
-    if F > 4 * len(idx) + 10:
-        raise InputError(f"times do not fit {fps:g} fps (they would span {F} frames); give fps=", path=path)
     if F == len(idx) and np.all(idx == np.arange(F)):
         return pos, conf, float(fps), 0
     out = np.full((F,) + pos.shape[1:], np.nan)
@@ -903,6 +914,7 @@ def read_positions(path: str | os.PathLike, **options: Any) -> Motion:
     if unknown:
         raise OptionError(f"unknown option(s) {unknown} for joint-position files; known: {sorted(allowed)}", path=p)
     raw = _READERS[suffix](p)
+    check_grid(p, raw.positions.shape[0], raw.positions.shape[1], raw.positions.shape[0] * raw.positions.shape[1])
     opts: dict[str, Any] = {}
     for key, value in raw.options.items():
         if key == "fps":

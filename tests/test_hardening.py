@@ -374,3 +374,47 @@ def test_jsonl_structure_and_numbers_are_checked(tmp_path, capsys, text, needle)
     assert main(["inspect", str(path)]) == 2
     line = _one_line(capsys)
     assert "bad.jsonl" in line and needle in line, line
+
+
+def _robot_map() -> str:
+    from physmocap.resources import mjcf_dir
+
+    return (mjcf_dir() / "robot.map.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    "edit, needle",
+    [
+        (("left = [\"l_heel\", \"l_toe\"]", "left = [" + ", ".join(['"l_heel"'] * 1000) + "]"),
+         "[contacts] left: site 'l_heel' is listed more than once"),
+        (("right = [\"r_heel\", \"r_toe\"]", "right = [\"l_heel\", \"r_toe\"]"),
+         "[contacts] right: site 'l_heel' is already a contact of the left foot"),
+        (("left_toe = \"site:l_ball_site\"", "left_toe = \"site:l_ankle_site\""),
+         "[joints] left_toe: 'site:l_ankle_site' is already the frame of left_ankle"),
+        (("pelvis = \"body:base_link\"", "pelvis = \"body:base_link\"\n\"pelvis\" = \"body:base_link\""),
+         "not valid TOML: Cannot overwrite a value"),
+        (("[rest]", "[sites]\nx = " + "[" * 100000 + "]" * 100000 + "\n[rest]"), "nested deeper than 64 levels"),
+        (("[rest]", "# " + "x" * (2 << 20) + "\n[rest]"), "larger than 1024 KB"),
+        (("name = \"robot\"", "name = \"rob\udcffot\""), ":5: not UTF-8 text (byte 0xff)"),
+    ],
+)
+def test_character_mapping_files_are_bounded_and_without_duplicates(tmp_path, capsys, edit, needle):
+    text = _robot_map()
+    assert edit[0] in text
+    path = tmp_path / "bad.map.toml"
+    path.write_bytes(text.replace(*edit).encode("utf-8", "surrogateescape"))
+    assert main(["character", "info", "robot", "--map", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "bad.map.toml" in line and needle in line, line
+
+
+def test_mapping_from_dev_zero_is_refused(capsys):
+    assert main(["inspect", "example", "--map", "/dev/zero"]) == 2
+    assert "/dev/zero: mapping file is larger than 1024 KB" in _one_line(capsys)
+
+
+def test_source_mapping_lists_without_duplicates(tmp_path, capsys):
+    path = tmp_path / "src.map.toml"
+    path.write_text('[joints]\nneck = ["Neck", "Neck1", "Neck"]\n')
+    assert main(["inspect", "example", "--map", str(path)]) == 2
+    assert "src.map.toml:2: entry 'neck' lists 'Neck' more than once" in _one_line(capsys)

@@ -418,3 +418,13 @@ def test_source_mapping_lists_without_duplicates(tmp_path, capsys):
     path.write_text('[joints]\nneck = ["Neck", "Neck1", "Neck"]\n')
     assert main(["inspect", "example", "--map", str(path)]) == 2
     assert "src.map.toml:2: entry 'neck' lists 'Neck' more than once" in _one_line(capsys)
+
+
+@pytest.mark.parametrize("command", ["replay", "retarget", "clean"])
+def test_empty_clip_is_refused_by_commands_that_process_motion(tmp_path, capsys, command):
+    path = tmp_path / "empty.bvh"
+    path.write_text(BVH.replace("FT", "0.033").split("Frames:")[0] + "Frames: 0\nFrame Time: 0.033\n")
+    argv = [command, str(path)] + ([] if command == "replay" else ["-o", str(tmp_path / "out.bvh")])
+    assert main(argv) == 2
+    assert "empty.bvh: the clip has 0 frames" in _one_line(capsys)
+    assert not (tmp_path / "out.bvh").exists()

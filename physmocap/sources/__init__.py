@@ -31,8 +31,11 @@ READERS: dict[str, tuple[str, str]] = {
 }
 
 
-def load_motion(path: str | os.PathLike, **options) -> Motion:
-    """Read any supported capture file (``"example"`` is the bundled walk)."""
+def load_motion(path: str | os.PathLike, *, min_frames: int = 0, **options) -> Motion:
+    """Read any supported capture file (``"example"`` is the bundled walk).
+
+    ``min_frames``: refuse a clip with fewer frames (commands that process motion need one;
+    ``inspect`` and ``convert`` take an empty clip as it is)."""
     p = resolve_input(path)
     suffix = p.suffix.lower()
     if suffix not in READERS:
@@ -46,6 +49,8 @@ def load_motion(path: str | os.PathLike, **options) -> Motion:
     reader = getattr(importlib.import_module(module_name), func_name)
     motion = reader(Path(p), **options)
     check_plausible(motion, p)
+    if motion.num_frames < min_frames:
+        raise InputError(f"the clip has {motion.num_frames} frames; this command needs at least {min_frames}", path=p)
     return motion
 
 

@@ -428,3 +428,25 @@ def test_empty_clip_is_refused_by_commands_that_process_motion(tmp_path, capsys,
     assert main(argv) == 2
     assert "empty.bvh: the clip has 0 frames" in _one_line(capsys)
     assert not (tmp_path / "out.bvh").exists()
+
+
+@pytest.mark.parametrize(
+    "old, new, needle",
+    [
+        (b'name="lumbar_flexion"', b'name="lumbar_\xffflexion"', "the name b'lumbar_\\xffflexion' is not UTF-8 text"),
+        (b'<body name="lumbar" pos="0 0 0.121719"', b'<body name="lumbar" pos="1e308 0 0"',
+         "body 'lumbar' is not at a finite place within 1 km"),
+    ],
+)
+def test_mjcf_names_and_places_are_checked(tmp_path, capsys, old, new, needle):
+    import shutil
+
+    from physmocap.resources import mjcf_dir
+
+    xml = (mjcf_dir() / "humanoid.xml").read_bytes()
+    assert old in xml
+    (tmp_path / "odd.xml").write_bytes(xml.replace(old, new, 1))
+    shutil.copy(mjcf_dir() / "humanoid.map.toml", tmp_path / "odd.map.toml")
+    assert main(["character", "info", str(tmp_path / "odd.xml")]) == 2
+    line = _one_line(capsys)
+    assert "odd.xml" in line and needle in line, line

@@ -98,6 +98,8 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
         ok = np.all(ok, axis=-1)
         if not ok.all():
             f, j = (int(x) for x in np.argwhere(~ok)[0])
+            if what == "joint":
+                what, j = "joint", names[j]
             raise InputError(f"frame {f}: {what} {j} is not a finite distance within 1 km", path=path)
 
     if motion.rotations is not None:

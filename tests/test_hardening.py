@@ -290,6 +290,9 @@ BIG = "9" * 400
         ("fps", "1e308", "'fps' is 1e+308"),
         ("source_unit_scale", "1e400", "'source_unit_scale' is inf"),
         ("meta", DEEP, "'meta' is not valid JSON (nested deeper"),
+        ("meta", "[1, 2]", "'meta' must be a JSON object"),
+        ("meta", '{"floor_z": "x"}', "'meta' entry 'floor_z' has the wrong type"),
+        ("meta", '{"format": 5}', "'meta' entry 'format' has the wrong type"),
     ],
 )
 def test_mcap_skeleton_metadata_is_checked(tmp_path, capsys, small_mcap, key, value, needle):

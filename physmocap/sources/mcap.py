@@ -441,6 +441,41 @@ class _Meta:
         return v
 
 
+def _is_str_list(v: Any) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+#: The source motion's ``meta`` entries physmocap acts on, each with the check its value must
+#: pass in a file (a wrong type would fail far from the file); other entries are kept as read.
+_SOURCE_META_CHECKS: dict[str, Any] = {
+    "format": lambda v: isinstance(v, str),
+    "units_detected": lambda v: isinstance(v, bool),
+    "floor_z": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1000.0,
+    "bvh_channels": lambda v: isinstance(v, dict) and all(_is_str_list(c) for c in v.values()),
+    "bvh_rotation_orders": lambda v: isinstance(v, dict) and all(isinstance(o, str) for o in v.values()),
+    "source_mapping": lambda v: isinstance(v, dict),
+}
+
+
+def _source_meta(m: _Meta, value: Any) -> dict:
+    """The checked ``meta`` of a physmocap.skeleton record (see :data:`_SOURCE_META_CHECKS`)."""
+    if not isinstance(value, dict):
+        raise m.fail("meta", f"must be a JSON object, got {type(value).__name__}")
+    out = dict(value)
+    for key, check in _SOURCE_META_CHECKS.items():
+        if key in out and not check(out[key]):
+            raise m.fail("meta", f"entry {key!r} has the wrong type or range: {str(out[key])[:60]}")
+    if "source_mapping" in out:
+        from ..errors import MappingError
+        from .profiles.mapfile import check_mapping
+
+        try:
+            check_mapping(out["source_mapping"])
+        except MappingError as exc:
+            raise m.fail("meta", f"entry 'source_mapping' is not a mapping ({exc.message})") from None
+    return out
+
+
 def list_skeletons(path: str | os.PathLike) -> list[dict[str, str]]:
     """The ``physmocap.skeleton`` metadata records of a file (one per skeleton)."""
     raw = _load(Path(path))
@@ -526,7 +561,7 @@ def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, An
         skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, end_site=end_site)
     except ValueError as exc:
         raise InputError(f"skeleton {prefix}: {exc}", path=path) from None
-    source_meta = m.json("meta", default={})
+    source_meta = _source_meta(m, m.json("meta", default={}))
     unit_scale = float(m.number("source_unit_scale", 1e-9, 1e9, default=1.0))
     common: dict[str, Any] = dict(
         skeleton=skeleton,
@@ -535,7 +570,7 @@ def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, An
         units=meta.get("source_units", "m"),
         unit_scale=unit_scale,
         file_up=file_up.upper(),
-        meta={**(source_meta if isinstance(source_meta, dict) else {}), "mcap": {"topic_prefix": prefix}},
+        meta={**source_meta, "mcap": {"topic_prefix": prefix}},
     )
     if kind == "positional":
         positions, confidence = _read_joint_positions(path, raw, topics.get(f"{prefix}/joints"), names, fps, start, F)

@@ -453,3 +453,13 @@ def test_mjcf_names_and_places_are_checked(tmp_path, capsys, old, new, needle):
     assert main(["character", "info", str(tmp_path / "odd.xml")]) == 2
     line = _one_line(capsys)
     assert "odd.xml" in line and needle in line, line
+
+
+def test_mcap_outputs_carry_no_absolute_paths(tmp_path):
+    outs = []
+    for d in ("one", "two/deeper"):
+        (tmp_path / d).mkdir(parents=True)
+        out = tmp_path / d / "walk.mcap"
+        assert main(["convert", "example", str(out), "--end", "5"]) == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and str(tmp_path).encode() not in outs[0]

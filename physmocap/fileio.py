@@ -156,6 +156,23 @@ def parse_json(text: str | bytes, nan_constants: bool = False):
         raise ValueError(f"nested deeper than {MAX_NESTING} levels") from None
 
 
+def _tame_ints(obj):
+    """Integers beyond 2**53 (a float cannot hold them exactly; past 1e308 not at all) as
+    floats, infinite when out of range, so the checks for finite numbers name them."""
+    import math
+
+    if isinstance(obj, dict):
+        return {k: _tame_ints(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_tame_ints(v) for v in obj]
+    if isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > 2**53:
+        try:
+            return float(obj)
+        except OverflowError:
+            return math.inf if obj > 0 else -math.inf
+    return obj
+
+
 def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict, str]:
     """Read a TOML file: ``(data, text)``; clear :class:`InputError` naming the file and line.
 
@@ -177,7 +194,7 @@ def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict
     if nesting_depth(text) > MAX_NESTING:
         raise InputError(f"not a {kind}: lists or tables nested deeper than {MAX_NESTING} levels", path=p)
     try:
-        return tomllib.loads(text), text
+        return _tame_ints(tomllib.loads(text)), text
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"at line (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path=p, line=int(m.group(1)) if m else None) from None

@@ -399,6 +399,7 @@ def _robot_map() -> str:
         (("[rest]", "[sites]\nx = " + "[" * 100000 + "]" * 100000 + "\n[rest]"), "nested deeper than 64 levels"),
         (("[rest]", "# " + "x" * (2 << 20) + "\n[rest]"), "larger than 1024 KB"),
         (("name = \"robot\"", "name = \"rob\udcffot\""), ":5: not UTF-8 text (byte 0xff)"),
+        (("default = 860", "default = " + "9" * 400), "[velocity_limits] default: expected a finite number, got inf"),
     ],
 )
 def test_character_mapping_files_are_bounded_and_without_duplicates(tmp_path, capsys, edit, needle):

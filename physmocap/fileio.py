@@ -139,21 +139,38 @@ def _no_constant(name: str):
 
 
 def parse_json(text: str | bytes, nan_constants: bool = False):
-    """``json.loads`` for untrusted input: at most :data:`MAX_NESTING` levels of nesting,
-    integers beyond 15 digits read as floats, ``NaN`` / ``Infinity`` refused (or read as NaN
-    with ``nan_constants``).  Raises ``ValueError`` with a message fit for a user."""
+    """``json.loads`` for untrusted input: nesting deeper than the parser's recursion limit
+    refused, integers beyond 15 digits read as floats (infinite when out of range),
+    ``NaN`` / ``Infinity`` refused (or read as NaN with ``nan_constants``).  Raises
+    ``ValueError`` with a message fit for a user.  Values kept as they are (free-form
+    metadata) should also pass :func:`json_depth` against :data:`MAX_NESTING`."""
     import json
     import math
 
-    if nesting_depth(text) > MAX_NESTING:
-        raise ValueError(f"nested deeper than {MAX_NESTING} levels")
     constant = (lambda c: math.nan) if nan_constants else _no_constant
     if isinstance(text, bytes):
         text = text.decode("utf-8")
     try:
         return json.loads(text, parse_int=_json_int, parse_constant=constant)
-    except RecursionError:  # pragma: no cover - nesting_depth stops it first
-        raise ValueError(f"nested deeper than {MAX_NESTING} levels") from None
+    except RecursionError:
+        raise ValueError("lists or objects nested too deeply") from None
+
+
+def json_depth(obj, limit: int = MAX_NESTING) -> int:
+    """Nesting depth of parsed JSON (lists and objects), counting no further than ``limit + 1``."""
+    depth, level = 0, [obj]
+    while level and depth <= limit:
+        nxt = []
+        for o in level:
+            if isinstance(o, dict):
+                nxt.extend(o.values())
+            elif isinstance(o, list):
+                nxt.extend(o)
+        if not nxt and not any(isinstance(o, (dict, list)) for o in level):
+            break
+        depth += 1
+        level = nxt
+    return depth
 
 
 def _tame_ints(obj):

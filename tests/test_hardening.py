@@ -279,7 +279,7 @@ BIG = "9" * 400
         ("parents", "[-1" + ", 99" * 37 + "]", "'parents' item 1 is 99"),
         ("parents", "[-1" + f", {BIG}" * 37 + "]", "'parents' item 1 must be an integer"),
         ("joints", "5", "'joints' must be a list of strings"),
-        ("joints", DEEP, "'joints' is not valid JSON (nested deeper than 64 levels)"),
+        ("joints", DEEP, "'joints' is not valid JSON (lists or objects nested too deeply)"),
         ("offsets", '"x"', "'offsets' must be a list of 38 [x, y, z]"),
         ("offsets", f"[[{BIG}, 0, 0]]", "'offsets' must be a list of 38"),
         ("translated", "[500]", "'translated' must list joint indices"),
@@ -289,7 +289,9 @@ BIG = "9" * 400
         ("start_time_ns", BIG, "'start_time_ns' must be an integer"),
         ("fps", "1e308", "'fps' is 1e+308"),
         ("source_unit_scale", "1e400", "'source_unit_scale' is inf"),
-        ("meta", DEEP, "'meta' is not valid JSON (nested deeper"),
+        ("meta", DEEP, "'meta' is not valid JSON (lists or objects nested too deeply)"),
+        ("meta", "[" * 100 + "]" * 100, "must be a JSON object"),
+        ("meta", "{\"a\": " + "[" * 100 + "]" * 100 + "}", "'meta' is nested deeper than 64 levels"),
         ("meta", "[1, 2]", "'meta' must be a JSON object"),
         ("meta", '{"floor_z": "x"}', "'meta' entry 'floor_z' has the wrong type"),
         ("meta", '{"format": 5}', "'meta' entry 'format' has the wrong type"),
@@ -311,7 +313,7 @@ def test_mcap_skeleton_metadata_is_checked(tmp_path, capsys, small_mcap, key, va
         (b'"sec":0', b'"sec":1e20', "timestamp sec and nsec must be non-negative integers"),
         (b'"sec":0', b'"sec":100000000000000000000', "timestamp sec and nsec must be non-negative integers"),
         (b'"sec":0', b'"sec":4611686019', "timestamp 4.61169e+09 s is out of range"),
-        (b'"transforms":[', b'"x":' + DEEP.encode() + b',"transforms":[', "invalid JSON (nested deeper than 64"),
+        (b'"transforms":[', b'"x":' + DEEP.encode() + b',"transforms":[', "invalid JSON (lists or objects nested too deeply"),
     ],
 )
 def test_mcap_messages_are_checked(tmp_path, capsys, small_mcap, old, new, needle):
@@ -360,7 +362,7 @@ def _jsonl_frame(t=None, names=("head", "left_hip", "right_hip")) -> str:
 @pytest.mark.parametrize(
     "text, needle",
     [
-        ('{"fps": 30, "x": ' + "[" * 100000 + "]" * 100000 + "}\n" + _jsonl_frame(), ":1: invalid JSON (nested deeper"),
+        ('{"fps": 30, "x": ' + "[" * 100000 + "]" * 100000 + "}\n" + _jsonl_frame(), ":1: invalid JSON (lists or objects nested too deeply)"),
         ('{"fps": 30, "joint_names": 5}\n' + _jsonl_frame(), "'joint_names' must be a list of names"),
         (_jsonl_frame(0) + "\n" + _jsonl_frame(0).replace('"time": 0', '"time": ' + "9" * 400),
          ":2: 'time' must be a finite number of seconds"),

@@ -459,8 +459,12 @@ _SOURCE_META_CHECKS: dict[str, Any] = {
 
 def _source_meta(m: _Meta, value: Any) -> dict:
     """The checked ``meta`` of a physmocap.skeleton record (see :data:`_SOURCE_META_CHECKS`)."""
+    from ..fileio import MAX_NESTING, json_depth
+
     if not isinstance(value, dict):
         raise m.fail("meta", f"must be a JSON object, got {type(value).__name__}")
+    if json_depth(value) > MAX_NESTING:
+        raise m.fail("meta", f"is nested deeper than {MAX_NESTING} levels")
     out = dict(value)
     for key, check in _SOURCE_META_CHECKS.items():
         if key in out and not check(out[key]):

@@ -468,3 +468,24 @@ def test_mcap_outputs_carry_no_absolute_paths(tmp_path):
         assert main(["convert", str(tmp_path / d / "in" / "walk.bvh"), str(out), "--end", "5"]) == 0
         outs.append(out.read_bytes())
     assert outs[0] == outs[1] and str(tmp_path).encode() not in outs[0]
+
+
+@pytest.mark.parametrize("every", [False, True])
+def test_far_tracker_samples_are_refused_before_any_fit(tmp_path, capsys, every):
+    """The positional pipeline checks positions (in metres) before fitting the ground to them
+    (a clip of 1e308 everywhere used to break the ground plane's SVD)."""
+    rows = ["time,head_x,head_y,head_z,left_hip_x,left_hip_y,left_hip_z,right_hip_x,right_hip_y,right_hip_z"]
+    rows += [f"{f / 30},0,0,1.7,0,0.1,1,0,-0.1,1" for f in range(10)]
+    if every:
+        rows[1:] = [r.split(",")[0] + ",1e308" * 9 for r in rows[1:]]
+    else:
+        rows[4] = rows[4].replace(",0,0,1.7,", ",0,1e308,1.7,")
+    path = tmp_path / "far.npz"
+    import numpy as np
+
+    table = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    np.savez(path, positions=table[:, 1:].reshape(10, 3, 3), names=np.array(["head", "left_hip", "right_hip"]),
+             times=table[:, 0], units=np.array("m"))
+    assert main(["inspect", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "far.npz: frame" in line and "is not a finite distance within 1 km" in line, line

@@ -92,15 +92,7 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
         raise InputError(f"joint {names[j]}: offset {off[j].tolist()} is not a finite distance within 1 km", path=path)
 
     def first_bad(arr: np.ndarray, what: str, allow_nan: bool) -> None:
-        ok = np.abs(arr) < MAX_DISTANCE
-        if allow_nan:
-            ok |= np.isnan(arr)
-        ok = np.all(ok, axis=-1)
-        if not ok.all():
-            f, j = (int(x) for x in np.argwhere(~ok)[0])
-            if what == "joint":
-                what, j = "joint", names[j]
-            raise InputError(f"frame {f}: {what} {j} is not a finite distance within 1 km", path=path)
+        check_distances(arr, path, what, names if what == "joint" else None, allow_nan)
 
     if motion.rotations is not None:
         norms = np.linalg.norm(motion.rotations, axis=-1)
@@ -112,3 +104,20 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
             first_bad(motion.translations, "translated joint", allow_nan=False)
     if motion.positions is not None:
         first_bad(motion.positions, "joint", allow_nan=True)
+
+
+def check_distances(arr, path: str | os.PathLike, what: str = "joint", names=None, allow_nan: bool = True) -> None:
+    """Refuse ``(F, J, 3)`` positions in metres that are not finite (NaN, a lost sample, is
+    allowed with ``allow_nan``) or farther than :data:`MAX_DISTANCE`, naming the frame and
+    joint (by name when ``names`` are given)."""
+    import numpy as np
+
+    with np.errstate(invalid="ignore"):
+        ok = np.abs(arr) < MAX_DISTANCE
+    if allow_nan:
+        ok |= np.isnan(arr)
+    ok = np.all(ok, axis=-1)
+    if not ok.all():
+        f, j = (int(x) for x in np.argwhere(~ok)[0])
+        label = names[j] if names is not None else j
+        raise InputError(f"frame {f}: {what} {label} is not a finite distance within 1 km", path=path)

@@ -56,7 +56,7 @@ import numpy as np
 from ..canonical import CANONICAL_NAMES, canonical_parent
 from ..errors import InputError, MappingError, OptionError, warn
 from ..fileio import parse_json
-from . import FPS_RANGE, check_grid
+from . import FPS_RANGE, MAX_DISTANCE, check_distances, check_grid
 from ..motion import Motion, Skeleton
 from .gaps import fill_gaps, invalid_samples
 from .sensor import Ground, default_foot_height, estimate_ground, guess_units, level_rotation, to_world, unit_scale
@@ -729,7 +729,9 @@ def positional_motion(
         unit_name = units  # type: ignore[assignment]
     unit_name, scale = unit_scale(unit_name, p)
     file_up = "Y" if frame == "camera" else up
-    pos = to_world(pos * scale, frame=frame, up=up, mirrored=mirrored)
+    with np.errstate(over="ignore", invalid="ignore"):
+        pos = to_world(pos * scale, frame=frame, up=up, mirrored=mirrored)
+    check_distances(pos, p, "joint", names)  # before any fit: 1e308 would break the ground's SVD
     plane_up = None
     plane_floor = None
     if floor_plane is not None:
@@ -739,6 +741,8 @@ def positional_motion(
         n = np.linalg.norm(plane[:3])
         plane_up = to_world(plane[:3] / n, frame=frame, up=up, mirrored=mirrored)
         plane_floor = -plane[3] * scale / n
+        if not abs(plane_floor) < MAX_DISTANCE:
+            raise OptionError(f"floor_plane puts the floor {plane_floor:.3g} m away; expected within 1 km", path=p)
 
     # gaps
     bad = invalid_samples(pos, conf, float(min_confidence))

@@ -82,11 +82,120 @@ def atomic_open(path: str | os.PathLike, mode: str = "w", **kwargs) -> Iterator[
         yield fh
 
 
+#: Largest mapping / marker-set file read (bytes): real ones are a few kilobytes.
+MAX_TEXT_BYTES = 1 << 20
+#: Deepest nesting of lists / tables accepted in JSON and TOML inputs.
+MAX_NESTING = 64
+
+
+def read_text(path: str | os.PathLike, kind: str, limit: int = MAX_TEXT_BYTES) -> str:
+    """A small UTF-8 text file (mapping, marker set...), reading at most ``limit`` bytes, so
+    ``/dev/zero`` or a huge file is refused instead of filling memory.  Errors name the file
+    (and the line of a byte that is not UTF-8)."""
+    from .errors import InputError
+
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read(limit + 1)
+    except FileNotFoundError:
+        raise InputError(f"{kind} not found", path=p) from None
+    except IsADirectoryError:
+        raise InputError(f"is a directory, expected a {kind}", path=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read {kind}: {exc.strerror or exc}", path=p) from None
+    if len(data) > limit:
+        raise InputError(f"{kind} is larger than {limit // 1024} KB; expected a small text file", path=p)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(f"not UTF-8 text (byte 0x{data[exc.start]:02x})", path=p, line=line) from None
+
+
+def nesting_depth(text: str | bytes, limit: int = MAX_NESTING) -> int:
+    """An upper bound of the bracket nesting of a JSON / TOML text, stopping past ``limit``
+    (brackets inside strings count too, so it never under-estimates)."""
+    if isinstance(text, str):
+        text = text.encode("utf-8", "surrogatepass")
+    if text.count(b"[") + text.count(b"{") <= limit:
+        return text.count(b"[") + text.count(b"{")
+    import numpy as np
+
+    b = np.frombuffer(text, dtype=np.uint8)
+    step = (b == ord("[")).astype(np.int32) + (b == ord("{"))
+    step -= (b == ord("]")).astype(np.int32) + (b == ord("}"))
+    return int(np.cumsum(step).max(initial=0))
+
+
+def _json_int(s: str):
+    # integers too long for a float or int64 become floats (inf when out of range), which every
+    # reader's finite-number check then names; Python ints would overflow later, far from the file
+    return int(s) if len(s) <= 15 else float(s)
+
+
+def _no_constant(name: str):
+    raise ValueError(f"non-finite number {name} is not JSON")
+
+
+def parse_json(text: str | bytes, nan_constants: bool = False):
+    """``json.loads`` for untrusted input: nesting deeper than the parser's recursion limit
+    refused, integers beyond 15 digits read as floats (infinite when out of range),
+    ``NaN`` / ``Infinity`` refused (or read as NaN with ``nan_constants``).  Raises
+    ``ValueError`` with a message fit for a user.  Values kept as they are (free-form
+    metadata) should also pass :func:`json_depth` against :data:`MAX_NESTING`."""
+    import json
+    import math
+
+    constant = (lambda c: math.nan) if nan_constants else _no_constant
+    if isinstance(text, bytes):
+        text = text.decode("utf-8")
+    try:
+        return json.loads(text, parse_int=_json_int, parse_constant=constant)
+    except RecursionError:
+        raise ValueError("lists or objects nested too deeply") from None
+
+
+def json_depth(obj, limit: int = MAX_NESTING) -> int:
+    """Nesting depth of parsed JSON (lists and objects), counting no further than ``limit + 1``."""
+    depth, level = 0, [obj]
+    while level and depth <= limit:
+        nxt = []
+        for o in level:
+            if isinstance(o, dict):
+                nxt.extend(o.values())
+            elif isinstance(o, list):
+                nxt.extend(o)
+        if not nxt and not any(isinstance(o, (dict, list)) for o in level):
+            break
+        depth += 1
+        level = nxt
+    return depth
+
+
+def _tame_ints(obj):
+    """Integers beyond 2**53 (a float cannot hold them exactly; past 1e308 not at all) as
+    floats, infinite when out of range, so the checks for finite numbers name them."""
+    import math
+
+    if isinstance(obj, dict):
+        return {k: _tame_ints(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_tame_ints(v) for v in obj]
+    if isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) > 2**53:
+        try:
+            return float(obj)
+        except OverflowError:
+            return math.inf if obj > 0 else -math.inf
+    return obj
+
+
 def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict, str]:
     """Read a TOML file: ``(data, text)``; clear :class:`InputError` naming the file and line.
 
-    ``kind`` names the file in messages (``"mapping file"``...).  Uses the standard
-    library's ``tomllib`` (Python 3.11+) or ``tomli`` on 3.10.
+    ``kind`` names the file in messages (``"mapping file"``...).  At most
+    :data:`MAX_TEXT_BYTES` are read and :data:`MAX_NESTING` levels of nesting accepted.
+    Uses the standard library's ``tomllib`` (Python 3.11+) or ``tomli`` on 3.10.
     """
     import re
 
@@ -98,16 +207,189 @@ def read_toml(path: str | os.PathLike, kind: str = "mapping file") -> tuple[dict
     from .errors import InputError
 
     p = Path(path)
+    text = read_text(p, kind)
+    if nesting_depth(text) > MAX_NESTING:
+        raise InputError(f"not a {kind}: lists or tables nested deeper than {MAX_NESTING} levels", path=p)
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{kind} not found", path=p) from None
-    except IsADirectoryError:
-        raise InputError(f"is a directory, expected a {kind} (TOML)", path=p) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read {kind}: {exc}", path=p) from None
-    try:
-        return tomllib.loads(text), text
+        return _tame_ints(tomllib.loads(text)), text
     except tomllib.TOMLDecodeError as exc:
         m = re.search(r"at line (\d+)", str(exc))
         raise InputError(f"not valid TOML: {exc}", path=p, line=int(m.group(1)) if m else None) from None
+    except RecursionError:  # pragma: no cover - nesting_depth stops it first
+        raise InputError(f"not a {kind}: nested too deeply", path=p) from None
+
+
+#: Largest NPZ accepted, in bytes once unpacked (all members together).
+MAX_NPZ_BYTES = 1 << 30
+#: Most members (arrays) an NPZ may hold.
+MAX_NPZ_MEMBERS = 256
+
+
+def read_npz(path: str | os.PathLike, kind: str = "an NPZ archive") -> dict:
+    """All ``.npy`` arrays of an NPZ archive, read without pickle and within bounds.
+
+    The zip directory is checked before anything is unpacked: at most
+    :data:`MAX_NPZ_MEMBERS` members and :data:`MAX_NPZ_BYTES` once uncompressed (so a zip
+    bomb costs nothing), and each array's header must declare exactly the bytes its member
+    holds (so a header cannot make numpy allocate more than the file contains).  Raises
+    :class:`InputError` naming the file and the array.
+    """
+    import zipfile
+
+    import numpy as np
+    from numpy.lib import format as npformat
+
+    from .errors import InputError
+
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            magic = fh.read(6)
+    except FileNotFoundError:
+        raise InputError("file not found", path=p) from None
+    except IsADirectoryError:
+        raise InputError(f"is a directory, expected {kind}", path=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the file: {exc.strerror or exc}", path=p) from None
+    if magic == b"\x93NUMPY":
+        raise InputError(f"a single .npy array, not an NPZ archive of named arrays; expected {kind}", path=p)
+    if not magic:
+        raise InputError(f"empty file; expected {kind}", path=p)
+    try:
+        zf = zipfile.ZipFile(p)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, ValueError, EOFError) as exc:
+        raise InputError(f"not {kind} (not a zip archive: {exc})", path=p) from None
+    out: dict[str, np.ndarray] = {}
+    with zf:
+        infos = [i for i in zf.infolist() if i.filename.endswith(".npy")]
+        if len(infos) > MAX_NPZ_MEMBERS:
+            raise InputError(f"{len(infos)} arrays; physmocap reads at most {MAX_NPZ_MEMBERS} from an NPZ", path=p)
+        total = sum(i.file_size for i in infos)
+        if total > MAX_NPZ_BYTES:
+            raise InputError(
+                f"its arrays would unpack to {total / 2**20:.0f} MB, more than the {MAX_NPZ_BYTES >> 20} MB "
+                "physmocap reads from an NPZ",
+                path=p,
+            )
+        for info in infos:
+            key = info.filename[:-4]
+            try:
+                with zf.open(info) as fh:
+                    version = npformat.read_magic(fh)
+                    if version == (1, 0):
+                        shape, fortran, dtype = npformat.read_array_header_1_0(fh)
+                    elif version == (2, 0):
+                        shape, fortran, dtype = npformat.read_array_header_2_0(fh)
+                    else:
+                        raise ValueError(f"unsupported .npy version {version}")
+                    if dtype.hasobject:
+                        raise InputError(
+                            f"array {key!r} holds Python objects, which physmocap does not unpickle; "
+                            "store strings as a string array (np.array(names, dtype=str))",
+                            path=p,
+                        )
+                    count = 1
+                    for n in shape:
+                        count *= int(n)
+                    need = count * dtype.itemsize
+                    if need != info.file_size - fh.tell():
+                        raise ValueError(f"its header declares shape {shape} ({need} bytes) but it holds "
+                                         f"{info.file_size - fh.tell()} bytes")
+                    arr = np.empty(count, dtype=dtype)
+                    buf = memoryview(arr.view(np.uint8).reshape(-1)) if need else memoryview(b"")
+                    got = 0
+                    while got < need:
+                        n = fh.readinto(buf[got:])
+                        if not n:
+                            raise ValueError("the member is truncated")
+                        got += n
+            except InputError:
+                raise
+            except Exception as exc:  # zipfile / npy header errors of many types
+                detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                raise InputError(f"array {key!r} is not readable ({detail})", path=p) from None
+            out[key] = arr.reshape(shape, order="F" if fortran else "C")
+    return out
+
+
+def npz_strings(arr, key: str, path: str | os.PathLike, count: int | None = None) -> list[str]:
+    """A 1-D string array of an NPZ as ``str`` (bytes must be UTF-8); InputError otherwise."""
+    import numpy as np
+
+    from .errors import InputError
+
+    arr = np.asarray(arr)
+    want = f"({count},)" if count is not None else "1-D"
+    if arr.ndim != 1 or arr.dtype.kind not in "US" or (count is not None and arr.shape != (count,)):
+        raise InputError(f"'{key}' must be a {want} array of strings, got {arr.dtype} {arr.shape}", path=path)
+    if arr.dtype.kind == "U":
+        out = [str(x) for x in arr]
+        for i, s in enumerate(out):  # a U array can hold lone surrogates: not text a file can name
+            try:
+                s.encode("utf-8")
+            except UnicodeEncodeError:
+                raise InputError(f"'{key}'[{i}] is not valid Unicode text", path=path) from None
+        return out
+    try:
+        return [bytes(x).decode("utf-8") for x in arr]
+    except UnicodeDecodeError:
+        i = next(i for i, x in enumerate(arr) if not _utf8(bytes(x)))
+        raise InputError(f"'{key}'[{i}] is not UTF-8 text ({bytes(arr[i])[:40]!r})", path=path) from None
+
+
+def _utf8(b: bytes) -> bool:
+    try:
+        b.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return True
+
+
+def npz_text(arr, key: str, path: str | os.PathLike) -> str:
+    """A scalar (0-d or one-element) string of an NPZ as ``str``; InputError otherwise."""
+    import numpy as np
+
+    from .errors import InputError
+
+    arr = np.asarray(arr)
+    if arr.size != 1 or arr.ndim > 1 or arr.dtype.kind not in "US":
+        raise InputError(f"'{key}' must be a single string, got {arr.dtype} {arr.shape}", path=path)
+    return npz_strings(arr.reshape(1), key, path)[0]
+
+
+def npz_number(arr, key: str, path: str | os.PathLike, lo: float, hi: float, integer: bool = False) -> float:
+    """A scalar (0-d or one-element) real number of an NPZ within ``[lo, hi]``; InputError
+    otherwise (strings, NaN, booleans, arrays, out of range)."""
+    import math
+
+    import numpy as np
+
+    from .errors import InputError
+
+    arr = np.asarray(arr)
+    kinds = "iu" if integer else "iuf"
+    what = "an integer" if integer else "a number"
+    if arr.size != 1 or arr.ndim > 1 or arr.dtype.kind not in kinds:
+        raise InputError(f"'{key}' must be {what}, got {arr.dtype} {arr.shape}", path=path)
+    v = arr.reshape(-1)[0]
+    x = int(v) if integer else float(v)
+    if not (math.isfinite(x) and lo <= x <= hi):
+        raise InputError(f"'{key}' is {x!r}; expected {what} from {lo:g} to {hi:g}", path=path)
+    return x
+
+
+def npz_array(arr, key: str, path: str | os.PathLike, shape: tuple, kinds: str = "iuf"):
+    """An NPZ array of real numbers (or ``kinds``) whose shape matches ``shape`` (a string
+    such as ``"F"``: any length), as float (or as is for booleans); InputError naming the
+    array otherwise."""
+    import numpy as np
+
+    from .errors import InputError
+
+    arr = np.asarray(arr)
+    ok = arr.ndim == len(shape) and all(isinstance(s, str) or s == n for s, n in zip(shape, arr.shape))
+    if not ok or arr.dtype.kind not in kinds:
+        want = "(" + ", ".join(str(s) for s in shape) + ("," if len(shape) == 1 else "") + ")"
+        what = "booleans" if kinds == "b" else "numbers"
+        raise InputError(f"'{key}' must be a {want} array of {what}, got {arr.dtype} {arr.shape}", path=path)
+    return arr if kinds == "b" else arr.astype(float)

@@ -42,6 +42,20 @@ __all__ = ["Skeleton", "Motion", "forward_kinematics", "MAX_FPS"]
 MAX_FPS = 2000.0
 
 
+#: Most joints (end sites included) a skeleton may have, and the deepest chain from a root:
+#: real captures have at most a few hundred joints, chains of a few dozen.
+MAX_JOINTS = 1000
+MAX_DEPTH = 100
+
+
+def hierarchy_depth(parents) -> int:
+    """Number of joints on the longest root-to-leaf chain (``parents[j] < j``)."""
+    depth: list[int] = []
+    for p in parents:
+        depth.append(1 if p < 0 else depth[p] + 1)
+    return max(depth, default=0)
+
+
 @dataclass(frozen=True, eq=False)
 class Skeleton:
     """A tree (or forest) of named joints with rest offsets.
@@ -76,6 +90,8 @@ class Skeleton:
                 f"skeleton arrays disagree: {n} names, parents {parents.shape}, "
                 f"offsets {offsets.shape}, end_site {end_site.shape}"
             )
+        if n > MAX_JOINTS:
+            raise ValueError(f"{n} joints; physmocap reads skeletons of at most {MAX_JOINTS}")
         if len(set(names)) != n:
             dup = sorted({x for x in names if names.count(x) > 1})
             raise ValueError(f"duplicate joint names: {dup}")
@@ -85,6 +101,9 @@ class Skeleton:
             raise ValueError("parent indices must be >= -1")
         if not np.all(np.isfinite(offsets)):
             raise ValueError("skeleton offsets must be finite")
+        if hierarchy_depth(parents.tolist()) > MAX_DEPTH:
+            raise ValueError(f"a chain of {hierarchy_depth(parents.tolist())} joints; physmocap reads chains "
+                             f"of at most {MAX_DEPTH}")
         for arr in (parents, offsets, end_site):
             arr.setflags(write=False)
         object.__setattr__(self, "names", names)

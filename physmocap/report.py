@@ -38,7 +38,6 @@ from __future__ import annotations
 import inspect
 import json
 import math
-import zipfile
 import os
 import sys
 from pathlib import Path
@@ -423,35 +422,31 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
         raise InputError("trajectory file not found", path=p)
     if p.is_dir():
         raise InputError("is a directory, expected a trajectory .npz file", path=p)
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            if not hasattr(z, "files"):
-                raise ValueError("a single array")
-            data = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        why = "empty" if p.stat().st_size == 0 else "not an NPZ archive" if "pickle" in str(exc) else str(exc) or type(exc).__name__
-        raise InputError(
-            f"not a trajectory .npz file ({why}); expected the file written by physmocap retarget --qpos", path=p
-        ) from None
+    from .fileio import npz_array, npz_number, npz_text, read_npz
+    from .sources import FPS_RANGE, MAX_DISTANCE
+
+    data = read_npz(p, "a trajectory .npz file written by physmocap retarget --qpos")
     for key in ("qpos", "fps"):
         if key not in data:
             raise InputError(f"trajectory file has no {key!r} array (expected a physmocap retarget --qpos file)", path=p)
-    qpos = np.asarray(data["qpos"], dtype=float)
-    fps = float(np.asarray(data["fps"]).reshape(-1)[0]) if data["fps"].size else float("nan")
-    if qpos.ndim != 2 or qpos.shape[0] == 0:
-        raise InputError(f"'qpos' must be a (frames, nq) array, got shape {qpos.shape}", path=p)
-    if not (math.isfinite(fps) and fps > 0):
-        raise InputError(f"'fps' must be a positive number, got {fps}", path=p)
-    bad = ~np.all(np.isfinite(qpos), axis=1)
+    qpos = npz_array(data["qpos"], "qpos", p, ("frames", "nq"))
+    fps = npz_number(data["fps"], "fps", p, *FPS_RANGE)
+    if qpos.shape[0] == 0:
+        raise InputError(f"'qpos' must be a (frames, nq) array with frames, got shape {qpos.shape}", path=p)
+    bad = ~np.all(np.isfinite(qpos) & (np.abs(qpos) <= MAX_DISTANCE), axis=1)
     if bad.any():
-        raise InputError("'qpos' has non-finite values", path=p, frame=int(np.argmax(bad)))
+        raise InputError(
+            f"'qpos' has values that are not finite or beyond {MAX_DISTANCE:g} (metres or radians)",
+            path=p,
+            frame=int(np.argmax(bad)),
+        )
     if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
         if character is None:
             if "mjcf_path" not in data:
                 raise InputError("trajectory file names no character (mjcf_path); pass --character", path=p)
             from .resources import resolve_portable
 
-            character = resolve_portable(str(data["mjcf_path"]), p.parent)
+            character = resolve_portable(npz_text(data["mjcf_path"], "mjcf_path", p), p.parent)
             if Path(character).suffix and not Path(character).exists():
                 raise InputError(
                     f"the character's MJCF {character!r} named in the file does not exist; pass --character",
@@ -464,29 +459,44 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             f"'qpos' has {qpos.shape[1]} columns but the character {getattr(character, 'name', '')!r} has nq={nq}",
             path=p,
         )
-    source = str(data["source"]) if "source" in data else "<unknown>"
+    source = npz_text(data["source"], "source", p) if "source" in data else "<unknown>"
     traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
-    traj.targets = _stored_targets(data, qpos.shape[0], fps, p)
+    traj.targets = _stored_targets(data, qpos.shape[0], fps, p, character)
     if "source_start" in data:
-        traj.source_start = int(np.asarray(data["source_start"]).reshape(-1)[0])
+        traj.source_start = int(npz_number(data["source_start"], "source_start", p, 0, 2**40, integer=True))
     return traj
 
 
-def _stored_targets(data: dict, frames: int, fps: float, path: Path):
+def _stored_targets(data: dict, frames: int, fps: float, path: Path, character=None):
     """The IK targets saved in a trajectory NPZ (``target_*`` arrays), or None."""
     from .ik.targets import Targets
 
     if "target_names" not in data:
         return None
-    names = tuple(str(n) for n in data["target_names"])
+    from .fileio import npz_array, npz_strings
+
+    names = tuple(npz_strings(data["target_names"], "target_names", path))
     N = len(names)
-    try:
-        pos = np.asarray(data["target_positions"], dtype=float).reshape(frames, N, 3)
-        quat = np.asarray(data["target_orientations"], dtype=float).reshape(frames, N, 4)
-        has_q = np.asarray(data["target_has_orientation"], dtype=bool).reshape(N)
-        valid = np.asarray(data["target_valid"], dtype=bool).reshape(frames, N)
-    except (KeyError, ValueError) as exc:
-        raise InputError(f"the stored IK targets are malformed: {exc}", path=path) from None
+    if len(set(names)) != N:
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"'target_names' lists {', '.join(dup[:5])} more than once", path=path)
+    tracked = getattr(character, "tracked", None)
+    if tracked is not None:
+        unknown = [n for n in names if n not in tracked]
+        if unknown:
+            raise InputError(
+                f"'target_names' has {', '.join(unknown[:5])}, which the character "
+                f"{getattr(character, 'name', '')!r} does not track",
+                path=path,
+            )
+    missing = [k for k in ("target_positions", "target_orientations", "target_has_orientation", "target_valid")
+               if k not in data]
+    if missing:
+        raise InputError(f"the stored IK targets lack {', '.join(missing)}", path=path)
+    pos = npz_array(data["target_positions"], "target_positions", path, (frames, N, 3))
+    quat = npz_array(data["target_orientations"], "target_orientations", path, (frames, N, 4))
+    has_q = npz_array(data["target_has_orientation"], "target_has_orientation", path, (N,), kinds="b")
+    valid = npz_array(data["target_valid"], "target_valid", path, (frames, N), kinds="b")
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
         raise InputError("the stored IK targets have non-finite values", path=path)
     return Targets(names, pos, quat, has_q, valid, fps=fps)

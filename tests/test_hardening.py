@@ -132,3 +132,360 @@ def test_outputs_carry_no_absolute_paths(tmp_path, capsys):
         assert str(z["mjcf_path"]) == "../chars/robot.xml" and str(z["source"]) == "example"
     capsys.readouterr()
     assert main(["report", str(out)]) == 0
+
+
+# --- part 2: structure, sizes and types of every input ------------------------------------
+def _npy(arr) -> bytes:
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.save(buf, arr)
+    return buf.getvalue()
+
+
+def _npy_header(shape) -> bytes:
+    import io
+
+    from numpy.lib import format as npformat
+
+    buf = io.BytesIO()
+    npformat.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": shape})
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def minimal_trajectory():
+    """The arrays of a tiny valid trajectory NPZ of the bundled humanoid (3 frames standing)."""
+    import numpy as np
+
+    from physmocap.models import load_character
+
+    nq = load_character("humanoid").model.nq
+    qpos = np.zeros((3, nq))
+    qpos[:, 2], qpos[:, 3] = 1.0, 1.0
+    return {"qpos": qpos, "fps": np.array(30.0), "mjcf_path": np.array("humanoid"), "source": np.array("example")}
+
+
+@pytest.mark.parametrize("command", ["inspect", "report"])
+def test_npz_bombs_are_refused_from_the_zip_directory(tmp_path, capsys, monkeypatch, command):
+    """Every NPZ reader checks the members' uncompressed sizes before unpacking, and that each
+    array's header declares exactly the bytes its member holds."""
+    import zipfile
+
+    import physmocap.fileio as fileio
+
+    monkeypatch.setattr(fileio, "MAX_NPZ_BYTES", 1 << 20)  # 1 MB: the bomb below unpacks to 2 MB
+    key = "positions" if command == "inspect" else "qpos"
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as z:
+        z.writestr(f"{key}.npy", _npy_header(((2 << 20) // 72, 3, 3)) + bytes(((2 << 20) // 72) * 72))
+    assert bomb.stat().st_size < 20000
+    assert main([command, str(bomb)]) == 2
+    line = _one_line(capsys)
+    assert "bomb.npz" in line and "would unpack to 2 MB" in line
+    liar = tmp_path / "liar.npz"  # a header declaring 10^12 frames over 72 stored bytes
+    with zipfile.ZipFile(liar, "w") as z:
+        z.writestr(f"{key}.npy", _npy_header((10**12, 3, 3)) + bytes(72))
+    assert main([command, str(liar)]) == 2
+    line = _one_line(capsys)
+    assert "liar.npz" in line and f"array '{key}'" in line and "declares shape" in line
+
+
+@pytest.mark.parametrize(
+    "field, value, needle",
+    [
+        ("fps", "thirty", "'fps' must be a number"),
+        ("fps", 1e308, "'fps' is 1e+308"),
+        ("source_start", -5, "'source_start' is -5"),
+        ("source_start", "x", "'source_start' must be an integer"),
+        ("target_names", "abc", "'target_names' must be a 1-D array of strings"),
+        ("target_names", [b"\xff\xfe"], "'target_names'[0] is not UTF-8"),
+        ("mjcf_path", b"\xff.xml", "'mjcf_path'[0] is not UTF-8"),
+        ("qpos", [["a"]], "'qpos' must be a (frames, nq) array of numbers"),
+        ("qpos", "far", "beyond 1000"),
+        ("plain", None, "a single .npy array"),
+    ],
+)
+def test_trajectory_npz_fields_are_checked(tmp_path, capsys, minimal_trajectory, field, value, needle):
+    import numpy as np
+
+    data = dict(minimal_trajectory)
+    path = tmp_path / "traj.npz"
+    if field == "plain":
+        path.write_bytes(_npy(data["qpos"]))
+    else:
+        if value == "far":
+            value = data["qpos"] + 1e300
+        data[field] = np.array(value)
+        if field == "target_names":  # with the other target arrays, so only the names are wrong
+            data.update(target_positions=np.zeros((3, 1, 3)), target_orientations=np.zeros((3, 1, 4)),
+                        target_has_orientation=np.zeros(1, bool), target_valid=np.ones((3, 1), bool))
+        np.savez(path, **data)
+    assert main(["report", str(path), "--no-source"]) == 2
+    line = _one_line(capsys)
+    assert "traj.npz" in line and needle in line, line
+
+
+def test_minimal_trajectory_is_accepted(tmp_path, capsys, minimal_trajectory):
+    import numpy as np
+
+    path = tmp_path / "traj.npz"
+    np.savez(path, **minimal_trajectory)
+    assert main(["report", str(path), "--no-source"]) == 0
+
+
+@pytest.fixture(scope="module")
+def small_mcap(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mcap") / "walk.mcap"
+    assert main(["convert", "example", str(path), "--end", "10"]) == 0
+    return path
+
+
+def _rewrite_mcap(src, dst, meta_fn=None, msg_fn=None):
+    """Copy an MCAP, changing its skeleton metadata and / or its transform messages."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as fh, open(dst, "wb") as out:
+        reader = make_reader(fh)
+        w = Writer(out)
+        w.start()
+        schemas, chans = {}, {}
+        for s, c, m in reader.iter_messages():
+            if s.id not in schemas:
+                schemas[s.id] = w.register_schema(s.name, s.encoding, s.data)
+            if c.id not in chans:
+                chans[c.id] = w.register_channel(c.topic, c.message_encoding, schemas[s.id], c.metadata)
+            data = msg_fn(m.data) if msg_fn and c.topic.endswith("/tf") else m.data
+            w.add_message(chans[c.id], m.log_time, data, m.publish_time)
+        for md in reader.iter_metadata():
+            meta = dict(md.metadata)
+            if meta_fn:
+                meta_fn(meta)
+            w.add_metadata(md.name, meta)
+        w.finish()
+
+
+DEEP = "[" * 100000 + "]" * 100000
+BIG = "9" * 400
+
+
+@pytest.mark.parametrize(
+    "key, value, needle",
+    [
+        ("parents", '"abc"', "'parents' must be a list of 38 integers"),
+        ("parents", "[-1" + ", 99" * 37 + "]", "'parents' item 1 is 99"),
+        ("parents", "[-1" + f", {BIG}" * 37 + "]", "'parents' item 1 must be an integer"),
+        ("joints", "5", "'joints' must be a list of strings"),
+        ("joints", DEEP, "'joints' is not valid JSON (lists or objects nested too deeply)"),
+        ("offsets", '"x"', "'offsets' must be a list of 38 [x, y, z]"),
+        ("offsets", f"[[{BIG}, 0, 0]]", "'offsets' must be a list of 38"),
+        ("translated", "[500]", "'translated' must list joint indices"),
+        ("translated", '"a"', "'translated' must be a list of integers"),
+        ("num_frames", "1000000", "'num_frames' is 1e+06; expected an integer from 1 to 50"),
+        ("num_frames", BIG, "'num_frames' must be an integer"),
+        ("start_time_ns", BIG, "'start_time_ns' must be an integer"),
+        ("fps", "1e308", "'fps' is 1e+308"),
+        ("source_unit_scale", "1e400", "'source_unit_scale' is inf"),
+        ("meta", DEEP, "'meta' is not valid JSON (lists or objects nested too deeply)"),
+        ("meta", "[" * 100 + "]" * 100, "must be a JSON object"),
+        ("meta", "{\"a\": " + "[" * 100 + "]" * 100 + "}", "'meta' is nested deeper than 64 levels"),
+        ("meta", "[1, 2]", "'meta' must be a JSON object"),
+        ("meta", '{"floor_z": "x"}', "'meta' entry 'floor_z' has the wrong type"),
+        ("meta", '{"format": 5}', "'meta' entry 'format' has the wrong type"),
+    ],
+)
+def test_mcap_skeleton_metadata_is_checked(tmp_path, capsys, small_mcap, key, value, needle):
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(small_mcap, bad, meta_fn=lambda m: m.__setitem__(key, value))
+    assert main(["inspect", str(bad)]) == 2
+    line = _one_line(capsys)
+    assert "bad.mcap" in line and "skeleton /skeleton" in line and needle in line, line
+
+
+@pytest.mark.parametrize(
+    "old, new, needle",
+    [
+        (b'"w":1.0', b'"w":1e308', "'rotation' is not a rotation (quaternion norm inf)"),
+        (b'"w":1.0', b'"w":' + BIG.encode(), "field 'w' must be a finite number, got inf"),
+        (b'"sec":0', b'"sec":1e20', "timestamp sec and nsec must be non-negative integers"),
+        (b'"sec":0', b'"sec":100000000000000000000', "timestamp sec and nsec must be non-negative integers"),
+        (b'"sec":0', b'"sec":4611686019', "timestamp 4.61169e+09 s is out of range"),
+        (b'"transforms":[', b'"x":' + DEEP.encode() + b',"transforms":[', "invalid JSON (lists or objects nested too deeply"),
+    ],
+)
+def test_mcap_messages_are_checked(tmp_path, capsys, small_mcap, old, new, needle):
+    bad = tmp_path / "bad.mcap"
+    _rewrite_mcap(small_mcap, bad, msg_fn=lambda d: d.replace(old, new, 1))
+    assert main(["inspect", str(bad)]) == 2
+    line = _one_line(capsys)
+    assert "bad.mcap" in line and "message 0 on /skeleton/tf" in line and needle in line, line
+
+
+@pytest.mark.parametrize("shape, needle", [("deep", "nested more than 100 levels"), ("wide", "more than 1000 joints")])
+def test_huge_bvh_hierarchies_are_refused_quickly(tmp_path, capsys, shape, needle):
+    """A 20,000-deep chain (or 20,000 siblings) is refused at the joint that passes the limit."""
+    import time
+
+    n = 20000
+    lines = ["HIERARCHY", "ROOT Hips", "{", "OFFSET 0 0 0",
+             "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"]
+    if shape == "deep":
+        for i in range(n):
+            lines += [f"JOINT J{i}", "{", "OFFSET 0 0.001 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+        lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * n
+    else:
+        for i in range(n):
+            lines += [f"JOINT J{i}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation", "}"]
+    lines += ["}", "MOTION", "Frames: 1", "Frame Time: 0.033", " ".join(["0"] * (6 + 3 * n))]
+    path = tmp_path / "huge.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    t0 = time.perf_counter()
+    assert main(["convert", str(path), str(tmp_path / "out.bvh")]) == 2
+    assert time.perf_counter() - t0 < 5
+    line = _one_line(capsys)
+    assert "huge.bvh:" in line and needle in line, line
+    assert not (tmp_path / "out.bvh").exists()
+
+
+def _jsonl_frame(t=None, names=("head", "left_hip", "right_hip")) -> str:
+    import json
+
+    frame = {"joints": {n: [0.1 * i, 0.0, 1.0] for i, n in enumerate(names)}}
+    if t is not None:
+        frame["time"] = t
+    return json.dumps(frame)
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ('{"fps": 30, "x": ' + "[" * 100000 + "]" * 100000 + "}\n" + _jsonl_frame(), ":1: invalid JSON (lists or objects nested too deeply)"),
+        ('{"fps": 30, "joint_names": 5}\n' + _jsonl_frame(), "'joint_names' must be a list of names"),
+        (_jsonl_frame(0) + "\n" + _jsonl_frame(0).replace('"time": 0', '"time": ' + "9" * 400),
+         ":2: 'time' must be a finite number of seconds"),
+        ('{"fps": 30}\n' + _jsonl_frame(0) + "\n" + _jsonl_frame(1e20), "times do not fit"),
+        (_jsonl_frame(0) + "\n" + _jsonl_frame(1e-300), "median spacing gives 1e+300 fps"),
+        ('{"fps": 30}\n' + "\n".join(_jsonl_frame(names=[f"j{i}_{k}" for k in range(4)]) for i in range(225)),
+         "900 samples would be spread over 225 frames x 900 joints"),
+        ('{"fps": 30}\n' + _jsonl_frame(names=[f"j{k}" for k in range(1001)]), "1001 joints; physmocap reads at most 1000"),
+    ],
+)
+def test_jsonl_structure_and_numbers_are_checked(tmp_path, capsys, text, needle):
+    path = tmp_path / "bad.jsonl"
+    path.write_text(text)
+    assert main(["inspect", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "bad.jsonl" in line and needle in line, line
+
+
+def _robot_map() -> str:
+    from physmocap.resources import mjcf_dir
+
+    return (mjcf_dir() / "robot.map.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    "edit, needle",
+    [
+        (("left = [\"l_heel\", \"l_toe\"]", "left = [" + ", ".join(['"l_heel"'] * 1000) + "]"),
+         "[contacts] left: site 'l_heel' is listed more than once"),
+        (("right = [\"r_heel\", \"r_toe\"]", "right = [\"l_heel\", \"r_toe\"]"),
+         "[contacts] right: site 'l_heel' is already a contact of the left foot"),
+        (("left_toe = \"site:l_ball_site\"", "left_toe = \"site:l_ankle_site\""),
+         "[joints] left_toe: 'site:l_ankle_site' is already the frame of left_ankle"),
+        (("pelvis = \"body:base_link\"", "pelvis = \"body:base_link\"\n\"pelvis\" = \"body:base_link\""),
+         "not valid TOML: Cannot overwrite a value"),
+        (("[rest]", "[sites]\nx = " + "[" * 100000 + "]" * 100000 + "\n[rest]"), "nested deeper than 64 levels"),
+        (("[rest]", "# " + "x" * (2 << 20) + "\n[rest]"), "larger than 1024 KB"),
+        (("name = \"robot\"", "name = \"rob\udcffot\""), ":5: not UTF-8 text (byte 0xff)"),
+        (("default = 860", "default = " + "9" * 400), "[velocity_limits] default: expected a finite number, got inf"),
+    ],
+)
+def test_character_mapping_files_are_bounded_and_without_duplicates(tmp_path, capsys, edit, needle):
+    text = _robot_map()
+    assert edit[0] in text
+    path = tmp_path / "bad.map.toml"
+    path.write_bytes(text.replace(*edit).encode("utf-8", "surrogateescape"))
+    assert main(["character", "info", "robot", "--map", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "bad.map.toml" in line and needle in line, line
+
+
+def test_mapping_from_dev_zero_is_refused(capsys):
+    assert main(["inspect", "example", "--map", "/dev/zero"]) == 2
+    assert "/dev/zero: mapping file is larger than 1024 KB" in _one_line(capsys)
+
+
+def test_source_mapping_lists_without_duplicates(tmp_path, capsys):
+    path = tmp_path / "src.map.toml"
+    path.write_text('[joints]\nneck = ["Neck", "Neck1", "Neck"]\n')
+    assert main(["inspect", "example", "--map", str(path)]) == 2
+    assert "src.map.toml:2: entry 'neck' lists 'Neck' more than once" in _one_line(capsys)
+
+
+@pytest.mark.parametrize("command", ["replay", "retarget", "clean"])
+def test_empty_clip_is_refused_by_commands_that_process_motion(tmp_path, capsys, command):
+    path = tmp_path / "empty.bvh"
+    path.write_text(BVH.replace("FT", "0.033").split("Frames:")[0] + "Frames: 0\nFrame Time: 0.033\n")
+    argv = [command, str(path)] + ([] if command == "replay" else ["-o", str(tmp_path / "out.bvh")])
+    assert main(argv) == 2
+    assert "empty.bvh: the clip has 0 frames" in _one_line(capsys)
+    assert not (tmp_path / "out.bvh").exists()
+
+
+@pytest.mark.parametrize(
+    "old, new, needle",
+    [
+        (b'name="lumbar_flexion"', b'name="lumbar_\xffflexion"', "the name b'lumbar_\\xffflexion' is not UTF-8 text"),
+        (b'<body name="lumbar" pos="0 0 0.121719"', b'<body name="lumbar" pos="1e308 0 0"',
+         "body 'lumbar' is not at a finite place within 1 km"),
+    ],
+)
+def test_mjcf_names_and_places_are_checked(tmp_path, capsys, old, new, needle):
+    import shutil
+
+    from physmocap.resources import mjcf_dir
+
+    xml = (mjcf_dir() / "humanoid.xml").read_bytes()
+    assert old in xml
+    (tmp_path / "odd.xml").write_bytes(xml.replace(old, new, 1))
+    shutil.copy(mjcf_dir() / "humanoid.map.toml", tmp_path / "odd.map.toml")
+    assert main(["character", "info", str(tmp_path / "odd.xml")]) == 2
+    line = _one_line(capsys)
+    assert "odd.xml" in line and needle in line, line
+
+
+def test_mcap_outputs_carry_no_absolute_paths(tmp_path):
+    """The same job in two folders gives the same MCAP bytes: the source is named relative to it."""
+    outs = []
+    for d in ("one", "two"):
+        (tmp_path / d / "in").mkdir(parents=True)
+        (tmp_path / d / "in" / "walk.bvh").write_bytes(resolve_input("example").read_bytes())
+        out = tmp_path / d / "walk.mcap"
+        assert main(["convert", str(tmp_path / d / "in" / "walk.bvh"), str(out), "--end", "5"]) == 0
+        outs.append(out.read_bytes())
+    assert outs[0] == outs[1] and str(tmp_path).encode() not in outs[0]
+
+
+@pytest.mark.parametrize("every", [False, True])
+def test_far_tracker_samples_are_refused_before_any_fit(tmp_path, capsys, every):
+    """The positional pipeline checks positions (in metres) before fitting the ground to them
+    (a clip of 1e308 everywhere used to break the ground plane's SVD)."""
+    rows = ["time,head_x,head_y,head_z,left_hip_x,left_hip_y,left_hip_z,right_hip_x,right_hip_y,right_hip_z"]
+    rows += [f"{f / 30},0,0,1.7,0,0.1,1,0,-0.1,1" for f in range(10)]
+    if every:
+        rows[1:] = [r.split(",")[0] + ",1e308" * 9 for r in rows[1:]]
+    else:
+        rows[4] = rows[4].replace(",0,0,1.7,", ",0,1e308,1.7,")
+    path = tmp_path / "far.npz"
+    import numpy as np
+
+    table = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    np.savez(path, positions=table[:, 1:].reshape(10, 3, 3), names=np.array(["head", "left_hip", "right_hip"]),
+             times=table[:, 0], units=np.array("m"))
+    assert main(["inspect", str(path)]) == 2
+    line = _one_line(capsys)
+    assert "far.npz: frame" in line and "is not a finite distance within 1 km" in line, line

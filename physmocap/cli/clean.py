@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
 
         require_matplotlib()
     check_not_input([args.output, args.report], [args.input])
-    motion = load_motion(args.input)
+    motion = load_motion(args.input, min_frames=1)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
     fixed, report = clean(motion)

@@ -131,19 +131,24 @@ def describe(motion, jmap) -> dict[str, Any]:
     }
 
 
+def _fmt(x: float | None, spec: str) -> str:
+    """A number of the report, or "n/a" where it is not finite (None in the JSON)."""
+    return "n/a" if x is None else format(x, spec)
+
+
 def _text(rep: dict[str, Any]) -> str:
     out: list[str] = []
     add = out.append
     add(f"file:      {rep['file']}" + (f" ({rep['format'].upper()}, {rep['kind']})" if rep["format"] else
                                         f" ({rep['kind']})"))
-    add(f"frames:    {rep['frames']} at {rep['fps']:.6g} fps, {rep['duration_s']:.3f} s")
+    add(f"frames:    {rep['frames']} at {_fmt(rep['fps'], '.6g')} fps, {_fmt(rep['duration_s'], '.3f')} s")
     det = "detected" if rep["units_detected"] else "given"
-    add(f"units:     {rep['units']} ({rep['unit_scale_m']:.6g} m per file unit, {det}); "
+    add(f"units:     {rep['units']} ({_fmt(rep['unit_scale_m'], '.6g')} m per file unit, {det}); "
         f"file up axis {rep['file_up']}")
-    add(f"height:    {rep['height_m']:.3f} m ({rep['height_pose']})"
+    add(f"height:    {_fmt(rep['height_m'], '.3f')} m ({rep['height_pose']})"
         + ("" if rep["height_pose"] == "rest pose" else
-           f"; the rest pose is not a standing body (rest extent {rep['rest_height_m']:.3f} m)"))
-    add(f"floor:     {rep['floor_m']:.3f} m (5th percentile of the lowest joint per frame)")
+           f"; the rest pose is not a standing body (rest extent {_fmt(rep['rest_height_m'], '.3f')} m)"))
+    add(f"floor:     {_fmt(rep['floor_m'], '.3f')} m (5th percentile of the lowest joint per frame)")
     add(f"skeleton:  {rep['num_joints']} joints, {rep['num_end_sites']} end sites")
     depth: dict[str, int] = {}
     for j in rep["joints"]:

@@ -94,7 +94,7 @@ def _load(args: argparse.Namespace):
             return preview_input(traj)
         from ..sources import load_motion
 
-        return preview_input_with_source(traj, load_motion(args.source), args.start, args.profile, args.source_map)
+        return preview_input_with_source(traj, load_motion(args.source, min_frames=1), args.start, args.profile, args.source_map)
     if args.source:
         raise OptionError("--source is for a trajectory .npz input; a motion file is its own source")
     from .retarget import retarget_from_args

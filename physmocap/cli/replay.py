@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(out)
     if args.stats:
         check_writable(args.stats)
-    motion = load_motion(args.input)
+    motion = load_motion(args.input, min_frames=1)
     character = load_character(args.character, args.map)
     floor = args.floor if args.floor is not None else motion.meta.get("floor_z")
     streamer = StreamingRetargeter(

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         from ..sources import load_motion
 
         opts = {"units": args.in_units} if args.in_units else {}
-        motion = load_motion(src, **opts)
+        motion = load_motion(src, min_frames=1, **opts)
         # as retarget does: cut at the source's rate (--start is a source frame), then resample
         if args.start >= motion.num_frames:
             raise OptionError(f"--start {args.start} is past the source's {motion.num_frames} frames", path=src)

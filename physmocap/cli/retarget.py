@@ -106,7 +106,7 @@ def retarget_from_args(args: argparse.Namespace):
         read_opts["units"] = args.in_units
     if getattr(args, "marker_set", None):
         read_opts["marker_set"] = args.marker_set
-    motion = load_motion(args.input, **read_opts)
+    motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)
     options = {}
     if args.max_iterations is not None:

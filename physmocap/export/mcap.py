@@ -514,7 +514,12 @@ def write_transforms_mcap(
             tf_ch = writer.register_channel(f"{t.topic_prefix}/tf", "json", tf_schema)
             j_ch = writer.register_channel(f"{t.topic_prefix}/joints", "json", joints_schema)
             p_ch = writer.register_channel(f"{t.topic_prefix}/poses", "json", poses_schema) if poses else 0
-            writer.add_metadata(SKELETON_METADATA, _metadata_record(t, fps, start_time_ns, poses))
+            record = _metadata_record(t, fps, start_time_ns, poses)
+            if "source" in record:  # named relative to the output, never the machine's absolute path
+                from ..resources import portable_path
+
+                record["source"] = portable_path(record["source"], Path(path).parent)
+            writer.add_metadata(SKELETON_METADATA, record)
             parent_ids = [WORLD_FRAME if q < 0 else t.frame_ids[q] for q in t.parents]
             plan.append((t, tf_ch, j_ch, p_ch, positions, world_pos, world_rot, parent_ids))
 

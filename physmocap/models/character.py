@@ -133,6 +133,33 @@ def _resolve(path: str | os.PathLike | None) -> Path:
 
 
 def _load_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
+    """Compile the MJCF (:func:`_compile_model`) and check what it holds: names that are
+    UTF-8 text, and bodies, sites and geoms at finite places within 1 km at the rest pose."""
+    model = _compile_model(path, mp)
+    names = bytes(model.names)
+    try:
+        names.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        lo, hi = names.rfind(b"\0", 0, exc.start) + 1, names.find(b"\0", exc.start)
+        bad = names[lo : hi if hi >= 0 else None]
+        raise InputError(f"the name {bad!r} is not UTF-8 text", path=path) from None
+    data = mujoco.MjData(model)
+    with np.errstate(all="ignore"):
+        mujoco.mj_kinematics(model, data)
+        for what, arr, name_of in (("body", data.xpos, model.body), ("site", data.site_xpos, model.site),
+                                   ("geom", data.geom_xpos, model.geom)):
+            bad = ~np.all(np.isfinite(arr) & (np.abs(arr) < 1000.0), axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise InputError(
+                    f"{what} {name_of(i).name or i!r} is not at a finite place within 1 km at the rest pose "
+                    f"({arr[i].tolist()})",
+                    path=path,
+                )
+    return model
+
+
+def _compile_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
     """Compile the MJCF; with a mapping's ``[sites]``, add those sites first (MjSpec)."""
     if not path.exists():
         raise InputError("MJCF file not found", path=path)

@@ -205,6 +205,10 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
             raise mp.error(f"expected \"site:NAME\", \"body:NAME\" or \"NAME\", got {value!r}", "joints", canon)
         if kind not in ("site", "body", "auto") or not isinstance(name, str) or not name:
             raise mp.error(f"expected \"site:NAME\", \"body:NAME\" or \"NAME\", got {value!r}", "joints", canon)
+        other = next((c for c, tf in mp.joints.items() if (tf.kind, tf.name) == (kind, name)), None)
+        if other is not None:
+            raise mp.error(f"{value!r} is already the frame of {other}; each canonical joint needs its own",
+                           "joints", canon)
         mp.joints[canon] = TrackedFrame(kind, name)
 
     contacts = raw.get("contacts", {})
@@ -215,6 +219,12 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
             raise mp.error("expected left or right", "contacts", side)
         if not isinstance(sites, list) or not sites or not all(isinstance(s, str) for s in sites):
             raise mp.error("expected a non-empty list of site names", "contacts", side)
+        for i, site in enumerate(sites):  # a repeated site would be a repeated row in the IK's QP
+            if site in sites[:i]:
+                raise mp.error(f"site {site!r} is listed more than once", "contacts", side)
+            other = next((o for o, ss in mp.contacts.items() if site in ss), None)
+            if other is not None:
+                raise mp.error(f"site {site!r} is already a contact of the {other} foot", "contacts", side)
         mp.contacts[side] = tuple(sites)
 
     added = raw.get("sites", {})

@@ -31,8 +31,11 @@ READERS: dict[str, tuple[str, str]] = {
 }
 
 
-def load_motion(path: str | os.PathLike, **options) -> Motion:
-    """Read any supported capture file (``"example"`` is the bundled walk)."""
+def load_motion(path: str | os.PathLike, *, min_frames: int = 0, **options) -> Motion:
+    """Read any supported capture file (``"example"`` is the bundled walk).
+
+    ``min_frames``: refuse a clip with fewer frames (commands that process motion need one;
+    ``inspect`` and ``convert`` take an empty clip as it is)."""
     p = resolve_input(path)
     suffix = p.suffix.lower()
     if suffix not in READERS:
@@ -46,12 +49,30 @@ def load_motion(path: str | os.PathLike, **options) -> Motion:
     reader = getattr(importlib.import_module(module_name), func_name)
     motion = reader(Path(p), **options)
     check_plausible(motion, p)
+    if motion.num_frames < min_frames:
+        raise InputError(f"the clip has {motion.num_frames} frames; this command needs at least {min_frames}", path=p)
     return motion
 
 
 #: Plausible ranges of what a capture holds: frame rate (Hz), distances (metres).
 FPS_RANGE = (0.1, 10000.0)
 MAX_DISTANCE = 1000.0
+
+
+def check_grid(path: str | os.PathLike, frames: float, joints: int, samples: int) -> None:
+    """Refuse to lay ``samples`` values read from a file out as a ``frames x joints`` grid
+    much larger than the file holds (sparse frame numbers, times or joint names would
+    otherwise allocate gigabytes from a small file), or with more joints than any skeleton."""
+    from ..motion import MAX_JOINTS
+
+    if joints > MAX_JOINTS:
+        raise InputError(f"{joints} joints; physmocap reads at most {MAX_JOINTS}", path=path)
+    if frames * joints > 16 * samples + 100_000:
+        raise InputError(
+            f"{samples} samples would be spread over {frames:.6g} frames x {joints} joints; the recording "
+            "is too sparse to hold as a clip (a wrong frame rate, or corrupt frame numbers or times)",
+            path=path,
+        )
 
 
 def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
@@ -71,13 +92,7 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
         raise InputError(f"joint {names[j]}: offset {off[j].tolist()} is not a finite distance within 1 km", path=path)
 
     def first_bad(arr: np.ndarray, what: str, allow_nan: bool) -> None:
-        ok = np.abs(arr) < MAX_DISTANCE
-        if allow_nan:
-            ok |= np.isnan(arr)
-        ok = np.all(ok, axis=-1)
-        if not ok.all():
-            f, j = (int(x) for x in np.argwhere(~ok)[0])
-            raise InputError(f"frame {f}: {what} {j} is not a finite distance within 1 km", path=path)
+        check_distances(arr, path, what, names if what == "joint" else None, allow_nan)
 
     if motion.rotations is not None:
         norms = np.linalg.norm(motion.rotations, axis=-1)
@@ -89,3 +104,20 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
             first_bad(motion.translations, "translated joint", allow_nan=False)
     if motion.positions is not None:
         first_bad(motion.positions, "joint", allow_nan=True)
+
+
+def check_distances(arr, path: str | os.PathLike, what: str = "joint", names=None, allow_nan: bool = True) -> None:
+    """Refuse ``(F, J, 3)`` positions in metres that are not finite (NaN, a lost sample, is
+    allowed with ``allow_nan``) or farther than :data:`MAX_DISTANCE`, naming the frame and
+    joint (by name when ``names`` are given)."""
+    import numpy as np
+
+    with np.errstate(invalid="ignore"):
+        ok = np.abs(arr) < MAX_DISTANCE
+    if allow_nan:
+        ok |= np.isnan(arr)
+    ok = np.all(ok, axis=-1)
+    if not ok.all():
+        f, j = (int(x) for x in np.argwhere(~ok)[0])
+        label = names[j] if names is not None else j
+        raise InputError(f"frame {f}: {what} {label} is not a finite distance within 1 km", path=path)

@@ -367,7 +367,7 @@ def _parse_hierarchy(text: str, path: Path) -> list[_Joint]:
             if cur.end_site:
                 raise InputError(f"JOINT inside {_what(cur)}; expected 'OFFSET' or '}}'", path=path, line=line)
             cur.children += 1
-            stack.append(_open_joint(toks, joints, stack[-1], line, path, key))
+            stack.append(_open_joint(toks, joints, stack[-1], line, path, key, len(stack)))
         elif key in ("END", "ENDSITE"):
             if cur.end_site:
                 raise InputError(f"End Site inside {_what(cur)}; expected 'OFFSET' or '}}'", path=path, line=line)
@@ -380,6 +380,7 @@ def _parse_hierarchy(text: str, path: Path) -> list[_Joint]:
             if t != "{":
                 raise InputError(f"expected '{{' after End Site, found {_show(t)}", path=path, line=ln)
             cur.children += 1
+            _check_size(joints, len(stack), line, path)
             joints.append(_Joint(name="", parent=stack[-1], line=line, end_site=True))
             stack.append(len(joints) - 1)
         elif tok == "}":
@@ -409,7 +410,30 @@ def _what(j: _Joint) -> str:
     return "an End Site" if j.end_site else f"joint {j.name!r}"
 
 
-def _open_joint(toks: _Tokens, joints: list[_Joint], parent: int, line: int, path: Path, key: str) -> int:
+def _check_size(joints: list[_Joint], depth: int, line: int, path: Path) -> None:
+    """Refuse a hierarchy past :data:`~physmocap.motion.MAX_JOINTS` joints or
+    :data:`~physmocap.motion.MAX_DEPTH` levels as soon as the parser reaches it (a
+    20,000-deep chain would otherwise cost quadratic time and gigabytes downstream)."""
+    from ..motion import MAX_DEPTH, MAX_JOINTS
+
+    if len(joints) >= MAX_JOINTS:
+        raise InputError(
+            f"more than {MAX_JOINTS} joints (end sites included); physmocap reads skeletons of at most "
+            f"{MAX_JOINTS}",
+            path=path,
+            line=line,
+        )
+    if depth >= MAX_DEPTH:
+        raise InputError(
+            f"joints nested more than {MAX_DEPTH} levels deep; physmocap reads chains of at most {MAX_DEPTH}",
+            path=path,
+            line=line,
+        )
+
+
+def _open_joint(toks: _Tokens, joints: list[_Joint], parent: int, line: int, path: Path, key: str,
+                depth: int = 0) -> int:
+    _check_size(joints, depth, line, path)
     words = toks.rest_of_line(line)
     if not words:
         raise InputError(f"expected a joint name after {key}", path=path, line=line)

@@ -30,7 +30,6 @@ unless ``units=`` or ``up=`` say otherwise.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -40,8 +39,10 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import InputError, OptionError, warn
-from ..motion import Motion, Skeleton, forward_kinematics
+from ..fileio import parse_json
+from ..motion import MAX_JOINTS, Motion, Skeleton, forward_kinematics
 from ..rotations import Rotation, quat_mul, up_axis_matrix
+from . import check_grid
 
 __all__ = ["read_mcap", "list_skeletons"]
 
@@ -49,6 +50,9 @@ MAGIC = b"\x89MCAP0\r\n"
 TF_SCHEMAS = ("foxglove.FrameTransforms", "foxglove.FrameTransform")
 POSES_SCHEMA = "foxglove.PosesInFrame"
 SKELETON_METADATA = "physmocap.skeleton"
+#: Latest timestamp accepted (ns since the clock's epoch, about 146 years): later ones are
+#: corruption and would overflow 64-bit arithmetic.
+MAX_STAMP_NS = 2**62
 
 
 # --- raw records -------------------------------------------------------------------
@@ -136,10 +140,6 @@ def _describe_channels(raw: _Raw) -> str:
 _NUMS = (int, float)  # exact types: bool is excluded
 
 
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"non-finite number {name}")
-
-
 class _Decoder:
     """Decodes one channel's JSON messages with errors naming the message."""
 
@@ -158,8 +158,8 @@ class _Decoder:
 
     def load(self, k: int, data: bytes) -> dict:
         try:
-            obj = json.loads(data.decode("utf-8"), parse_constant=_reject_constant)
-        except (UnicodeDecodeError, ValueError) as exc:
+            obj = parse_json(data)
+        except ValueError as exc:  # also UnicodeDecodeError
             raise self.fail(k, f"invalid JSON ({exc})") from None
         if not isinstance(obj, dict):
             raise self.fail(k, "expected a JSON object")
@@ -191,35 +191,50 @@ class _Decoder:
         if not (all(type(c) in _NUMS for c in q) and math.isfinite(sum(q))):  # type: ignore[arg-type]
             q = [self.number(k, v, a, 0.0) for a in "xyz"] + [self.number(k, v, "w", 1.0)]
         n = math.sqrt(sum(c * c for c in q))
-        if n < 1e-6:
-            raise self.fail(k, f"field {key!r} is not a rotation (zero quaternion)")
+        if not (1e-6 <= n < 1e150):  # inf or 0 would normalise to a zero quaternion
+            raise self.fail(k, f"field {key!r} is not a rotation (quaternion norm {n:.3g})")
         if abs(n - 1.0) > 1e-9:
             q = [c / n for c in q]
         return q
 
     def stamp(self, k: int, obj: Any, log_time: int) -> int:
+        """The message's time (ns): its ``timestamp``, else the record's log time; both
+        within 0..:data:`MAX_STAMP_NS`."""
         ts = obj.get("timestamp") if isinstance(obj, dict) else None
+        t = None
         if ts is None:
-            return log_time
-        if type(ts) is dict and type(ts.get("sec")) is int and type(ts.get("nsec")) is int:
-            t = ts["sec"] * 1_000_000_000 + ts["nsec"]
+            pass
+        elif type(ts) is dict and type(ts.get("sec")) is int and type(ts.get("nsec")) is int:
             if ts["sec"] >= 0 and ts["nsec"] >= 0:
-                return t if t > 0 else log_time
-        if not isinstance(ts, dict):
-            raise self.fail(k, "field 'timestamp' must be an object with sec and nsec")
-        sec, nsec = ts.get("sec", 0), ts.get("nsec", 0)
-        if not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in (sec, nsec)):
-            raise self.fail(k, "timestamp sec and nsec must be non-negative integers")
-        t = sec * 1_000_000_000 + nsec
-        return t if t > 0 else log_time
+                t = ts["sec"] * 1_000_000_000 + ts["nsec"]
+        if t is None and ts is not None:
+            if not isinstance(ts, dict):
+                raise self.fail(k, "field 'timestamp' must be an object with sec and nsec")
+            sec, nsec = ts.get("sec", 0), ts.get("nsec", 0)
+            if not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in (sec, nsec)):
+                raise self.fail(k, f"timestamp sec and nsec must be non-negative integers, got {sec!r}, {nsec!r}")
+            t = sec * 1_000_000_000 + nsec
+        if not t:
+            t = log_time
+        if not 0 <= t <= MAX_STAMP_NS:
+            raise self.fail(k, f"timestamp {t / 1e9:.6g} s is out of range (0 to {MAX_STAMP_NS / 1e9:.3g} s)")
+        return t
 
 
 # --- frame grid -------------------------------------------------------------------
+def _max_frames(distinct_times: int) -> int:
+    """Most frames a clip with this many distinct timestamps may span (frames without a
+    message hold the previous one; more than this is a wrong fps or a corrupt clock)."""
+    return 4 * distinct_times + 10
+
+
 def _frame_grid(
     path: Path, times: Sequence[int], fps: float | None, start: int | None
 ) -> tuple[np.ndarray, float, int]:
     """Frame index per timestamp, the fps and the number of frames."""
-    t = np.asarray(times, dtype=np.int64)
+    from . import FPS_RANGE
+
+    t = np.asarray(times, dtype=np.int64)  # each within 0..MAX_STAMP_NS (_Decoder.stamp)
     uniq = np.unique(t)
     if fps is None:
         if uniq.size < 2:
@@ -227,18 +242,24 @@ def _frame_grid(
                 "cannot tell the frame rate from a single timestamp; give fps=", path=path
             )
         fps = 1e9 / float(np.median(np.diff(uniq)))
+        lo, hi = FPS_RANGE
+        if not lo <= fps <= hi:
+            raise InputError(
+                f"the timestamps' median spacing gives {fps:.6g} fps, outside {lo:g}-{hi:g}; give fps=",
+                path=path,
+            )
     t0 = int(uniq[0]) if start is None else int(start)
-    idx = np.rint((t - t0) * (float(fps) / 1e9)).astype(np.int64)
-    if idx.min() < 0:
+    fidx = np.rint((t - t0) * (float(fps) / 1e9))  # float: no int64 overflow before the checks
+    if fidx.min() < 0:
         raise InputError("messages stamped before the clip's start time", path=path)
-    F = int(idx.max()) + 1
-    if F > 4 * uniq.size + 10:
+    if fidx.max() + 1 > _max_frames(uniq.size):
         raise InputError(
             f"timestamps do not fit a {fps:.6g} fps clip ({uniq.size} distinct times would span "
-            f"{F} frames); give the right fps=",
+            f"{fidx.max() + 1:.6g} frames); give the right fps=",
             path=path,
         )
-    return idx, float(fps), F
+    idx = fidx.astype(np.int64)
+    return idx, float(fps), int(idx.max()) + 1
 
 
 def _hold_fill(arr: np.ndarray, have: np.ndarray) -> np.ndarray:
@@ -324,6 +345,7 @@ def _read_tf(
 
     idx, fps, F = _frame_grid(path, [s[0] for s in samples], fps, start)
     N = len(sorted_ids)
+    check_grid(path, F, N, len(samples))
     trans = np.zeros((F, N, 3))
     rots = np.zeros((F, N, 4))
     rots[..., 3] = 1.0
@@ -357,15 +379,105 @@ def _convert_rotational(
 
 
 # --- metadata tracks ----------------------------------------------------------------
-def _json_field(path: Path, meta: dict[str, str], key: str, default: Any = None) -> Any:
-    if key not in meta:
-        if default is not None:
+_REQUIRED = object()
+
+
+class _Meta:
+    """Typed, range-checked fields of one ``physmocap.skeleton`` metadata record (every value
+    is a JSON text); errors name the file, the skeleton and the field."""
+
+    def __init__(self, path: Path, meta: dict[str, str]) -> None:
+        self.path = path
+        self.meta = meta
+        prefix = meta.get("topic_prefix", "/skeleton")
+        self.prefix = prefix if len(prefix) <= 200 else prefix[:200] + "..."
+
+    def fail(self, key: str, what: str) -> InputError:
+        return InputError(f"skeleton {self.prefix}: physmocap.skeleton metadata {key!r} {what}", path=self.path)
+
+    def json(self, key: str, default: Any = _REQUIRED) -> Any:
+        if key not in self.meta:
+            if default is _REQUIRED:
+                raise self.fail(key, "is missing")
             return default
-        raise InputError(f"physmocap.skeleton metadata lacks {key!r}", path=path)
-    try:
-        return json.loads(meta[key], parse_constant=_reject_constant)
-    except ValueError as exc:
-        raise InputError(f"physmocap.skeleton metadata {key!r} is not valid JSON ({exc})", path=path) from None
+        try:
+            return parse_json(self.meta[key])
+        except ValueError as exc:
+            raise self.fail(key, f"is not valid JSON ({exc})") from None
+
+    def number(self, key: str, lo: float, hi: float, integer: bool = False, default: Any = _REQUIRED) -> float:
+        v = self.json(key, default)
+        if isinstance(v, str):  # physmocap writes numbers as JSON text; tolerate a quoted one
+            try:
+                v = parse_json(v)
+            except ValueError:
+                pass
+        kind = "an integer" if integer else "a number"
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not isinstance(v, int)):
+            raise self.fail(key, f"must be {kind}, got {str(v)[:40]!r}")
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise self.fail(key, f"is {v:.6g}; expected {kind} from {lo:g} to {hi:g}")
+        return v
+
+    def items(self, key: str, kind: str, count: int | None = None, default: Any = _REQUIRED) -> list:
+        """A JSON list of ``count`` items of ``kind``: "str", "int", "bool" or "vec3"."""
+        v = self.json(key, default)
+        checks = {
+            "str": lambda x: isinstance(x, str),
+            "int": lambda x: isinstance(x, int) and not isinstance(x, bool),
+            "bool": lambda x: isinstance(x, bool),
+            "vec3": lambda x: isinstance(x, list) and len(x) == 3 and all(
+                isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in x),
+        }
+        names = {"str": "strings", "int": "integers", "bool": "true/false values", "vec3": "[x, y, z] finite numbers"}
+        size = f"{count} " if count is not None else ""
+        if not isinstance(v, list) or (count is not None and len(v) != count):
+            got = f"{len(v)} items" if isinstance(v, list) else type(v).__name__
+            raise self.fail(key, f"must be a list of {size}{names[kind]}, got {got}")
+        for i, x in enumerate(v):
+            if not checks[kind](x):
+                one = {"str": "a string", "int": "an integer", "bool": "true or false", "vec3": "[x, y, z] finite numbers"}
+                raise self.fail(key, f"item {i} must be {one[kind]}, got {str(x)[:40]!r}")
+        return v
+
+
+def _is_str_list(v: Any) -> bool:
+    return isinstance(v, list) and all(isinstance(x, str) for x in v)
+
+
+#: The source motion's ``meta`` entries physmocap acts on, each with the check its value must
+#: pass in a file (a wrong type would fail far from the file); other entries are kept as read.
+_SOURCE_META_CHECKS: dict[str, Any] = {
+    "format": lambda v: isinstance(v, str),
+    "units_detected": lambda v: isinstance(v, bool),
+    "floor_z": lambda v: isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1000.0,
+    "bvh_channels": lambda v: isinstance(v, dict) and all(_is_str_list(c) for c in v.values()),
+    "bvh_rotation_orders": lambda v: isinstance(v, dict) and all(isinstance(o, str) for o in v.values()),
+    "source_mapping": lambda v: isinstance(v, dict),
+}
+
+
+def _source_meta(m: _Meta, value: Any) -> dict:
+    """The checked ``meta`` of a physmocap.skeleton record (see :data:`_SOURCE_META_CHECKS`)."""
+    from ..fileio import MAX_NESTING, json_depth
+
+    if not isinstance(value, dict):
+        raise m.fail("meta", f"must be a JSON object, got {type(value).__name__}")
+    if json_depth(value) > MAX_NESTING:
+        raise m.fail("meta", f"is nested deeper than {MAX_NESTING} levels")
+    out = dict(value)
+    for key, check in _SOURCE_META_CHECKS.items():
+        if key in out and not check(out[key]):
+            raise m.fail("meta", f"entry {key!r} has the wrong type or range: {str(out[key])[:60]}")
+    if "source_mapping" in out:
+        from ..errors import MappingError
+        from .profiles.mapfile import check_mapping
+
+        try:
+            check_mapping(out["source_mapping"])
+        except MappingError as exc:
+            raise m.fail("meta", f"entry 'source_mapping' is not a mapping ({exc.message})") from None
+    return out
 
 
 def list_skeletons(path: str | os.PathLike) -> list[dict[str, str]]:
@@ -396,25 +508,34 @@ def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, An
             "not supported (physmocap writes metres, Z-up)",
             path=path,
         )
-    names = [str(n) for n in _json_field(path, meta, "joints")]
-    frame_ids = [str(n) for n in _json_field(path, meta, "frame_ids")]
-    parents = np.asarray(_json_field(path, meta, "parents"), dtype=np.int64)
-    N = len(names)
-    if len(frame_ids) != N or parents.shape != (N,):
-        raise InputError(f"skeleton {prefix}: joints, frame_ids and parents disagree in length", path=path)
-    try:
-        fps = float(meta["fps"])
-        F = int(meta["num_frames"])
-        start = int(meta.get("start_time_ns", "0"))
-    except (KeyError, ValueError) as exc:
-        raise InputError(f"skeleton {prefix}: bad fps / num_frames / start_time_ns ({exc})", path=path) from None
-    if not (math.isfinite(fps) and fps > 0) or F < 1:
-        raise InputError(f"skeleton {prefix}: fps {fps} and {F} frames are not a clip", path=path)
+    from . import FPS_RANGE
 
+    m = _Meta(path, meta)
+    prefix = m.prefix
+    names = m.items("joints", "str")
+    N = len(names)
+    if not 1 <= N <= MAX_JOINTS:
+        raise m.fail("joints", f"lists {N} joints; expected 1 to {MAX_JOINTS}")
+    frame_ids = m.items("frame_ids", "str", N)
+    parent_list = m.items("parents", "int", N)
+    for j, pj in enumerate(parent_list):
+        if not -1 <= pj < j:
+            raise m.fail("parents", f"item {j} is {pj}; a parent is -1 or an earlier joint's index (0 to {j - 1})")
+    parents = np.asarray(parent_list, dtype=np.int64)
+    fps = float(m.number("fps", *FPS_RANGE))
+    start = int(m.number("start_time_ns", 0, MAX_STAMP_NS, integer=True, default=0))
+    kind = meta.get("kind", "rotational")
+    if kind not in ("rotational", "positional"):
+        raise m.fail("kind", f"is {kind[:40]!r}; expected rotational or positional")
+    file_up = meta.get("source_file_up", "Z")
+    if file_up.upper() not in ("X", "Y", "Z"):
+        raise m.fail("source_file_up", f"is {file_up[:40]!r}; expected X, Y or Z")
     topics = {c.topic: c for c in raw.channels.values()}
     tf_ch = topics.get(f"{prefix}/tf")
     if tf_ch is None or tf_ch.schema_name not in TF_SCHEMAS:
         raise InputError(f"skeleton {prefix}: no foxglove.FrameTransforms channel {prefix}/tf", path=path)
+    n_msgs = len(raw.messages.get(tf_ch.id, []))
+    F = int(m.number("num_frames", 1, max(1, _max_frames(n_msgs)), integer=True))
     tf = _read_tf(path, raw, [tf_ch], fps, start)
     col = {fid: i for i, fid in enumerate(tf.frame_ids)}
     missing = [f for f in frame_ids if f not in col]
@@ -438,26 +559,22 @@ def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, An
                 f"skeleton {prefix}: transform of {frame_ids[j]!r} has parent {got!r}, metadata says {expect!r}",
                 path=path,
             )
-    offsets = np.asarray(_json_field(path, meta, "offsets", default=trans[0].tolist()), dtype=float)
-    end_site = np.asarray(_json_field(path, meta, "end_site", default=[False] * N), dtype=bool)
+    offsets = np.asarray(m.items("offsets", "vec3", N, default=trans[0].tolist()), dtype=float)
+    end_site = np.asarray(m.items("end_site", "bool", N, default=[False] * N), dtype=bool)
     try:
         skeleton = Skeleton(names=tuple(names), parents=parents, offsets=offsets, end_site=end_site)
     except ValueError as exc:
         raise InputError(f"skeleton {prefix}: {exc}", path=path) from None
-    kind = meta.get("kind", "rotational")
-    source_meta = _json_field(path, meta, "meta", default={}) if "meta" in meta else {}
-    try:
-        unit_scale = float(meta.get("source_unit_scale", "1.0"))
-    except ValueError:
-        raise InputError(f"skeleton {prefix}: bad source_unit_scale", path=path) from None
+    source_meta = _source_meta(m, m.json("meta", default={}))
+    unit_scale = float(m.number("source_unit_scale", 1e-9, 1e9, default=1.0))
     common: dict[str, Any] = dict(
         skeleton=skeleton,
         fps=fps,
         source=str(path),
         units=meta.get("source_units", "m"),
         unit_scale=unit_scale,
-        file_up=meta.get("source_file_up", "Z"),
-        meta={**(source_meta if isinstance(source_meta, dict) else {}), "mcap": {"topic_prefix": prefix}},
+        file_up=file_up.upper(),
+        meta={**source_meta, "mcap": {"topic_prefix": prefix}},
     )
     if kind == "positional":
         positions, confidence = _read_joint_positions(path, raw, topics.get(f"{prefix}/joints"), names, fps, start, F)
@@ -465,7 +582,9 @@ def _read_own(path: Path, raw: _Raw, meta: dict[str, str], options: dict[str, An
             positions, _ = forward_kinematics(skeleton, rots, trans, np.arange(N))
         return Motion(positions=positions, confidence=confidence, **common)
     if "translated" in meta:
-        translated = np.asarray(_json_field(path, meta, "translated"), dtype=np.int64)
+        translated = np.asarray(m.items("translated", "int"), dtype=np.int64)
+        if translated.size and (translated.min() < 0 or translated.max() >= N or np.any(np.diff(translated) <= 0)):
+            raise m.fail("translated", f"must list joint indices (0 to {N - 1}) in increasing order")
     else:
         translated = np.flatnonzero(np.any(np.abs(trans - offsets) > 1e-12, axis=(0, 2)))
     return Motion(rotations=rots, translations=trans[:, translated], translated=translated, **common)
@@ -544,13 +663,20 @@ def _read_poses(
         names = [str(n) for n in joint_names]
     elif "joint_names" in ch.metadata:
         try:
-            names = [str(n) for n in json.loads(ch.metadata["joint_names"])]
+            listed = parse_json(ch.metadata["joint_names"])
         except ValueError:
-            raise InputError(f"channel {ch.topic}: metadata joint_names is not a JSON list", path=path) from None
+            listed = None
+        if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+            raise InputError(f"channel {ch.topic}: metadata joint_names is not a JSON list of names", path=path)
+        names = listed
     else:
         for name, meta in raw.metadata:
-            if name == SKELETON_METADATA and json.loads(meta.get("topics", "{}")).get("poses") == ch.topic:
-                names = [str(n) for n in json.loads(meta.get("joints", "[]"))]
+            if name != SKELETON_METADATA:
+                continue
+            m = _Meta(path, meta)
+            topics = m.json("topics", default={})
+            if isinstance(topics, dict) and topics.get("poses") == ch.topic:
+                names = m.items("joints", "str")
         if names is None:
             names = known_layout(J)
     if names is None:
@@ -559,6 +685,7 @@ def _read_poses(
     if len(names) != J:
         raise InputError(f"topic {ch.topic}: {J} poses per frame but {len(names)} joint names", path=path)
     idx, fps, F = _frame_grid(path, [t for t, _ in frames], fps, None)
+    check_grid(path, F, J, sum(len(p) for _, p in frames))
     pos = np.full((F, J, 3), np.nan)
     for i, (_, pts) in zip(idx, frames):
         if len(pts) == J:

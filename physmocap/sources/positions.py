@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 import os
 import re
@@ -56,6 +55,8 @@ import numpy as np
 
 from ..canonical import CANONICAL_NAMES, canonical_parent
 from ..errors import InputError, MappingError, OptionError, warn
+from ..fileio import parse_json
+from . import FPS_RANGE, MAX_DISTANCE, check_distances, check_grid
 from ..motion import Motion, Skeleton
 from .gaps import fill_gaps, invalid_samples
 from .sensor import Ground, default_foot_height, estimate_ground, guess_units, level_rotation, to_world, unit_scale
@@ -285,6 +286,7 @@ def _read_csv_long(
     rank = np.empty(len(keys), dtype=int)
     rank[order] = np.arange(len(keys))
     F, J = len(keys), len(names)
+    check_grid(path, F, J, len(entries))
     pos = np.full((F, J, 3), np.nan)
     conf = np.ones((F, J)) if cc is not None else None
     times = np.full(F, np.nan) if time_col is not None else None
@@ -301,31 +303,15 @@ def _read_csv_long(
 
 
 def _read_npz(path: Path) -> RawPositions:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            files = list(z.files)
-            arrays: dict[str, np.ndarray] = {}
-            for key in files:
-                try:
-                    arrays[key] = z[key]
-                except ValueError:
-                    raise InputError(
-                        f"array {key!r} holds Python objects, which physmocap does not unpickle; "
-                        "store joint names as a string array (np.array(names, dtype=str))",
-                        path=path,
-                    ) from None
-    except InputError:
-        raise
-    except Exception as exc:  # zipfile / format errors
-        raise InputError(f"not a readable NPZ archive ({type(exc).__name__}: {exc})", path=path) from None
+    from ..fileio import npz_array, npz_strings, npz_text, read_npz
+
+    arrays = read_npz(path, "a readable NPZ archive of tracker positions")
     if "positions" not in arrays:
         raise InputError(f"NPZ has no 'positions' array (F, J, 3); it has {sorted(arrays)}", path=path)
-    pos = arrays["positions"]
-    if pos.ndim != 3 or pos.shape[2] != 3 or not np.issubdtype(pos.dtype, np.number):
-        raise InputError(f"'positions' must be a numeric (F, J, 3) array, got {pos.dtype} {pos.shape}", path=path)
+    pos = npz_array(arrays["positions"], "positions", path, ("F", "J", 3))
     F, J = pos.shape[:2]
-    names_arr = arrays.get("names", arrays.get("joint_names"))
-    if names_arr is None:
+    names_key = "names" if "names" in arrays else "joint_names"
+    if names_key not in arrays:
         names = known_layout(J)
         if names is None:
             raise InputError(
@@ -334,50 +320,46 @@ def _read_npz(path: Path) -> RawPositions:
                 path=path,
             )
     else:
-        if names_arr.shape != (J,) or names_arr.dtype.kind not in "US":
-            raise InputError(f"'names' must be ({J},) strings, got {names_arr.dtype} {names_arr.shape}", path=path)
-        names = [str(n) for n in names_arr.astype(str)]
+        names = npz_strings(arrays[names_key], names_key, path, J)
     conf = arrays.get("confidence")
-    if conf is not None and (conf.shape != (F, J) or not np.issubdtype(conf.dtype, np.number)):
-        raise InputError(f"'confidence' must be a numeric ({F}, {J}) array, got {conf.shape}", path=path)
-    times = arrays.get("times", arrays.get("time"))
-    if times is not None and times.shape != (F,):
-        raise InputError(f"'times' must be ({F},) seconds, got {times.shape}", path=path)
+    if conf is not None:
+        conf = npz_array(conf, "confidence", path, (F, J))
+    times_key = "times" if "times" in arrays else "time"
+    times = arrays.get(times_key)
+    if times is not None:
+        times = npz_array(times, times_key, path, (F,))
     options: dict[str, Any] = {}
     for key in _HEADER_OPTIONS:
         if key in arrays:
             a = arrays[key]
-            options[key] = a.item() if a.ndim == 0 else a.tolist()
-    return RawPositions(
-        names,
-        pos.astype(float),
-        None if conf is None else conf.astype(float),
-        None if times is None else times.astype(float),
-        options,
-    )
-
-
-def _reject_constant(name: str) -> float:
-    raise ValueError(f"non-finite number {name}")
+            if a.dtype.kind in "US":
+                options[key] = npz_text(a, key, path)
+            elif a.size == 1 and a.dtype.kind in "biuf":
+                options[key] = a.reshape(-1)[0].item()
+            elif key == "floor_plane" and a.ndim == 1 and a.size <= 4 and a.dtype.kind in "iuf":
+                options[key] = a.tolist()
+            else:
+                raise InputError(f"'{key}' must be a single value, got {a.dtype} {a.shape}", path=path)
+    return RawPositions(names, pos, conf, times, options)
 
 
 def _read_jsonl(path: Path) -> RawPositions:
     options: dict[str, Any] = {}
     frames: list[tuple[int, dict]] = []
     try:
-        fh = open(path, encoding="utf-8-sig")
+        data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read the file: {exc.strerror}", path=path) from None
-    with fh:
-        try:
-            lines = fh.read().splitlines()
-        except UnicodeDecodeError:
-            raise InputError("not a UTF-8 text file", path=path) from None
+    try:
+        lines = data.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(f"not a UTF-8 text file (byte 0x{data[exc.start]:02x})", path=path, line=line) from None
     for ln, line in enumerate(lines, start=1):
         if not line.strip():
             continue
         try:
-            obj = json.loads(line, parse_constant=lambda c: math.nan)
+            obj = parse_json(line, nan_constants=True)
         except ValueError as exc:
             raise InputError(f"invalid JSON ({exc})", path=path, line=ln) from None
         if not isinstance(obj, dict):
@@ -392,7 +374,10 @@ def _read_jsonl(path: Path) -> RawPositions:
                     options[k] = v
     if not frames:
         raise InputError("no frames: expected lines like {\"joints\": {\"head\": [x, y, z]}}", path=path)
-    names: list[str] = [str(n) for n in options.pop("joint_names", [])]
+    listed = options.pop("joint_names", [])
+    if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+        raise InputError("'joint_names' must be a list of names", path=path)
+    names: list[str] = list(listed)
     col = {n: i for i, n in enumerate(names)}
     parsed = []
     any_time = False
@@ -419,11 +404,13 @@ def _read_jsonl(path: Path) -> RawPositions:
             vals.append((col[name], _jsonl_joint(v, path, ln, name)))
         t = obj.get("time", obj.get("timestamp"))
         if t is not None:
-            if isinstance(t, bool) or not isinstance(t, (int, float)):
-                raise InputError(f"'time' must be a number of seconds, got {t!r}", path=path, line=ln)
+            if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+                raise InputError(f"'time' must be a finite number of seconds, got {str(t)[:40]}", path=path,
+                                 line=ln)
             any_time = True
         parsed.append((vals, t))
     F, J = len(parsed), len(names)
+    check_grid(path, F, J, sum(len(vals) for vals, _ in parsed))
     pos = np.full((F, J, 3), np.nan)
     conf = np.zeros((F, J))
     has_conf = False
@@ -516,15 +503,23 @@ def _uniform_frames(
         if dt.size == 0:
             raise InputError("all frames have the same time; give fps=", path=path)
         fps = 1.0 / float(np.median(dt))
+        lo, hi = FPS_RANGE
+        if not lo <= fps <= hi:
+            raise InputError(
+                f"the times' median spacing gives {fps:.6g} fps, outside {lo:g}-{hi:g}; give fps=", path=path
+            )
     if np.any(np.diff(times) < 0):
         order = np.argsort(times, kind="stable")
         pos, t = pos[order], t[order]
         conf = None if conf is None else conf[order]
         t = t - t.min()
-    idx = np.rint(t * fps).astype(np.int64)
+    fidx = np.rint(t * fps)  # float: no int64 overflow before the check
+    if not fidx.max() + 1 <= 4 * len(fidx) + 10:
+        raise InputError(
+            f"times do not fit {fps:g} fps (they would span {fidx.max() + 1:.6g} frames); give fps=", path=path
+        )
+    idx = fidx.astype(np.int64)
     F = int(idx.max()) + 1
-    if F > 4 * len(idx) + 10:
-        raise InputError(f"times do not fit {fps:g} fps (they would span {F} frames); give fps=", path=path)
     if F == len(idx) and np.all(idx == np.arange(F)):
         return pos, conf, float(fps), 0
     out = np.full((F,) + pos.shape[1:], np.nan)
@@ -734,7 +729,9 @@ def positional_motion(
         unit_name = units  # type: ignore[assignment]
     unit_name, scale = unit_scale(unit_name, p)
     file_up = "Y" if frame == "camera" else up
-    pos = to_world(pos * scale, frame=frame, up=up, mirrored=mirrored)
+    with np.errstate(over="ignore", invalid="ignore"):
+        pos = to_world(pos * scale, frame=frame, up=up, mirrored=mirrored)
+    check_distances(pos, p, "joint", names)  # before any fit: 1e308 would break the ground's SVD
     plane_up = None
     plane_floor = None
     if floor_plane is not None:
@@ -744,6 +741,8 @@ def positional_motion(
         n = np.linalg.norm(plane[:3])
         plane_up = to_world(plane[:3] / n, frame=frame, up=up, mirrored=mirrored)
         plane_floor = -plane[3] * scale / n
+        if not abs(plane_floor) < MAX_DISTANCE:
+            raise OptionError(f"floor_plane puts the floor {plane_floor:.3g} m away; expected within 1 km", path=p)
 
     # gaps
     bad = invalid_samples(pos, conf, float(min_confidence))
@@ -919,6 +918,7 @@ def read_positions(path: str | os.PathLike, **options: Any) -> Motion:
     if unknown:
         raise OptionError(f"unknown option(s) {unknown} for joint-position files; known: {sorted(allowed)}", path=p)
     raw = _READERS[suffix](p)
+    check_grid(p, raw.positions.shape[0], raw.positions.shape[1], raw.positions.shape[0] * raw.positions.shape[1])
     opts: dict[str, Any] = {}
     for key, value in raw.options.items():
         if key == "fps":

@@ -114,6 +114,9 @@ def check_mapping(
             and value
             and all(isinstance(v, str) and v.strip() for v in value)
         ):
+            dup = next((v for i, v in enumerate(value) if v in value[:i]), None)
+            if dup is not None:
+                raise fail(f"entry {key!r} lists {dup!r} more than once", key)
             joints[key] = tuple(value)
         else:
             raise fail(

@@ -109,7 +109,7 @@ def _adjacent(model: mujoco.MjModel, b1: int, b2: int) -> bool:
     return p1 == w2 or p2 == w1
 
 
-def self_collision_pairs(character, rest_clearance: float = 0.0) -> list[tuple[int, int]]:
+def self_collision_pairs(character, rest_clearance: float = 0.01) -> list[tuple[int, int]]:
     """Sorted geom-id pairs ``(g1 < g2)`` that must not interpenetrate.
 
     Args:

@@ -41,7 +41,7 @@ def main() -> int:
 
     head = (
         f"{'clip':26s} {'character':9s} {'src skate':>9s} {'skate mean':>10s} {'p95':>5s} {'pen max':>7s}"
-        f" {'hover med':>9s} {'p95':>5s} {'lim':>3s} {'vel':>3s} {'track cm':>8s}"
+        f" {'hover med':>9s} {'p95':>5s} {'lim':>3s} {'vel':>3s} {'track cm':>8s} {'self mm':>7s}"
     )
     print(head)
     for clip in args.clips:
@@ -60,9 +60,10 @@ def main() -> int:
             lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
             vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]
             trk = metrics.tracking_errors(traj, metrics.outside_stance_mask(traj))["key_joints_mean_cm"]
+            selfpen = metrics.self_penetration(ch, traj.qpos)["max_mm"]
             print(
                 f"{clip:26s} {name:9s} {src:9.1f} {sk['mean_cm_s']:10.2f} {sk['p95_cm_s']:5.2f} {pen:7.2f}"
-                f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {lim:3d} {vel:3d} {trk:8.2f}"
+                f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {lim:3d} {vel:3d} {trk:8.2f} {selfpen:7.2f}"
             )
     return 0
 

@@ -6,7 +6,9 @@ among the trunk's children, that carries it (for a leg the child of the body
 that holds the pelvis frame; for an arm the body nearest the trunk on the way
 from the elbow).  Every collision geom of the character belongs to one group:
 ``left_leg``, ``right_leg``, ``left_arm``, ``right_arm`` or ``trunk`` (the rest:
-pelvis, spine, chest, neck, head).  The pairs checked (:data:`GROUP_PAIRS`) are
+pelvis, spine, chest, neck, head); a leg's toe segment (the subtree of the body
+carrying the toe joint, when it is not the foot's) belongs to none.  The pairs
+checked (:data:`GROUP_PAIRS`) are
 the legs against each other, the arms against each other, and each arm against
 the trunk and both legs; the legs against the trunk are left out (the hips are
 where they meet).  A geom pair is dropped when its bodies are the same, parent
@@ -73,7 +75,7 @@ def _subtree(model: mujoco.MjModel, root: int) -> set[int]:
 
 def limb_groups(character) -> dict[str, set[int]]:
     """Group name -> body ids (see the module docstring); limbs that cannot be found are
-    left out, their bodies counted as trunk."""
+    left out, their bodies counted as trunk; toe segments are in no group."""
     model = character.model
     pelvis = _body_of(character, "pelvis")
     trunk_chain = set(_chain(model, pelvis)) if pelvis is not None else set()
@@ -96,7 +98,16 @@ def limb_groups(character) -> dict[str, set[int]]:
             root = x
         if root is not None:
             groups[group] = _subtree(model, root)
+    # toe segments are left out: a flicked toe is the cheapest way around a brushing foot,
+    # and toes passing each other are no visible fault
+    toes = set()
+    for side in ("left", "right"):
+        toe, ankle = _body_of(character, f"{side}_toe"), _body_of(character, f"{side}_ankle")
+        if toe is not None and toe != ankle and f"{side}_leg" in groups and toe in groups[f"{side}_leg"]:
+            toes |= _subtree(model, toe)
+            groups[f"{side}_leg"] -= toes
     limbs = set().union(*groups.values()) if groups else set()
+    limbs |= toes
     groups["trunk"] = {b for b in range(1, model.nbody) if b not in limbs}
     return groups
 

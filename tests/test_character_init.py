@@ -453,3 +453,22 @@ def test_g1_cli_writes_a_mapping_that_retargets(g1_proposal, tmp_path, capsys):
     assert main(["retarget", str(shared_file("pymo_walk.bvh")), "--character", str(G1), "--map", str(out),
                  "--end", "60", "--no-plant", "--quiet", "-o", str(npz)]) == 0
     assert npz.exists()
+
+
+def test_model_without_a_mapping_file_loads_with_the_proposal(tmp_path):
+    """Issue 13: a robot with no mapping file beside it retargets with the proposed mapping
+    (and one warning saying so), instead of refusing to load."""
+    import shutil
+
+    import physmocap
+    from physmocap.models import load_character
+
+    src = REPO / "tests" / "fixtures" / "robot_trunk_root.xml"
+    model = tmp_path / "my_robot.xml"
+    shutil.copy(src, model)
+    with pytest.warns(Warning, match="no mapping file found: using the mapping `physmocap character init` proposes"):
+        ch = load_character(model)
+    assert ch.mapping_proposed and ch.map_path is None
+    assert {"pelvis", "left_knee", "right_ankle"} <= set(ch.tracked)
+    traj = physmocap.retarget(physmocap.load_motion("example"), ch, end=30, progress=False, plant=False)
+    assert np.isfinite(traj.qpos).all()

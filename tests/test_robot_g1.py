@@ -41,6 +41,21 @@ def test_g1_retargets_without_a_user_mapping(g1_walk):
     assert fid.facing_p95_deg < 10.0 and fid.path_mean_cm < 3.0
 
 
+def test_g1_hands_stay_palm_in_and_limbs_apart(g1_walk):
+    """Before: the wrist roll swung over +-113 degrees (hands rolled palm-up; a peer keeps
+    +-31), and the limbs were not kept apart at all."""
+    from physmocap.metrics import self_penetration
+
+    ch, traj = g1_walk
+    model = ch.model
+    for side in ("left", "right"):
+        j = model.joint(f"{side}_wrist_roll_joint")
+        roll = np.degrees(traj.qpos[:, j.qposadr[0]])
+        assert np.abs(roll).max() < 45.0, (side, roll.min(), roll.max())
+    sp = self_penetration(ch, traj.qpos)
+    assert sp["pairs"] > 50 and sp["max_mm"] < 3.0, sp
+
+
 def test_floor_constraint_skips_visual_meshes_and_far_geoms(g1_walk):
     import mujoco
 

@@ -121,6 +121,7 @@ def describe(ch) -> dict:
         "name": ch.name,
         "mjcf": str(ch.mjcf_path),
         "mapping": None if ch.map_path is None else str(ch.map_path),
+        "mapping_proposed": bool(getattr(ch, "mapping_proposed", False)),
         "root_joint": ch.root_joint,
         "height": ch.height,
         "hip_height": ch.hip_height,
@@ -150,7 +151,12 @@ def print_info(desc: dict, out: TextIO) -> None:
     w = out.write
     w(f"character  {desc['name']}\n")
     w(f"mjcf       {desc['mjcf']}\n")
-    w(f"mapping    {desc['mapping'] or '(none: sites named like canonical joints)'}\n")
+    implicit = (
+        "(none found: proposed by `physmocap character init`, not saved)"
+        if desc.get("mapping_proposed")
+        else "(none: sites named like canonical joints)"
+    )
+    w(f"mapping    {desc['mapping'] or implicit}\n")
     w(f"root       {desc['root_joint']} (free joint), {desc['dof']} degrees of freedom\n")
     w(f"height     {desc['height']:.3f} m    hip height {desc['hip_height']:.3f} m    "
       f"total mass {desc['total_mass']:.2f} kg\n")

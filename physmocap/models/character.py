@@ -75,6 +75,8 @@ class Character:
         hip_height: mean height of the hip joint centres in the rest pose, m.
         height: standing height (top of the highest geom in the rest pose), m.
         total_mass: kg.
+        mapping_proposed: True when no mapping file was found and the mapping is the
+            one :func:`~physmocap.models.propose.propose_mapping` proposed.
     """
 
     name: str
@@ -91,6 +93,7 @@ class Character:
     hip_height: float
     height: float
     total_mass: float
+    mapping_proposed: bool = False
     _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def rest_positions(self) -> dict[str, np.ndarray]:
@@ -254,6 +257,26 @@ def _up_forward_rotation(up: str, forward: str) -> np.ndarray:
     return src.T  # maps f -> X, left -> Y, u -> Z
 
 
+def _proposed_mapping(mjcf: Path):
+    """The mapping :func:`~physmocap.models.propose.propose_mapping` proposes for a model
+    that has no mapping file, said in one warning; None if it proposes none (the caller
+    then reports what is missing)."""
+    from ..errors import InputError, warn
+    from .mapping import mapping_from_text
+    from .propose import propose_mapping
+
+    try:
+        proposal = propose_mapping(mjcf)
+    except (MappingError, InputError):
+        return None
+    warn(
+        f"{mjcf}: no mapping file found: using the mapping `physmocap character init` proposes "
+        f"({len(proposal.joints)} joints; run `physmocap character init {mjcf.name} -o "
+        f"{mjcf.stem}.map.toml` to see, edit and keep it)"
+    )
+    return mapping_from_text(proposal.to_toml(), mjcf.with_name(f"{mjcf.stem}.map.toml (proposed)"))
+
+
 def load_character(
     path: str | os.PathLike | None = None,
     map_path: str | os.PathLike | None = None,
@@ -266,7 +289,9 @@ def load_character(
         path: ``None`` for the default humanoid, a bundled name (``"humanoid"``,
             ``"robot"``), or an MJCF file.
         map_path: mapping file; default ``<stem>.map.toml`` beside the MJCF.
-            A model without one maps its sites named like canonical joints.
+            A model without one maps its sites named like canonical joints, or,
+            if that leaves required joints unmapped, takes the mapping
+            :func:`~physmocap.models.propose.propose_mapping` proposes (with a warning).
         range_policy: ``"default"`` or ``"strict"``: for joints in the
             range-of-motion table (:mod:`physmocap.models.rom`), replace their
             ranges with the table's under this policy.  Overrides the mapping's
@@ -285,6 +310,11 @@ def load_character(
     else:
         model = _load_model(mjcf)
         mp = implicit_mapping(model)
+        if any(j not in _resolve_frames(mp, model) for j in CHARACTER_REQUIRED):
+            proposed = _proposed_mapping(mjcf)
+            if proposed is not None:
+                mp = proposed
+                model = _load_model(mjcf, mp)
     where = mp_file if mp_file is not None else mjcf
     tracked = _resolve_frames(mp, model)
     missing = [j for j in CHARACTER_REQUIRED if j not in tracked]
@@ -404,6 +434,7 @@ def load_character(
         name=mp.name or (mjcf.stem if mjcf.stem != "scene" else DEFAULT_CHARACTER),
         mjcf_path=mjcf,
         map_path=mp_file,
+        mapping_proposed=mp_file is None and mp.path is not None,
         model=model,
         root_joint=model.joint(root).name,
         tracked=tracked,

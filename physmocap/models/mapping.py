@@ -52,7 +52,7 @@ from ..canonical import CANONICAL_NAMES
 from ..errors import InputError, MappingError
 from ..fileio import read_toml
 
-__all__ = ["TrackedFrame", "Mapping", "read_mapping", "implicit_mapping", "AXES"]
+__all__ = ["TrackedFrame", "Mapping", "read_mapping", "mapping_from_text", "implicit_mapping", "AXES"]
 
 #: Axis names accepted for ``up`` and ``forward``.
 AXES = {
@@ -146,6 +146,26 @@ def read_mapping(path: str | os.PathLike) -> Mapping:
     """Parse a mapping file's syntax and types (not yet checked against a model)."""
     p = Path(path)
     raw, text = read_toml(p, "mapping file")
+    return _parse_mapping(raw, text, p)
+
+
+def mapping_from_text(text: str, path: str | os.PathLike) -> Mapping:
+    """Parse mapping TOML held in memory (e.g. a proposed mapping); ``path`` names it in
+    messages."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+
+    p = Path(path)
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MappingError(f"not valid TOML: {exc}", path=p) from None
+    return _parse_mapping(raw, text, p)
+
+
+def _parse_mapping(raw: dict, text: str, p: Path) -> Mapping:
     mp = Mapping(path=p, text=text)
     known = {"character", "joints", "contacts", "rest", "velocity_limits", "joint_limits", "sites"}
     for key in raw:

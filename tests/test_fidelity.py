@@ -152,6 +152,35 @@ def test_no_pelvis_pop_at_toe_off():
         assert fid.pelvis_vz_p99 < 4.0 * fid.actor_vz_p99_scaled, (character, fid.pelvis_vz_p99)
 
 
+@pytest.mark.parametrize("character", ["humanoid", "robot"])
+def test_swing_feet_do_not_skim_the_floor(character):
+    """Before: swing toes passed 5-8 mm above the floor at 3-4 m/s for a quarter of a second
+    (the clearance held the contact sites, not the collision geoms below them).  Now no
+    collision geom flies within 5 mm of the floor faster than 2 m/s for more than 2 frames."""
+    import mujoco
+
+    from physmocap.models.geometry import character_geoms, geom_z_extent
+
+    shared_file("cmu_12_01_walk.bvh")
+    _, traj = retargeted("cmu_12_01_walk.bvh", character)
+    model = traj.character.model
+    data = mujoco.MjData(model)
+    geoms = character_geoms(model, collision_only=True)
+    low = np.empty((traj.num_frames, len(geoms)))
+    pos = np.empty((traj.num_frames, len(geoms), 2))
+    for t, q in enumerate(traj.qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        low[t] = [geom_z_extent(model, data, g)[0] for g in geoms]
+        pos[t] = data.geom_xpos[geoms, :2]
+    fast = np.linalg.norm(np.diff(pos, axis=0), axis=-1) * traj.fps > 2.0
+    skim = (low[1:] < 0.005) & fast
+    for k in range(len(geoms)):
+        run = np.diff(np.concatenate([[0], skim[:, k].astype(np.int8), [0]]))
+        lengths = np.flatnonzero(run == -1) - np.flatnonzero(run == 1)
+        assert lengths.size == 0 or lengths.max() <= 2, (model.geom(geoms[k]).name, lengths.max())
+
+
 def test_turns_on_a_planted_foot_do_not_lag():
     """Before: on the CMU jumps clip (turn around, frames 1900-2300) the pelvis heading
     lagged the actor's by up to 115 degrees: facing p95 91 (humanoid), 55 (robot)."""

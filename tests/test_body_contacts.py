@@ -82,3 +82,28 @@ def test_all_fours_rests_knees_and_hands_on_the_floor(crawl, character, knee, ha
     for seg in ("left_thigh", "right_thigh", "left_shank", "right_shank"):
         assert np.nanpercentile(errors[seg], 95) < 45.0, seg
     assert np.isfinite(traj.qpos).all()
+
+
+def test_streaming_holds_knees_and_hands_on_the_floor(crawl):
+    """The causal variant: the stream detects the crawl's knees and hands and lays them down."""
+    from physmocap.ik.stream import stream_motion
+    from physmocap.models import load_character
+
+    ch = load_character()
+    traj = stream_motion(crawl, ch)
+    hold = range(*_hold(crawl).indices(crawl.num_frames))
+    for side in ("left", "right"):
+        assert _lowest(traj, hold, (f"{side}_shank",)) < 0.03
+        assert _lowest(traj, hold, (f"{side}_hand",)) < 0.015
+    assert np.isfinite(traj.qpos).all()
+    # walking streams are unchanged: no body part comes near the floor
+    import physmocap
+
+    walk = physmocap.load_motion("example").slice_frames(1, 121)
+    from physmocap.ik.stream import StreamingRetargeter
+
+    live = StreamingRetargeter(ch, skeleton=walk.skeleton, fps=walk.fps, translated=walk.translated)
+    for t in range(walk.num_frames):
+        live.step(rotations=walk.rotations[t], translations=walk.translations[t])
+    assert live.body_contacts is not None and set(live.body_contacts.parts) >= {"left_knee", "right_hand"}
+    assert not any(a.anchor is not None for a in live.body_anchors.values())

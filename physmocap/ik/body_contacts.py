@@ -38,7 +38,7 @@ from ..errors import OptionError
 from ..options import check_fields
 from .contacts import ContactDetector, ContactOptions, FloorPlane, central_velocity
 
-__all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points"]
+__all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points", "BodyContactStream", "BodyContactAnchor"]
 
 #: Contact part -> the canonical joints measured (the lowest of them counts).
 BODY_PARTS: dict[str, tuple[str, ...]] = {
@@ -165,3 +165,110 @@ def detect_body_contacts(
             lab[since:] = state
         out[part] = lab
     return out
+
+
+def _smooth(x: float) -> float:
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+class BodyContactStream:
+    """Causal knee, hand and pelvis contact detection, one frame at a time (streaming).
+
+    The same thresholds as :func:`detect_body_contacts`, with the leg length and the
+    floor known beforehand (the streaming retargeter's calibration); horizontal speed
+    from a bounded look-behind, as :class:`~physmocap.ik.contacts.ContactStream` does.
+
+    Args:
+        parts: Contact parts to watch (keys of :data:`BODY_PARTS`).
+        fps: Frame rate.
+        floor: The actor's floor.
+        leg: The actor's leg length (metres).
+        options: Thresholds.
+    """
+
+    def __init__(
+        self,
+        parts: list[str],
+        fps: float,
+        floor: FloorPlane,
+        leg: float,
+        options: BodyContactOptions | None = None,
+    ) -> None:
+        opt = options or BodyContactOptions()
+        self.parts = tuple(parts) if opt.enabled and leg > 0 else ()
+        self.fps = float(fps)
+        self.floor = floor
+        self.detectors = [ContactDetector(["heel"], fps, opt.detector_options(p, leg)) for p in self.parts]
+        self.window = max(1, int(round(0.035 * fps)))
+        self.history: list[np.ndarray] = []
+
+    @classmethod
+    def for_actor(cls, world: Mapping[str, np.ndarray], fps: float, floor: FloorPlane, options=None):
+        """The stream for the parts present in ``world`` (canonical joint -> ``(F, 3)``,
+        a calibration frame or more), leg length measured there."""
+        leg = _leg_length(world) or 0.0
+        return cls(list(body_part_points(world)), fps, floor, leg, options)
+
+    def step(self, world: Mapping[str, np.ndarray]) -> dict[str, bool]:
+        """This frame's canonical joint positions (``(3,)`` each) in; part -> in contact out."""
+        if not self.parts:
+            return {}
+        pts = body_part_points({k: np.asarray(v, dtype=float)[None] for k, v in world.items()})
+        x = np.stack([pts[p][0] for p in self.parts])
+        self.history.append(x)
+        if len(self.history) > self.window + 1:
+            self.history.pop(0)
+        span = max(len(self.history) - 1, 1)
+        speed = np.linalg.norm((x - self.history[0])[:, :2], axis=1) * (self.fps / span)
+        height = self.floor.heights(x)
+        out = {}
+        for k, part in enumerate(self.parts):
+            out[part] = bool(self.detectors[k].step(height[k : k + 1], speed[k : k + 1])[0])
+        return out
+
+
+class BodyContactAnchor:
+    r"""Causal offset that holds one body part's targets on the floor during its contact.
+
+    When the contact begins, the anchor is where the part's (first) joint target is
+    horizontally, and the floor height vertically; the offset
+    :math:`o = (A_{xy} - x_{xy},\; z_{floor} - x_z)` eases in over ``onset_time``
+    (a knee seen 10 cm above the floor is lowered, not dropped) and, after the
+    contact, fades back to zero along a smoothstep over ``release_time``.
+    """
+
+    def __init__(self, fps: float, onset_time: float = 0.1, release_time: float = 0.25, floor: float = 0.0) -> None:
+        self.onset = max(1, int(round(onset_time * fps)))
+        self.release = max(1, int(round(release_time * fps)))
+        self.floor = float(floor)
+        self.anchor: np.ndarray | None = None
+        self.offset = np.zeros(3)
+        self._age = 0
+        self._fade_from = np.zeros(3)
+        self._fade_left = 0
+
+    def step(self, label: bool, point: np.ndarray) -> np.ndarray:
+        """This frame's label and the part's (unshifted) target point ``(3,)``; returns the
+        offset ``(3,)`` to add to the part's joint targets."""
+        x = np.asarray(point, dtype=float)
+        if label:
+            if self.anchor is None:
+                self.anchor = x[:2].copy()
+                self._age = 0
+            self._age += 1
+            full = np.array([*(self.anchor - x[:2]), self.floor - x[2]])
+            w = _smooth(self._age / self.onset)
+            self.offset = (1.0 - w) * self.offset + w * full if self._age < self.onset else full
+            self._fade_left = 0
+            return self.offset.copy()
+        if self.anchor is not None:  # released: fade out from here
+            self.anchor = None
+            self._fade_from = self.offset.copy()
+            self._fade_left = self.release
+        if self._fade_left > 0:
+            self._fade_left -= 1
+            self.offset = self._fade_from * _smooth(self._fade_left / self.release)
+        else:
+            self.offset = np.zeros(3)
+        return self.offset.copy()

@@ -504,7 +504,7 @@ class Planting:
             if side not in self.feet:
                 continue
             out[self.feet[side][4], :2] += offsets[s]
-            if side in self.lengths:
+            if side in self.lengths and not labels.get(f"{side}_knee", False):  # a knee on the floor keeps its target
                 ih, ik, ia2, l1, l2 = self.lengths[side]
                 knee0 = positions[ik].copy()
                 knee0[:2] += self.root_offset

@@ -19,7 +19,11 @@ Everything it does looks only at the current frame and a short, bounded past:
 * **The per-frame pipeline** (:class:`~physmocap.ik.frame.FrameRetargeter`:
   planting, then the IK) is the one offline retargeting runs, with causal
   anchoring of the feet (offline plans them over the whole clip instead).
-  Knee, hand and pelvis contacts are not detected while streaming.
+  Knees, hands and the pelvis on the floor are detected causally
+  (:class:`~physmocap.ik.body_contacts.BodyContactStream`) and held where they
+  touch down, eased in and faded out
+  (:class:`~physmocap.ik.body_contacts.BodyContactAnchor`), where offline plans
+  each contact over its whole interval.
 
 Tracker frames with missing joints go through the causal gap filler
 (:class:`~physmocap.sources.gaps.CausalGapFiller`): short gaps hold the last
@@ -37,7 +41,9 @@ from ..errors import InputError, MappingError, OptionError, warn
 from ..motion import Motion, Skeleton
 from ..trajectory import SolverStats, Trajectory
 from .config import RetargetConfig
+from .body_contacts import BodyContactAnchor, BodyContactStream
 from .contacts import ContactStream, Contacts, FloorPlane, contact_points
+from .footplan import BODY_PART_JOINTS
 from .frame import FrameRetargeter
 from .retarget import map_motion
 from .targets import build_targets
@@ -104,6 +110,8 @@ class StreamingRetargeter:
         self.calibration = None
         self.pipeline: FrameRetargeter | None = None
         self.contacts: ContactStream | None = None
+        self.body_contacts: BodyContactStream | None = None
+        self.body_anchors: dict[str, BodyContactAnchor] = {}
         self.latencies: list[float] = []
         self.iterations: list[int] = []
         self.relaxations: list[int] = []
@@ -156,6 +164,14 @@ class StreamingRetargeter:
         self.contacts = ContactStream(
             list(self.points), self.fps, FloorPlane(height=floor, levels=levels), self.config.contacts
         )
+        canonical = {c: world[j][None] for c, j in self.joint_indices.items()}
+        self.body_contacts = BodyContactStream.for_actor(canonical, self.fps, FloorPlane(height=floor), self.config.body_contacts)
+        self.body_anchors = {
+            part: BodyContactAnchor(
+                self.fps, release_time=self.config.plant.anchor_release_time, floor=self.config.solver.floor_height
+            )
+            for part in self.body_contacts.parts
+        }
         if keep_solver and self.pipeline is not None and self.pipeline.names == targets.names:
             self.pipeline.restart_contacts()  # a new calibration; the pose and velocity bounds carry on
         else:
@@ -209,13 +225,48 @@ class StreamingRetargeter:
         )
         world = fk[0][0]
         labels = self.contacts.step(np.array([world[j] for j in self.points.values()]))
-        result = self.pipeline.solve(targets.positions[0], targets.orientations[0], targets.valid[0], labels)
+        positions = targets.positions[0]
+        assert self.body_contacts is not None
+        body = self.body_contacts.step({c: world[j] for c, j in self.joint_indices.items()})
+        if self.body_anchors:
+            positions, labels = self._hold_body_parts(positions, targets.names, labels, body)
+        result = self.pipeline.solve(positions, targets.orientations[0], targets.valid[0], labels)
         self.frame += 1
         self.labels.append(labels)
         self.iterations.append(result.iterations)
         self.relaxations.append(result.relaxation)
         self.latencies.append(time.perf_counter() - t0)
         return result.qpos
+
+
+    def _hold_body_parts(
+        self, positions: np.ndarray, names: tuple[str, ...], labels: dict[str, bool], body: dict[str, bool]
+    ) -> tuple[np.ndarray, dict[str, bool]]:
+        """Targets with knees, hands and pelvis held on the floor while in contact
+        (:class:`~physmocap.ik.body_contacts.BodyContactAnchor`, the causal counterpart of
+        the offline plan), and the foot labels of a kneeling leg cleared; the knee labels
+        ride along so the planting leaves a kneeling knee's target alone."""
+        out = np.array(positions, dtype=float, copy=True)
+        col = {n: i for i, n in enumerate(names)}
+        labels = dict(labels)
+        for part, anchor in self.body_anchors.items():
+            joints = [col[j] for j in BODY_PART_JOINTS.get(part, ()) if j in col]
+            if not joints:
+                continue
+            if part == "pelvis":
+                if not all(h in col for h in ("left_hip", "right_hip")):
+                    continue
+                point = 0.5 * (positions[col["left_hip"]] + positions[col["right_hip"]])
+            else:
+                point = positions[joints[0]]
+            out[joints] += anchor.step(bool(body.get(part, False)), point)
+        for side in ("left", "right"):
+            if body.get(f"{side}_knee", False):
+                labels[f"{side}_knee"] = True
+                for name in list(labels):
+                    if name.startswith(side + "_") and name != f"{side}_knee":
+                        labels[name] = False
+        return out, labels
 
 
 def stream_motion(motion: Motion, character=None, config: RetargetConfig | None = None, **options: Any) -> Trajectory:

@@ -14,7 +14,6 @@ from physmocap import metrics
 #: lift the mean flat-stance skating above 1 cm/s; its 95th percentile is 0.4 cm/s.
 KNOWN = {
     ("pymo_walk.bvh", "humanoid"): "touchdown outliers lift mean flat-stance skating to 1.3 cm/s",
-    ("pymo_walk.bvh", "robot"): "touchdown outliers lift mean flat-stance skating to 1.2 cm/s",
 }
 CASES = [
     pytest.param(clip, ch, marks=pytest.mark.xfail(reason=KNOWN[(clip, ch)], strict=True))

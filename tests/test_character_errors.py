@@ -135,8 +135,22 @@ def test_explicit_map_not_found(biped, tmp_path):
 
 
 def test_no_mapping_file_at_all(biped):
+    """Issue 13: with no mapping file the proposed mapping is used, and said so."""
     xml, mp = biped
     mp.unlink()
+    with pytest.warns(Warning, match="no mapping file found: using the mapping"):
+        ch = load_character(xml)
+    assert ch.mapping_proposed and ch.map_path is None
+
+
+def test_no_mapping_file_and_nothing_to_propose(tmp_path):
+    """A model the proposer cannot read as a humanoid still gets the missing-mapping error."""
+    xml = tmp_path / "blob.xml"
+    xml.write_text(
+        '<mujoco><worldbody><body name="blob"><freejoint/><geom type="sphere" size="0.1"/>'
+        '<body name="arm" pos="0 0 0.2"><joint type="hinge"/><geom type="capsule" fromto="0 0 0 0 0 0.3" size="0.03"/>'
+        "</body></body></worldbody></mujoco>"
+    )
     with pytest.raises(MappingError) as e:
         load_character(xml)
     assert str(xml) in str(e.value) and "no mapping file" in str(e.value)

@@ -15,17 +15,79 @@ from typing import IO, Iterator
 from .errors import OutputError
 
 
-def check_writable(path: str | os.PathLike) -> Path:
-    """Fail early, with a clear error, if ``path`` cannot be written."""
+def _check_folder(folder: Path, target: Path, what: str) -> None:
+    """``folder`` must be an existing directory in which a file can be made; else an
+    :class:`OutputError` about ``target`` saying which part is wrong."""
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise OutputError(f"{str(probe)!r} is a file, not a directory; the {what} cannot be created", path=target)
+    if probe != folder:
+        raise OutputError(f"directory {str(folder)!r} does not exist; the {what} cannot be created", path=target)
+    try:  # os.access says yes to root on read-only mounts and /proc: try it
+        fd, tmp = tempfile.mkstemp(prefix=".physmocap-probe.", dir=folder)
+    except OSError as exc:
+        raise OutputError(f"the {what} cannot be created in {str(folder)!r}: {exc.strerror or exc}", path=target) from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
+
+
+def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
+    """Fail early, with a clear error, if ``path`` cannot be written: it is a directory,
+    a part of its folder is a file, its folder does not exist, or no file can be
+    created there (permissions, read-only or virtual file systems such as ``/proc``)."""
     p = Path(path)
-    parent = p.parent if str(p.parent) else Path(".")
     if p.is_dir():
-        raise OutputError("output path is a directory, expected a file name", path=p)
-    if not parent.exists():
-        raise OutputError(f"output directory {str(parent)!r} does not exist", path=p)
-    if not os.access(parent, os.W_OK):
-        raise OutputError(f"output directory {str(parent)!r} is not writable", path=p)
+        raise OutputError(f"is a directory, expected a file name for the {what}", path=p)
+    _check_folder(p.parent if str(p.parent) else Path("."), p, what)
     return p
+
+
+def check_output_dir(path: str | os.PathLike, what: str = "output directory") -> Path:
+    """Fail early if ``path`` is not a directory files can be written into, nor one that
+    can be created (its parent must exist: only the last level is made)."""
+    p = Path(path)
+    if p.exists():
+        if not p.is_dir():
+            raise OutputError(f"is a file; the {what} must be a directory", path=p)
+        _check_folder(p, p, what)
+        return p
+    parent = p.parent if str(p.parent) else Path(".")
+    _check_folder(parent, p, what)
+    try:  # a directory can be made where a file can, except on odd file systems: try it
+        tmp = tempfile.mkdtemp(prefix=".physmocap-probe.", dir=parent)
+    except OSError as exc:
+        raise OutputError(f"the {what} cannot be created: {exc.strerror or exc}", path=p) from None
+    with contextlib.suppress(OSError):
+        os.rmdir(tmp)
+    return p
+
+
+def make_output_dir(path: str | os.PathLike, what: str = "output directory") -> Path:
+    """Create ``path`` (not its parents) if missing, after :func:`check_output_dir`."""
+    p = check_output_dir(path, what)
+    if not p.exists():
+        try:
+            p.mkdir()
+        except FileExistsError:
+            pass
+        except OSError as exc:
+            raise OutputError(f"the {what} cannot be created: {exc.strerror or exc}", path=p) from None
+    return p
+
+
+def check_distinct(outputs) -> None:
+    """Refuse two outputs of one run at the same path (the second would replace the first)."""
+    seen: dict[Path, str] = {}
+    for out in outputs:
+        if out is None:
+            continue
+        key = Path(out).resolve()
+        if key in seen:
+            raise OutputError(f"given twice as an output (also as {seen[key]!r}); choose distinct paths", path=out)
+        seen[key] = str(out)
 
 
 def check_not_input(outputs, inputs) -> None:

@@ -489,3 +489,170 @@ def test_far_tracker_samples_are_refused_before_any_fit(tmp_path, capsys, every)
     assert main(["inspect", str(path)]) == 2
     line = _one_line(capsys)
     assert "far.npz: frame" in line and "is not a finite distance within 1 km" in line, line
+
+
+# --- part 3: rough edges a new user hit ----------------------------------------------------
+def _bad_outputs(tmp_path):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    return blocker
+
+
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "/proc/nope"], "the plot directory cannot be created"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/afile"], "is a file; the plot directory"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/nodir/sub"], "'{t}/nodir' does not exist"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--report", "{t}/afile/r.json"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--report", "/proc/r.json"], "the report cannot be created"),
+        (["retarget", "IN", "-o", "{t}/afile/o.bvh"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "/proc/o.bvh"], "the output file cannot be created"),
+        (["retarget", "IN", "-o", "{t}"], "is a directory"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--qpos", "{t}/afile/q.npz"], "'{t}/afile' is a file"),
+        (["clean", "IN", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["clean", "IN", "--plots", "/proc/nope"], "the plot directory cannot be created"),
+        (["clean", "IN", "-o", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["report", "IN", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["report", "IN", "--json", "/proc/r.json"], "the report cannot be created"),
+        (["convert", "IN", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["replay", "IN", "-o", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["preview", "IN", "-o", "{t}/afile/p.png"], "'{t}/afile' is a file"),
+    ],
+)
+def test_output_paths_are_checked_before_the_input_is_read(tmp_path, capsys, argv, needle):
+    """Every output path is checked before any work: the input does not even exist here, and
+    the error is about the output (what is wrong with it), not the input."""
+    pytest.importorskip("matplotlib")
+    _bad_outputs(tmp_path)
+    t = str(tmp_path)
+    missing = str(tmp_path / ("missing.npz" if argv[0] == "report" else "missing.bvh"))
+    argv = [missing if a == "IN" else a.format(t=t) for a in argv]
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert needle.format(t=t) in line and "missing" not in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing made, no probe left
+
+
+@pytest.mark.parametrize("command", ["inspect", "convert", "retarget", "clean", "replay", "preview"])
+def test_a_directory_as_input_says_so(tmp_path, capsys, command):
+    d = tmp_path / "takes"
+    d.mkdir()
+    argv = [command, str(d)] + ([str(tmp_path / "o.bvh")] if command == "convert" else [])
+    argv += ["-o", str(tmp_path / ("o.png" if command == "preview" else "o.bvh"))] if command not in ("inspect", "convert") else []
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert "takes: is a directory" in line and "(none)" not in line, line
+
+
+def _help(capsys, *argv) -> str:
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_agrees_with_the_readers_and_writers(capsys):
+    """Help texts list what the code accepts: every format retarget and convert write,
+    every unit --in-units takes (for the BVH and the tracker readers alike)."""
+    from physmocap.cli.retarget import WRITERS
+    from physmocap.export import MOTION_WRITERS
+    from physmocap.sources.bvh import UNIT_SCALES as BVH_UNITS
+    from physmocap.sources.sensor import UNIT_SCALES as SENSOR_UNITS
+
+    top = _help(capsys)
+    retarget_line = top[top.index("retarget retarget"):top.index("report measure")]
+    for suffix in WRITERS:
+        assert suffix[1:].upper() in retarget_line, retarget_line
+    conv = _help(capsys, "convert")
+    out_help = conv[conv.index("OUT output"):conv.index("options:")]
+    for suffix in MOTION_WRITERS:
+        assert suffix in out_help, out_help
+    assert set(BVH_UNITS) == set(SENSOR_UNITS)
+    for command in ("retarget", "convert", "inspect", "report"):
+        text = _help(capsys, command)
+        units_help = text[text.index("--in-units"):]
+        units_help = units_help[: units_help.index("default: detect")]
+        for unit in BVH_UNITS:
+            assert f" {unit}," in units_help or f" {unit} " in units_help, (command, unit, units_help)
+
+
+@pytest.mark.parametrize("unit,scale", [("dm", 0.1), ("ft", 0.3048), ("feet", 0.3048), ("mm", 0.001)])
+def test_tracker_files_take_every_unit_of_the_help(unit, scale):
+    from physmocap.sources.sensor import unit_scale
+
+    assert unit_scale(unit)[1] == scale
+
+
+def test_plot_hints_quote_the_extra(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    from physmocap.errors import OptionError
+    from physmocap.plots import require_matplotlib
+
+    with pytest.raises(OptionError, match=r"pip install 'physmocap\[plot\]'"):
+        require_matplotlib()
+    for command in ("retarget", "report", "clean"):
+        text = _help(capsys, command)
+        assert "pip install 'physmocap[plot]'" in text, command
+
+
+def test_inspect_and_convert_count_joints_alike(tmp_path, capsys):
+    assert main(["inspect", "example"]) == 0
+    inspected = capsys.readouterr().out
+    assert "skeleton:  31 joints, 7 end sites" in inspected
+    assert main(["convert", "example", str(tmp_path / "c.bvh"), "--end", "2"]) == 0
+    assert "31 joints and 7 end sites" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["retarget", "convert", "preview"])
+def test_an_empty_frame_range_is_called_empty(tmp_path, capsys, command):
+    out = str(tmp_path / ("o.png" if command == "preview" else "o.bvh"))
+    argv = [command, "example", out] if command == "convert" else [command, "example", "-o", out]
+    assert main([*argv, "--start", "10", "--end", "5"]) == 2
+    line = _one_line(capsys)
+    assert "--start 10 --end 5: the range is empty" in line, line
+
+
+def test_inspect_json_states_the_axes_of_its_offsets(capsys):
+    import json
+
+    assert main(["inspect", "example", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["file_up"] == "Y" and rep["offset_axes"] == "Z-up"
+    assert "Z-up" in rep["offset_note"] and "Y-up" in rep["offset_note"]
+
+
+def test_report_finds_a_bundled_character_by_name_or_by_an_old_path(tmp_path, capsys, minimal_trajectory):
+    """`report` needs no --character when the file names a bundled character, by name or by the
+    absolute path another machine (an older physmocap) stored."""
+    import numpy as np
+
+    for stored in ("humanoid", "/some/other/machine/physmocap/assets/mjcf/humanoid.xml"):
+        path = tmp_path / "t.npz"
+        np.savez(path, **{**minimal_trajectory, "mjcf_path": np.array(stored)})
+        with warnings_caught(stored.startswith("/")):
+            assert main(["report", str(path), "--no-source"]) == 0, capsys.readouterr().err
+        out = capsys.readouterr()
+        assert "--character" not in out.err and "humanoid" in out.out
+    np.savez(path, **{**minimal_trajectory, "mjcf_path": np.array("/elsewhere/mine.xml")})
+    assert main(["report", str(path), "--no-source"]) == 2
+    assert "pass --character" in _one_line(capsys)
+
+
+def warnings_caught(expected: bool):
+    import contextlib
+
+    from physmocap.errors import PhysmocapWarning
+
+    return pytest.warns(PhysmocapWarning, match="using the bundled 'humanoid'") if expected else contextlib.nullcontext()
+
+
+def test_quiet_prints_no_report_table(tmp_path, capsys):
+    out, report = tmp_path / "o.bvh", tmp_path / "r.json"
+    argv = ["retarget", "example", "-o", str(out), "--report", str(report), "--start", "1", "--end", "12"]
+    assert main([*argv, "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.out == "" and "wrote" not in quiet.err and report.exists()
+    assert main(argv) == 0
+    loud = capsys.readouterr()
+    assert "Foot skating" in loud.out and f"wrote {out}" in loud.err

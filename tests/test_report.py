@@ -127,7 +127,7 @@ def test_missing_matplotlib_names_the_extra(monkeypatch):
     from physmocap.plots import require_matplotlib
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)
-    with pytest.raises(OptionError, match=r"pip install physmocap\[plot\]"):
+    with pytest.raises(OptionError, match=r"pip install 'physmocap\[plot\]'"):
         require_matplotlib()
 
 
@@ -182,7 +182,7 @@ def test_cli_plots_without_matplotlib_fail_before_writing(walk_npz, tmp_path, ca
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     out = tmp_path / "r.json"
     assert main(["report", str(walk_npz), "--json", str(out), "--plots", str(tmp_path / "p")]) == 2
-    assert "pip install physmocap[plot]" in capsys.readouterr().err
+    assert "pip install 'physmocap[plot]'" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--plots",
         metavar="DIR",
         help="write PNGs: anatomical angles with their ranges and the spans beyond them, and each glitched "
-        "joint's speed with its glitched spans (needs matplotlib)",
+        "joint's speed with its glitched spans (needs: pip install 'physmocap[plot]')",
     )
     p.set_defaults(func=run)
 
@@ -43,11 +43,13 @@ def run(args: argparse.Namespace) -> int:
             raise OptionError("clean writes .bvh files", path=args.output)
         check_writable(args.output)
     if args.report:
-        check_writable(args.report)
+        check_writable(args.report, "report")
     if args.plots:
+        from ..fileio import check_output_dir
         from ..plots import require_matplotlib
 
         require_matplotlib()
+        check_output_dir(args.plots, "plot directory")
     check_not_input([args.output, args.report], [args.input])
     motion = load_motion(args.input, min_frames=1)
     if args.output and not motion.is_rotational:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OptionError, OutputError
+from .errors import OptionError
 from .fileio import atomic_open
 
 __all__ = ["require_matplotlib", "write_plots", "plot_directory", "save_png", "shade_spans", "PLOT_FILES"]

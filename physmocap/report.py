@@ -46,7 +46,7 @@ from typing import IO, Any
 import numpy as np
 
 from .errors import InputError, OptionError
-from .fileio import atomic_open
+from .fileio import announce, atomic_open
 
 __all__ = [
     "REPORT_FORMAT",
@@ -387,7 +387,7 @@ def emit_report(
     if json_path is not None:
         write_report_json(report, json_path)
         if not quiet:
-            print(f"wrote {json_path}", file=sys.stderr)
+            announce(f"wrote {json_path}")
     if plots_dir is not None:
         from .plots import write_plots
 
@@ -395,7 +395,7 @@ def emit_report(
             contacts = traj.contacts
         for p in write_plots(traj, source_motion, contacts, plots_dir, joint_indices=joint_indices):
             if not quiet:
-                print(f"wrote {p}", file=sys.stderr)
+                announce(f"wrote {p}")
     return report
 
 

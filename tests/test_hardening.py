@@ -656,3 +656,129 @@ def test_quiet_prints_no_report_table(tmp_path, capsys):
     assert main(argv) == 0
     loud = capsys.readouterr()
     assert "Foot skating" in loud.out and f"wrote {out}" in loud.err
+
+
+# --- all the outputs of one run, or none --------------------------------------------------
+def test_output_set_renames_together_or_not_at_all(tmp_path, capsys):
+    from physmocap.fileio import OutputSet, announce, atomic_open, make_output_dir
+
+    old = tmp_path / "a.txt"
+    old.write_text("old")
+    with pytest.raises(OSError, match="disk full"):
+        with OutputSet():
+            with atomic_open(old) as fh:
+                fh.write("new")
+            make_output_dir(tmp_path / "plots")
+            with atomic_open(tmp_path / "plots" / "p.txt") as fh:
+                fh.write("p")
+            announce("wrote a.txt")
+            assert old.read_text() == "old" and not (tmp_path / "plots" / "p.txt").exists()  # not yet
+            with atomic_open(tmp_path / "b.txt") as fh:
+                fh.write("half")
+                raise OSError(28, "disk full")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and old.read_text() == "old"
+    assert "wrote" not in capsys.readouterr().err
+    with OutputSet() as outer:
+        with OutputSet():  # an inner set (a writer of two files) hands its files to the outer one
+            with atomic_open(tmp_path / "b.txt") as fh:
+                fh.write("b")
+        assert outer.pending == [tmp_path / "b.txt"] and not (tmp_path / "b.txt").exists()
+        with atomic_open(old) as fh:
+            fh.write("new")
+        announce("wrote both")
+    assert old.read_text() == "new" and (tmp_path / "b.txt").read_text() == "b"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+    assert capsys.readouterr().err == "wrote both\n"
+
+
+def _fail_last(monkeypatch, module, name):
+    """Make ``module.name`` (the run's last writer) write half its file, then fail as a full disk."""
+    from physmocap.fileio import atomic_open
+
+    def boom(*args, **kwargs):
+        path = next(a for a in args if isinstance(a, (str, __import__("os").PathLike)))
+        with atomic_open(path) as fh:
+            fh.write("{")
+            raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(module, name, boom)
+
+
+def test_retarget_failing_in_its_last_output_leaves_none(tmp_path, capsys, monkeypatch):
+    import physmocap.report
+
+    names = ["a.bvh", "a.npz", "a.csv", "r.json"]
+    outs = [str(tmp_path / n) for n in names]
+    argv = ["retarget", "example", "-o", outs[0], "--qpos", outs[1], "--csv", outs[2], "--report", outs[3],
+            "--start", "1", "--end", "12", "--quiet"]
+    _fail_last(monkeypatch, physmocap.report, "write_report_json")
+    assert main(argv) == 2
+    assert "No space left on device" in _one_line(capsys)
+    assert list(tmp_path.iterdir()) == []  # none of the new files, no temporary file
+    for n in names:  # an earlier run's files stay as they were
+        (tmp_path / n).write_text("old")
+    assert main(argv) == 2
+    capsys.readouterr()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
+    assert all((tmp_path / n).read_text() == "old" for n in names)
+    monkeypatch.undo()
+    assert main(argv) == 0
+    assert all((tmp_path / n).read_bytes() != b"old" for n in names)
+
+
+def test_retarget_with_plots_failing_removes_the_plot_directory_it_made(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import physmocap.plots
+
+    real = physmocap.plots._joints_plot
+
+    def boom(*args):
+        real(*args)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(physmocap.plots, "_joints_plot", boom)
+    argv = ["retarget", "example", "-o", str(tmp_path / "a.npz"), "--plots", str(tmp_path / "plots"),
+            "--start", "1", "--end", "12", "--quiet"]
+    assert main(argv) == 2
+    capsys.readouterr()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_clean_failing_in_its_report_leaves_no_bvh(tmp_path, capsys, monkeypatch):
+    import physmocap.cli.clean as clean_cli
+
+    def boom(obj, fh, **kwargs):
+        fh.write("{")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(clean_cli.json, "dump", boom)
+    out = tmp_path / "c.bvh"
+    assert main(["clean", "example", "-o", str(out), "--report", str(tmp_path / "g.json")]) == 2
+    assert "No space left on device" in _one_line(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_robot_csv_and_its_joint_names_are_one_output(tmp_path, capsys, monkeypatch):
+    import physmocap.export.robot as robot
+
+    real = robot.atomic_open
+    calls = []
+
+    def second_fails(path, *a, **k):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(robot, "atomic_open", second_fails)
+    out = tmp_path / "r.csv"
+    assert main(["retarget", "example", "-o", str(out), "--format", "robot-csv", "--start", "1", "--end", "6",
+                 "--quiet"]) == 2
+    capsys.readouterr()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_same_path_twice_is_refused(tmp_path, capsys):
+    out = str(tmp_path / "a.npz")
+    assert main(["retarget", "example", "-o", out, "--qpos", out]) == 2
+    assert "given twice as an output" in _one_line(capsys)

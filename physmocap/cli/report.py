@@ -52,7 +52,7 @@ def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
 def run(args: argparse.Namespace) -> int:
     from ..fileio import check_writable
     from ..ik.contacts import detect_contacts, load_contact_csv
-    from ..report import emit_report, load_trajectory, tracking_targets
+    from ..report import load_trajectory, tracking_targets
 
     if args.json:
         check_writable(args.json, "report")
@@ -102,6 +102,16 @@ def run(args: argparse.Namespace) -> int:
     if motion is not None and traj.targets is None:
         # files without stored targets: rebuild them (planting adjustments not reproduced)
         traj.targets = tracking_targets(motion, joint_indices, traj.character, contacts)
+    from ..fileio import OutputSet
+
+    with OutputSet():  # the JSON and the plots renamed into place together, or none
+        _emit(traj, motion, contacts, joint_indices, args)
+    return 0
+
+
+def _emit(traj, motion, contacts, joint_indices, args: argparse.Namespace) -> None:
+    from ..report import emit_report
+
     emit_report(
         traj,
         motion,
@@ -111,4 +121,3 @@ def run(args: argparse.Namespace) -> int:
         joint_indices=joint_indices,
         stream=sys.stdout,
     )
-    return 0

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import check_not_input, check_writable
+from ..fileio import OutputSet, announce, check_distinct, check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,6 +63,14 @@ WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 
 def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool = False) -> None:
+    """Write ``traj`` to every path of ``outputs`` (the first in ``args.format``'s layout),
+    all renamed into place together (:class:`~physmocap.fileio.OutputSet`): if one fails,
+    none is written."""
+    with OutputSet():
+        _write_outputs(traj, outputs, args, quiet)
+
+
+def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool) -> None:
     for k, out in enumerate(outputs):
         suffix = out.suffix.lower()
         layout = getattr(args, "format", "auto") if k == 0 else "auto"
@@ -92,7 +99,7 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bo
 
             write_trajectory_mcap(traj, out)
         if not quiet:
-            print(f"wrote {out}", file=sys.stderr)
+            announce(f"wrote {out}")
 
 
 def retarget_from_args(args: argparse.Namespace):
@@ -153,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         check_writable(args.report, "report")
     check_not_input(outputs + [args.report, args.preview], [args.input, args.contacts, args.source_map, args.map])
+    check_distinct(outputs + [args.report, args.preview])
     from ..options import check_frame_range
 
     check_frame_range(args.start, args.end)
@@ -168,6 +176,12 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.preview)
         require_imageio()
     traj = retarget_from_args(args)
+    with OutputSet():  # every file of the run renamed into place together, or none
+        _write_all(traj, outputs, args)
+    return 0
+
+
+def _write_all(traj, outputs: list[Path], args: argparse.Namespace) -> None:
     write_outputs(traj, outputs, args, quiet=args.quiet)
     if args.report or args.plots:
         from ..report import emit_report
@@ -185,4 +199,3 @@ def run(args: argparse.Namespace) -> int:
         from .preview import render_preview
 
         render_preview(traj, Path(args.preview), quiet=args.quiet)
-    return 0

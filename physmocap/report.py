@@ -466,6 +466,10 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             path=p,
         )
     source = npz_text(data["source"], "source", p) if "source" in data else "<unknown>"
+    if source and not source.startswith("<"):
+        from .resources import resolve_portable
+
+        source = resolve_portable(source, p.parent)  # stored relative to the file (or "example")
     traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
     traj.targets = _stored_targets(data, qpos.shape[0], fps, p, character)
     if "source_start" in data:

@@ -24,7 +24,9 @@ from physmocap.report import (
 from physmocap.sources.profiles import map_skeleton
 from physmocap.trajectory import Trajectory
 
-from conftest import retargeted
+from conftest import RETARGET_DIAGNOSTICS, retargeted
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 WALK = "cmu_12_01_walk.bvh"
 FIXTURE = __import__("pathlib").Path(__file__).parent / "fixtures" / "contacts" / "cmu_12_01_walk_stance.csv"

@@ -10,6 +10,9 @@ import pytest
 
 from physmocap.cli import main
 from physmocap.resources import mjcf_dir
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 TINY_BVH = """HIERARCHY
 ROOT Hips

@@ -42,6 +42,10 @@ def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
         return None
     if args.source:
         return Path(args.source)
+    from ..resources import EXAMPLE_NAME, resolve_input
+
+    if stored == EXAMPLE_NAME:
+        return resolve_input(stored)
     p = Path(stored)
     if stored and stored not in ("<memory>", "<unknown>") and p.exists():
         return p

@@ -246,6 +246,14 @@ def _relative(path: str, root: Path) -> str:
 
 
 def _write_summaries(results: list[FileResult], out: Path) -> None:
+    """summary.csv, summary.json and timings.csv, renamed into place together."""
+    from .fileio import OutputSet
+
+    with OutputSet():
+        _write_summary_files(results, out)
+
+
+def _write_summary_files(results: list[FileResult], out: Path) -> None:
     from .fileio import atomic_open
 
     rows = []

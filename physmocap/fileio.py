@@ -2,11 +2,17 @@
 
 A failed or interrupted write never leaves a half-written output file, and an
 existing file at the target path is only replaced once the new one is complete.
+A run that writes several files does so inside an :class:`OutputSet`: every
+file is written to its temporary sibling first and all are renamed together at
+the end, so a failure in any of them leaves none of the run's new files.
+Also here: the checks of output paths made before any work, and bounded
+readers of untrusted text, JSON, TOML and NPZ.
 """
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import tempfile
 from pathlib import Path
@@ -15,17 +21,84 @@ from typing import IO, Iterator
 from .errors import OutputError
 
 
-def check_writable(path: str | os.PathLike) -> Path:
-    """Fail early, with a clear error, if ``path`` cannot be written."""
+def _check_folder(folder: Path, target: Path, what: str) -> None:
+    """``folder`` must be an existing directory in which a file can be made; else an
+    :class:`OutputError` about ``target`` saying which part is wrong."""
+    probe = folder
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if probe.exists() and not probe.is_dir():
+        raise OutputError(f"{str(probe)!r} is a file, not a directory; the {what} cannot be created", path=target)
+    if probe != folder:
+        raise OutputError(f"directory {str(folder)!r} does not exist; the {what} cannot be created", path=target)
+    try:  # os.access says yes to root on read-only mounts and /proc: try it
+        fd, tmp = tempfile.mkstemp(prefix=".physmocap-probe.", dir=folder)
+    except OSError as exc:
+        raise OutputError(f"the {what} cannot be created in {str(folder)!r}: {exc.strerror or exc}", path=target) from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
+
+
+def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
+    """Fail early, with a clear error, if ``path`` cannot be written: it is a directory,
+    a part of its folder is a file, its folder does not exist, or no file can be
+    created there (permissions, read-only or virtual file systems such as ``/proc``)."""
     p = Path(path)
-    parent = p.parent if str(p.parent) else Path(".")
     if p.is_dir():
-        raise OutputError("output path is a directory, expected a file name", path=p)
-    if not parent.exists():
-        raise OutputError(f"output directory {str(parent)!r} does not exist", path=p)
-    if not os.access(parent, os.W_OK):
-        raise OutputError(f"output directory {str(parent)!r} is not writable", path=p)
+        raise OutputError(f"is a directory, expected a file name for the {what}", path=p)
+    _check_folder(p.parent if str(p.parent) else Path("."), p, what)
     return p
+
+
+def check_output_dir(path: str | os.PathLike, what: str = "output directory") -> Path:
+    """Fail early if ``path`` is not a directory files can be written into, nor one that
+    can be created (its parent must exist: only the last level is made)."""
+    p = Path(path)
+    if p.exists():
+        if not p.is_dir():
+            raise OutputError(f"is a file; the {what} must be a directory", path=p)
+        _check_folder(p, p, what)
+        return p
+    parent = p.parent if str(p.parent) else Path(".")
+    _check_folder(parent, p, what)
+    try:  # a directory can be made where a file can, except on odd file systems: try it
+        tmp = tempfile.mkdtemp(prefix=".physmocap-probe.", dir=parent)
+    except OSError as exc:
+        raise OutputError(f"the {what} cannot be created: {exc.strerror or exc}", path=p) from None
+    with contextlib.suppress(OSError):
+        os.rmdir(tmp)
+    return p
+
+
+def make_output_dir(path: str | os.PathLike, what: str = "output directory") -> Path:
+    """Create ``path`` (not its parents) if missing, after :func:`check_output_dir`; a
+    directory created inside an :class:`OutputSet` is removed again if the set fails."""
+    p = check_output_dir(path, what)
+    if not p.exists():
+        try:
+            p.mkdir()
+        except FileExistsError:
+            pass
+        except OSError as exc:
+            raise OutputError(f"the {what} cannot be created: {exc.strerror or exc}", path=p) from None
+        else:
+            current = _OUTPUT_SET.get()
+            if current is not None:
+                current._dirs.append(p)
+    return p
+
+
+def check_distinct(outputs) -> None:
+    """Refuse two outputs of one run at the same path (the second would replace the first)."""
+    seen: dict[Path, str] = {}
+    for out in outputs:
+        if out is None:
+            continue
+        key = Path(out).resolve()
+        if key in seen:
+            raise OutputError(f"given twice as an output (also as {seen[key]!r}); choose distinct paths", path=out)
+        seen[key] = str(out)
 
 
 def check_not_input(outputs, inputs) -> None:
@@ -55,14 +128,114 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[P
     except OSError as exc:
         raise OutputError(f"cannot create a file here: {exc.strerror}", path=p) from None
     os.close(fd)
+    current = _OUTPUT_SET.get()
     try:
         yield Path(tmp)
         os.chmod(tmp, 0o644)
-        os.replace(tmp, p)
+        if current is None:
+            os.replace(tmp, p)
+        else:
+            current._add(Path(tmp), p)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: The :class:`OutputSet` collecting the current run's outputs, if any.
+_OUTPUT_SET: contextvars.ContextVar["OutputSet | None"] = contextvars.ContextVar("physmocap_output_set", default=None)
+
+
+class OutputSet:
+    """All the outputs of one run, renamed into place together once every one is written.
+
+    Inside ``with OutputSet():`` every :func:`atomic_path` / :func:`atomic_open` (so every
+    physmocap writer) leaves its finished temporary file beside its target instead of
+    renaming it; when the block ends without an exception, all of them are renamed (one
+    ``os.replace`` each, back to back), and :func:`announce` messages are printed.  On an
+    exception, every temporary file and every directory made by :func:`make_output_dir` is
+    removed, so a failed run leaves none of its new files and the old ones untouched.
+    Sets nest: an inner set hands its files to the outer one.
+    """
+
+    def __init__(self) -> None:
+        self._pending: list[tuple[Path, Path]] = []
+        self._dirs: list[Path] = []
+        self._messages: list[str] = []
+        self._token = None
+        self._outer: OutputSet | None = None
+
+    def _add(self, tmp: Path, target: Path) -> None:
+        key = target.resolve()
+        for k, (old_tmp, old_target) in enumerate(self._pending):
+            if old_target.resolve() == key:  # written twice in one run: the last one wins
+                with contextlib.suppress(OSError):
+                    os.unlink(old_tmp)
+                del self._pending[k]
+                break
+        self._pending.append((tmp, target))
+
+    @property
+    def pending(self) -> list[Path]:
+        """The targets waiting to be renamed into place."""
+        return [t for _, t in self._pending]
+
+    def __enter__(self) -> "OutputSet":
+        self._outer = _OUTPUT_SET.get()
+        self._token = _OUTPUT_SET.set(self)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        _OUTPUT_SET.reset(self._token)
+        if exc_type is not None:
+            self.discard()
+            return False
+        if self._outer is not None:
+            self._outer._pending.extend(self._pending)
+            self._outer._dirs.extend(self._dirs)
+            self._outer._messages.extend(self._messages)
+            return False
+        self.commit()
+        return False
+
+    def commit(self) -> None:
+        import sys
+
+        try:
+            for k, (tmp, target) in enumerate(self._pending):
+                os.replace(tmp, target)
+        except BaseException:
+            for tmp, _ in self._pending[k:]:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+            raise
+        self._pending = []
+        for m in self._messages:
+            print(m, file=sys.stderr)
+        self._messages = []
+
+    def discard(self) -> None:
+        for tmp, _ in self._pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self._pending = []
+        for d in reversed(self._dirs):
+            with contextlib.suppress(OSError):
+                os.rmdir(d)  # only if still empty: files put there by others stay
+        self._dirs = []
+        self._messages = []
+
+
+def announce(message: str) -> None:
+    """Print ``message`` (``wrote PATH``) on stderr now, or, inside an :class:`OutputSet`,
+    once its files are in place (never for files a failed run did not keep)."""
+    current = _OUTPUT_SET.get()
+    if current is None:
+        import sys
+
+        print(message, file=sys.stderr)
+    else:
+        current._messages.append(message)
 
 
 @contextlib.contextmanager

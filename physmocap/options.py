@@ -8,7 +8,7 @@ from typing import Any, Iterable
 
 from .errors import OptionError
 
-__all__ = ["check_fields"]
+__all__ = ["check_fields", "check_frame_range"]
 
 
 def check_fields(
@@ -49,3 +49,17 @@ def check_fields(
             raise OptionError(f"{what} option {name} must be > 0, got {v!r}")
         if name not in signed and v < 0:
             raise OptionError(f"{what} option {name} must be >= 0, got {v!r}")
+
+
+def check_frame_range(start: int | None, end: int | None) -> None:
+    """``--start`` / ``--end`` (source frames, end exclusive) before any file is read:
+    no negative frame, and a range that holds at least one frame."""
+    if start is not None and start < 0:
+        raise OptionError(f"--start must be a frame number >= 0, got {start}")
+    if end is not None and end < 1:
+        raise OptionError(f"--end must be a frame number >= 1 (it is exclusive), got {end}")
+    if start is not None and end is not None and end <= start:
+        raise OptionError(
+            f"--start {start} --end {end}: the range is empty (--end is exclusive, so it must be "
+            "greater than --start)"
+        )

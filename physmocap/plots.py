@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OptionError, OutputError
+from .errors import OptionError
 from .fileio import atomic_open
 
 __all__ = ["require_matplotlib", "write_plots", "plot_directory", "save_png", "shade_spans", "PLOT_FILES"]
@@ -38,7 +38,7 @@ def require_matplotlib():
         from matplotlib import figure
     except ImportError:
         raise OptionError(
-            "plots need matplotlib, which is not installed: pip install physmocap[plot]"
+            "plots need matplotlib, which is not installed: pip install 'physmocap[plot]'"
         ) from None
     return figure
 
@@ -46,14 +46,9 @@ def require_matplotlib():
 def plot_directory(directory: str | os.PathLike) -> Path:
     """``directory`` as a :class:`Path`, created if missing (not its parents); a clear
     :class:`OutputError` if it is a file or cannot be made."""
-    d = Path(directory)
-    if d.exists() and not d.is_dir():
-        raise OutputError("plot output is not a directory", path=d)
-    try:
-        d.mkdir(parents=False, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the plot directory: {exc.strerror}", path=d) from None
-    return d
+    from .fileio import make_output_dir
+
+    return make_output_dir(directory, "plot directory")
 
 
 def save_png(fig, path: Path) -> Path:

@@ -46,7 +46,7 @@ from typing import IO, Any
 import numpy as np
 
 from .errors import InputError, OptionError
-from .fileio import atomic_open
+from .fileio import announce, atomic_open
 
 __all__ = [
     "REPORT_FORMAT",
@@ -366,45 +366,43 @@ def emit_report(
     plots_dir: str | os.PathLike | None = None,
     joint_indices: dict[str, int] | None = None,
     stream: IO[str] | None = None,
+    quiet: bool = False,
 ) -> dict:
     """Build the report, print its table on ``stream`` (stdout), write the JSON
     and the plots if asked; returns the report.  Paths are checked before any
-    work is done.  For ``physmocap retarget --report``."""
+    work is done.  ``quiet``: no table and no "wrote" lines.  For ``physmocap
+    retarget --report``."""
     from .fileio import check_writable
 
     if json_path is not None:
-        check_writable(json_path)
+        check_writable(json_path, "report")
     if plots_dir is not None:
         from .plots import require_matplotlib
 
         require_matplotlib()
         _check_plot_dir(plots_dir)
     report = build_report(traj, source_motion, contacts, joint_indices)
-    (stream or sys.stdout).write(format_report(report))
+    if not quiet:
+        (stream or sys.stdout).write(format_report(report))
     if json_path is not None:
         write_report_json(report, json_path)
-        print(f"wrote {json_path}", file=sys.stderr)
+        if not quiet:
+            announce(f"wrote {json_path}")
     if plots_dir is not None:
         from .plots import write_plots
 
         if contacts is None:
             contacts = traj.contacts
         for p in write_plots(traj, source_motion, contacts, plots_dir, joint_indices=joint_indices):
-            print(f"wrote {p}", file=sys.stderr)
+            if not quiet:
+                announce(f"wrote {p}")
     return report
 
 
 def _check_plot_dir(path: str | os.PathLike) -> Path:
-    from .errors import OutputError
+    from .fileio import check_output_dir
 
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise OutputError("plot output is not a directory", path=p)
-    if not p.exists():
-        parent = p.parent if str(p.parent) else Path(".")
-        if not parent.is_dir():
-            raise OutputError(f"directory {str(parent)!r} does not exist", path=p)
-    return p
+    return check_output_dir(path, "plot directory")
 
 
 def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.PathLike | None = None):
@@ -447,7 +445,15 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             from .resources import resolve_portable
 
             character = resolve_portable(npz_text(data["mjcf_path"], "mjcf_path", p), p.parent)
-            if Path(character).suffix and not Path(character).exists():
+            bundled = _bundled_name(character)
+            if Path(character).suffix and not Path(character).exists() and bundled:
+                # an older file naming the bundled MJCF by another machine's absolute path
+                from .errors import warn
+
+                warn(f"{p}: the character's MJCF {character!r} is not here; using the bundled {bundled!r} "
+                     "(pass --character to choose another)")
+                character = bundled
+            elif Path(character).suffix and not Path(character).exists():
                 raise InputError(
                     f"the character's MJCF {character!r} named in the file does not exist; pass --character",
                     path=p,
@@ -460,11 +466,26 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             path=p,
         )
     source = npz_text(data["source"], "source", p) if "source" in data else "<unknown>"
+    if source and not source.startswith("<"):
+        from .resources import resolve_portable
+
+        source = resolve_portable(source, p.parent)  # stored relative to the file (or "example")
     traj = Trajectory(character=character, qpos=qpos, fps=fps, source=source)
     traj.targets = _stored_targets(data, qpos.shape[0], fps, p, character)
     if "source_start" in data:
         traj.source_start = int(npz_number(data["source_start"], "source_start", p, 0, 2**40, integer=True))
     return traj
+
+
+def _bundled_name(path: str) -> str | None:
+    """The bundled character a stored MJCF path names (``.../assets/mjcf/humanoid.xml`` written
+    on another machine), or None."""
+    from .resources import mjcf_dir
+
+    p = Path(path.replace("\\", "/"))
+    if p.parent.name != "mjcf" or not p.suffix == ".xml":
+        return None
+    return p.stem if (mjcf_dir() / p.name).is_file() and p.stem in ("humanoid", "robot") else None
 
 
 def _stored_targets(data: dict, frames: int, fps: float, path: Path, character=None):

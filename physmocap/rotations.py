@@ -221,7 +221,7 @@ def quat_canonical(q: np.ndarray) -> np.ndarray:
 
 
 def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotations (x-y-z-w) taking directions ``a (..., 3)`` onto ``b (..., 3)``.
+    r"""Smallest rotations (x-y-z-w) taking directions ``a (..., 3)`` onto ``b (..., 3)``.
 
     :math:`q = (\hat n \sin(\theta/2), \cos(\theta/2))` with
     :math:`\hat n = \widehat{a \times b}` and :math:`\theta = \operatorname{atan2}(|a \times b|, a \cdot b)`;

@@ -15,6 +15,9 @@ from physmocap.metrics.fidelity import actor_joint_positions, character_joint_po
 from physmocap.models.geometry import character_geoms, geom_z_extent
 from physmocap.resources import resolve_input
 from physmocap.sources import load_motion
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 @pytest.fixture(scope="module")

@@ -104,7 +104,9 @@ def _reference_world(joints, order, values):
                     axes += c[0]
                     angles.append(values[f, k])
                 k += 1
-            local = Rotation.from_euler(axes, angles, degrees=True).as_matrix() if axes else np.eye(3)
+            # one axis: a scalar angle (a 1-element list is a stack of one rotation on scipy < 1.11)
+            ang = angles[0] if len(axes) == 1 else angles
+            local = Rotation.from_euler(axes, ang, degrees=True).as_matrix() if axes else np.eye(3)
             p = joints[j]["parent"]
             if p < 0:
                 P[j], R[j] = t, local

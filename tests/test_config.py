@@ -14,6 +14,9 @@ from physmocap.ik.stream import StreamingRetargeter, stream_motion
 from physmocap.ik.targets import build_targets
 from physmocap.models import load_character
 from physmocap.trajectory import SolverStats
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 @pytest.fixture(scope="module")

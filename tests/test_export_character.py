@@ -9,11 +9,13 @@ import subprocess
 import numpy as np
 import pytest
 
-from conftest import retargeted
+from conftest import RETARGET_DIAGNOSTICS, retargeted
 from physmocap.errors import OutputError
 from physmocap.export.character_bvh import write_character_bvh
 from physmocap.export.trajectory import write_trajectory_csv, write_trajectory_npz
 from physmocap.sources.bvh import read_bvh
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 def _body_ids(traj, names):

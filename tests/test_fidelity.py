@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 
-from conftest import REPO, retargeted, shared_file
+from conftest import REPO, RETARGET_DIAGNOSTICS, retargeted, shared_file
 from physmocap.ik.calibration import calibration_pose, is_standing
 from physmocap.metrics.fidelity import (
     fidelity,
@@ -22,6 +22,8 @@ from physmocap.metrics.fidelity import (
     similarity_fit_2d,
     trajectory_fidelity,
 )
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 FIXTURES = REPO / "tests" / "fixtures" / "bvh"
 

@@ -10,6 +10,9 @@ import pytest
 
 from physmocap.cli import main
 from physmocap.resources import resolve_input
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 BVH = """HIERARCHY
 ROOT Hips
@@ -132,6 +135,24 @@ def test_outputs_carry_no_absolute_paths(tmp_path, capsys):
         assert str(z["mjcf_path"]) == "../chars/robot.xml" and str(z["source"]) == "example"
     capsys.readouterr()
     assert main(["report", str(out)]) == 0
+    assert "not available" not in capsys.readouterr().err  # "example" is the bundled clip
+
+
+def test_report_finds_the_stored_source_from_any_folder(tmp_path, capsys, monkeypatch):
+    """The trajectory names its source relative to itself; `report` run from another folder
+    finds it there (it used to look in the working directory and report without the source)."""
+    import json
+
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "out").mkdir()
+    (tmp_path / "clips" / "walk.bvh").write_bytes(resolve_input("example").read_bytes())
+    out = tmp_path / "out" / "w.npz"
+    assert main(["retarget", str(tmp_path / "clips" / "walk.bvh"), "-o", str(out), "--end", "12", "--quiet"]) == 0
+    monkeypatch.chdir(tmp_path)  # the stored "../clips/walk.bvh" is not a path from here
+    capsys.readouterr()
+    assert main(["report", "out/w.npz", "--json", "r.json"]) == 0
+    assert "not available" not in capsys.readouterr().err
+    assert json.loads((tmp_path / "r.json").read_text())["source"] is not None
 
 
 # --- part 2: structure, sizes and types of every input ------------------------------------
@@ -397,7 +418,7 @@ def _robot_map() -> str:
         (("left_toe = \"site:l_ball_site\"", "left_toe = \"site:l_ankle_site\""),
          "[joints] left_toe: 'site:l_ankle_site' is already the frame of left_ankle"),
         (("pelvis = \"body:base_link\"", "pelvis = \"body:base_link\"\n\"pelvis\" = \"body:base_link\""),
-         "not valid TOML: Cannot overwrite a value"),
+         "overwrite a value"),
         (("[rest]", "[sites]\nx = " + "[" * 100000 + "]" * 100000 + "\n[rest]"), "nested deeper than 64 levels"),
         (("[rest]", "# " + "x" * (2 << 20) + "\n[rest]"), "larger than 1024 KB"),
         (("name = \"robot\"", "name = \"rob\udcffot\""), ":5: not UTF-8 text (byte 0xff)"),
@@ -489,3 +510,296 @@ def test_far_tracker_samples_are_refused_before_any_fit(tmp_path, capsys, every)
     assert main(["inspect", str(path)]) == 2
     line = _one_line(capsys)
     assert "far.npz: frame" in line and "is not a finite distance within 1 km" in line, line
+
+
+# --- part 3: rough edges a new user hit ----------------------------------------------------
+def _bad_outputs(tmp_path):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    return blocker
+
+
+@pytest.mark.parametrize(
+    "argv,needle",
+    [
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "/proc/nope"], "the plot directory cannot be created"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/afile"], "is a file; the plot directory"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--plots", "{t}/nodir/sub"], "'{t}/nodir' does not exist"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--report", "{t}/afile/r.json"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--report", "/proc/r.json"], "the report cannot be created"),
+        (["retarget", "IN", "-o", "{t}/afile/o.bvh"], "'{t}/afile' is a file"),
+        (["retarget", "IN", "-o", "/proc/o.bvh"], "the output file cannot be created"),
+        (["retarget", "IN", "-o", "{t}"], "is a directory"),
+        (["retarget", "IN", "-o", "{t}/o.bvh", "--qpos", "{t}/afile/q.npz"], "'{t}/afile' is a file"),
+        (["clean", "IN", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["clean", "IN", "--plots", "/proc/nope"], "the plot directory cannot be created"),
+        (["clean", "IN", "-o", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["report", "IN", "--plots", "{t}/afile/sub"], "'{t}/afile' is a file"),
+        (["report", "IN", "--json", "/proc/r.json"], "the report cannot be created"),
+        (["convert", "IN", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["replay", "IN", "-o", "{t}/afile/c.bvh"], "'{t}/afile' is a file"),
+        (["preview", "IN", "-o", "{t}/afile/p.png"], "'{t}/afile' is a file"),
+    ],
+)
+def test_output_paths_are_checked_before_the_input_is_read(tmp_path, capsys, argv, needle):
+    """Every output path is checked before any work: the input does not even exist here, and
+    the error is about the output (what is wrong with it), not the input."""
+    pytest.importorskip("matplotlib")
+    _bad_outputs(tmp_path)
+    t = str(tmp_path)
+    missing = str(tmp_path / ("missing.npz" if argv[0] == "report" else "missing.bvh"))
+    argv = [missing if a == "IN" else a.format(t=t) for a in argv]
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert needle.format(t=t) in line and "missing" not in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]  # nothing made, no probe left
+
+
+@pytest.mark.parametrize("command", ["inspect", "convert", "retarget", "clean", "replay", "preview"])
+def test_a_directory_as_input_says_so(tmp_path, capsys, command):
+    d = tmp_path / "takes"
+    d.mkdir()
+    argv = [command, str(d)] + ([str(tmp_path / "o.bvh")] if command == "convert" else [])
+    argv += ["-o", str(tmp_path / ("o.png" if command == "preview" else "o.bvh"))] if command not in ("inspect", "convert") else []
+    assert main(argv) == 2
+    line = _one_line(capsys)
+    assert "takes: is a directory" in line and "(none)" not in line, line
+
+
+def _help(capsys, *argv) -> str:
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_agrees_with_the_readers_and_writers(capsys):
+    """Help texts list what the code accepts: every format retarget and convert write,
+    every unit --in-units takes (for the BVH and the tracker readers alike)."""
+    from physmocap.cli.retarget import WRITERS
+    from physmocap.export import MOTION_WRITERS
+    from physmocap.sources.bvh import UNIT_SCALES as BVH_UNITS
+    from physmocap.sources.sensor import UNIT_SCALES as SENSOR_UNITS
+
+    top = _help(capsys)
+    retarget_line = top[top.index("retarget retarget"):top.index("report measure")]
+    for suffix in WRITERS:
+        assert suffix[1:].upper() in retarget_line, retarget_line
+    conv = _help(capsys, "convert")
+    out_help = conv[conv.index("OUT output"):conv.index("options:")]
+    for suffix in MOTION_WRITERS:
+        assert suffix in out_help, out_help
+    assert set(BVH_UNITS) == set(SENSOR_UNITS)
+    for command in ("retarget", "convert", "inspect", "report"):
+        text = _help(capsys, command)
+        units_help = text[text.index("--in-units"):]
+        units_help = units_help[: units_help.index("default: detect")]
+        for unit in BVH_UNITS:
+            assert f" {unit}," in units_help or f" {unit} " in units_help, (command, unit, units_help)
+
+
+@pytest.mark.parametrize("unit,scale", [("dm", 0.1), ("ft", 0.3048), ("feet", 0.3048), ("mm", 0.001)])
+def test_tracker_files_take_every_unit_of_the_help(unit, scale):
+    from physmocap.sources.sensor import unit_scale
+
+    assert unit_scale(unit)[1] == scale
+
+
+def test_plot_hints_quote_the_extra(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    from physmocap.errors import OptionError
+    from physmocap.plots import require_matplotlib
+
+    with pytest.raises(OptionError, match=r"pip install 'physmocap\[plot\]'"):
+        require_matplotlib()
+    for command in ("retarget", "report", "clean"):
+        text = _help(capsys, command)
+        assert "pip install 'physmocap[plot]'" in text, command
+
+
+def test_inspect_and_convert_count_joints_alike(tmp_path, capsys):
+    assert main(["inspect", "example"]) == 0
+    inspected = capsys.readouterr().out
+    assert "skeleton:  31 joints, 7 end sites" in inspected
+    assert main(["convert", "example", str(tmp_path / "c.bvh"), "--end", "2"]) == 0
+    assert "31 joints and 7 end sites" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["retarget", "convert", "preview"])
+def test_an_empty_frame_range_is_called_empty(tmp_path, capsys, command):
+    out = str(tmp_path / ("o.png" if command == "preview" else "o.bvh"))
+    argv = [command, "example", out] if command == "convert" else [command, "example", "-o", out]
+    assert main([*argv, "--start", "10", "--end", "5"]) == 2
+    line = _one_line(capsys)
+    assert "--start 10 --end 5: the range is empty" in line, line
+
+
+def test_inspect_json_states_the_axes_of_its_offsets(capsys):
+    import json
+
+    assert main(["inspect", "example", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["file_up"] == "Y" and rep["offset_axes"] == "Z-up"
+    assert "Z-up" in rep["offset_note"] and "Y-up" in rep["offset_note"]
+
+
+def test_report_finds_a_bundled_character_by_name_or_by_an_old_path(tmp_path, capsys, minimal_trajectory):
+    """`report` needs no --character when the file names a bundled character, by name or by the
+    absolute path another machine (an older physmocap) stored."""
+    import numpy as np
+
+    for stored in ("humanoid", "/some/other/machine/physmocap/assets/mjcf/humanoid.xml"):
+        path = tmp_path / "t.npz"
+        np.savez(path, **{**minimal_trajectory, "mjcf_path": np.array(stored)})
+        with warnings_caught(stored.startswith("/")):
+            assert main(["report", str(path), "--no-source"]) == 0, capsys.readouterr().err
+        out = capsys.readouterr()
+        assert "--character" not in out.err and "humanoid" in out.out
+    np.savez(path, **{**minimal_trajectory, "mjcf_path": np.array("/elsewhere/mine.xml")})
+    assert main(["report", str(path), "--no-source"]) == 2
+    assert "pass --character" in _one_line(capsys)
+
+
+def warnings_caught(expected: bool):
+    import contextlib
+
+    from physmocap.errors import PhysmocapWarning
+
+    return pytest.warns(PhysmocapWarning, match="using the bundled 'humanoid'") if expected else contextlib.nullcontext()
+
+
+def test_quiet_prints_no_report_table(tmp_path, capsys):
+    out, report = tmp_path / "o.bvh", tmp_path / "r.json"
+    argv = ["retarget", "example", "-o", str(out), "--report", str(report), "--start", "1", "--end", "12"]
+    assert main([*argv, "--quiet"]) == 0
+    quiet = capsys.readouterr()
+    assert quiet.out == "" and "wrote" not in quiet.err and report.exists()
+    assert main(argv) == 0
+    loud = capsys.readouterr()
+    assert "Foot skating" in loud.out and f"wrote {out}" in loud.err
+
+
+# --- all the outputs of one run, or none --------------------------------------------------
+def test_output_set_renames_together_or_not_at_all(tmp_path, capsys):
+    from physmocap.fileio import OutputSet, announce, atomic_open, make_output_dir
+
+    old = tmp_path / "a.txt"
+    old.write_text("old")
+    with pytest.raises(OSError, match="disk full"):
+        with OutputSet():
+            with atomic_open(old) as fh:
+                fh.write("new")
+            make_output_dir(tmp_path / "plots")
+            with atomic_open(tmp_path / "plots" / "p.txt") as fh:
+                fh.write("p")
+            announce("wrote a.txt")
+            assert old.read_text() == "old" and not (tmp_path / "plots" / "p.txt").exists()  # not yet
+            with atomic_open(tmp_path / "b.txt") as fh:
+                fh.write("half")
+                raise OSError(28, "disk full")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"] and old.read_text() == "old"
+    assert "wrote" not in capsys.readouterr().err
+    with OutputSet() as outer:
+        with OutputSet():  # an inner set (a writer of two files) hands its files to the outer one
+            with atomic_open(tmp_path / "b.txt") as fh:
+                fh.write("b")
+        assert outer.pending == [tmp_path / "b.txt"] and not (tmp_path / "b.txt").exists()
+        with atomic_open(old) as fh:
+            fh.write("new")
+        announce("wrote both")
+    assert old.read_text() == "new" and (tmp_path / "b.txt").read_text() == "b"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+    assert capsys.readouterr().err == "wrote both\n"
+
+
+def _fail_last(monkeypatch, module, name):
+    """Make ``module.name`` (the run's last writer) write half its file, then fail as a full disk."""
+    from physmocap.fileio import atomic_open
+
+    def boom(*args, **kwargs):
+        path = next(a for a in args if isinstance(a, (str, __import__("os").PathLike)))
+        with atomic_open(path) as fh:
+            fh.write("{")
+            raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(module, name, boom)
+
+
+def test_retarget_failing_in_its_last_output_leaves_none(tmp_path, capsys, monkeypatch):
+    import physmocap.report
+
+    names = ["a.bvh", "a.npz", "a.csv", "r.json"]
+    outs = [str(tmp_path / n) for n in names]
+    argv = ["retarget", "example", "-o", outs[0], "--qpos", outs[1], "--csv", outs[2], "--report", outs[3],
+            "--start", "1", "--end", "12", "--quiet"]
+    _fail_last(monkeypatch, physmocap.report, "write_report_json")
+    assert main(argv) == 2
+    assert "No space left on device" in _one_line(capsys)
+    assert list(tmp_path.iterdir()) == []  # none of the new files, no temporary file
+    for n in names:  # an earlier run's files stay as they were
+        (tmp_path / n).write_text("old")
+    assert main(argv) == 2
+    capsys.readouterr()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
+    assert all((tmp_path / n).read_text() == "old" for n in names)
+    monkeypatch.undo()
+    assert main(argv) == 0
+    assert all((tmp_path / n).read_bytes() != b"old" for n in names)
+
+
+def test_retarget_with_plots_failing_removes_the_plot_directory_it_made(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("matplotlib")
+    import physmocap.plots
+
+    real = physmocap.plots._joints_plot
+
+    def boom(*args):
+        real(*args)
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(physmocap.plots, "_joints_plot", boom)
+    argv = ["retarget", "example", "-o", str(tmp_path / "a.npz"), "--plots", str(tmp_path / "plots"),
+            "--start", "1", "--end", "12", "--quiet"]
+    assert main(argv) == 2
+    capsys.readouterr()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_clean_failing_in_its_report_leaves_no_bvh(tmp_path, capsys, monkeypatch):
+    import physmocap.cli.clean as clean_cli
+
+    def boom(obj, fh, **kwargs):
+        fh.write("{")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(clean_cli.json, "dump", boom)
+    out = tmp_path / "c.bvh"
+    assert main(["clean", "example", "-o", str(out), "--report", str(tmp_path / "g.json")]) == 2
+    assert "No space left on device" in _one_line(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_robot_csv_and_its_joint_names_are_one_output(tmp_path, capsys, monkeypatch):
+    import physmocap.export.robot as robot
+
+    real = robot.atomic_open
+    calls = []
+
+    def second_fails(path, *a, **k):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(robot, "atomic_open", second_fails)
+    out = tmp_path / "r.csv"
+    assert main(["retarget", "example", "-o", str(out), "--format", "robot-csv", "--start", "1", "--end", "6",
+                 "--quiet"]) == 2
+    capsys.readouterr()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_same_path_twice_is_refused(tmp_path, capsys):
+    out = str(tmp_path / "a.npz")
+    assert main(["retarget", "example", "-o", out, "--qpos", out]) == 2
+    assert "given twice as an output" in _one_line(capsys)

@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import SHARED_BVH, retargeted
+from conftest import RETARGET_DIAGNOSTICS, SHARED_BVH, retargeted
 from physmocap import metrics
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 #: Known shortfall of the offline foot plan (issue 9 is open): on the PyMO walk a few
 #: touchdown frames (a foot labelled flat while its toe is still landing) move fast enough to

@@ -24,7 +24,9 @@ from physmocap.report import (
 from physmocap.sources.profiles import map_skeleton
 from physmocap.trajectory import Trajectory
 
-from conftest import retargeted
+from conftest import RETARGET_DIAGNOSTICS, retargeted
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 WALK = "cmu_12_01_walk.bvh"
 FIXTURE = __import__("pathlib").Path(__file__).parent / "fixtures" / "contacts" / "cmu_12_01_walk_stance.csv"
@@ -127,7 +129,7 @@ def test_missing_matplotlib_names_the_extra(monkeypatch):
     from physmocap.plots import require_matplotlib
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)
-    with pytest.raises(OptionError, match=r"pip install physmocap\[plot\]"):
+    with pytest.raises(OptionError, match=r"pip install 'physmocap\[plot\]'"):
         require_matplotlib()
 
 
@@ -182,7 +184,7 @@ def test_cli_plots_without_matplotlib_fail_before_writing(walk_npz, tmp_path, ca
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     out = tmp_path / "r.json"
     assert main(["report", str(walk_npz), "--json", str(out), "--plots", str(tmp_path / "p")]) == 2
-    assert "pip install physmocap[plot]" in capsys.readouterr().err
+    assert "pip install 'physmocap[plot]'" in capsys.readouterr().err
     assert not out.exists()
 
 

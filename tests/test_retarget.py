@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from conftest import SHARED_BVH, WALKS, retargeted
+from conftest import RETARGET_DIAGNOSTICS, SHARED_BVH, WALKS, retargeted
 from physmocap import metrics
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 CHARACTERS = ["humanoid", "robot"]
 CASES = [(clip, ch) for clip in SHARED_BVH for ch in CHARACTERS]

@@ -10,6 +10,9 @@ import pytest
 
 from physmocap.cli import main
 from physmocap.resources import mjcf_dir
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 TINY_BVH = """HIERARCHY
 ROOT Hips
@@ -108,11 +111,18 @@ def test_no_plant_needs_no_contacts(tmp_path, capsys):
     assert main(["retarget", "example", "-o", str(out), "--character", str(tmp_path / "robot.xml"), "--no-plant", "--end", "30"]) == 0
 
 
-@pytest.mark.parametrize("rng", [["--start", "600"], ["--start", "10", "--end", "5"], ["--end", "9999"]])
-def test_frame_range_outside_the_clip(tmp_path, capsys, rng):
+@pytest.mark.parametrize(
+    "rng,needle",
+    [
+        (["--start", "600"], "outside the clip"),
+        (["--start", "10", "--end", "5"], "the range is empty"),
+        (["--end", "9999"], "outside the clip"),
+    ],
+)
+def test_frame_range_outside_the_clip(tmp_path, capsys, rng, needle):
     out = tmp_path / "out.bvh"
     assert main(["retarget", "example", "-o", str(out), *rng]) == 2
-    assert "outside the clip" in _error(capsys)
+    assert needle in _error(capsys)
     assert not out.exists()
 
 

@@ -9,6 +9,9 @@ import physmocap
 from physmocap.metrics import self_penetration
 from physmocap.models import load_character
 from physmocap.models.selfcollision import limb_groups, self_collision_pairs
+from conftest import RETARGET_DIAGNOSTICS
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from conftest import shared_file
+from conftest import RETARGET_DIAGNOSTICS, shared_file
 from physmocap import metrics
 from physmocap.cli import main
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import atomic_open, check_not_input, check_writable
+from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--plots",
         metavar="DIR",
         help="write PNGs: anatomical angles with their ranges and the spans beyond them, and each glitched "
-        "joint's speed with its glitched spans (needs matplotlib)",
+        "joint's speed with its glitched spans (needs: pip install 'physmocap[plot]')",
     )
     p.set_defaults(func=run)
 
@@ -43,30 +43,38 @@ def run(args: argparse.Namespace) -> int:
             raise OptionError("clean writes .bvh files", path=args.output)
         check_writable(args.output)
     if args.report:
-        check_writable(args.report)
+        check_writable(args.report, "report")
     if args.plots:
+        from ..fileio import check_output_dir
         from ..plots import require_matplotlib
 
         require_matplotlib()
+        check_output_dir(args.plots, "plot directory")
     check_not_input([args.output, args.report], [args.input])
+    check_distinct([args.output, args.report])
     motion = load_motion(args.input, min_frames=1)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
     fixed, report = clean(motion)
     sys.stdout.write(report.table())
+    with OutputSet():  # the BVH, the plots and the JSON renamed into place together, or none
+        _write(motion, fixed, report, args)
+    return 0
+
+
+def _write(motion, fixed, report, args: argparse.Namespace) -> None:
     if args.output:
         from ..export.bvh import write_bvh
 
         write_bvh(fixed, args.output)
-        print(f"wrote {args.output}", file=sys.stderr)
+        announce(f"wrote {args.output}")
     if args.plots:
         from ..clean.plots import write_glitch_plots
 
         for path in write_glitch_plots(motion, report.glitches, args.plots):
-            print(f"wrote {path}", file=sys.stderr)
+            announce(f"wrote {path}")
     if args.report:
         with atomic_open(args.report) as fh:
             json.dump(report.as_dict(), fh, indent=2, sort_keys=True, allow_nan=False)
             fh.write("\n")
-        print(f"wrote {args.report}", file=sys.stderr)
-    return 0
+        announce(f"wrote {args.report}")

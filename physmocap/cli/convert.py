@@ -19,7 +19,7 @@ from ..errors import OptionError
 def register(subparsers) -> None:  # noqa: ANN001
     p = subparsers.add_parser(
         "convert",
-        help="rewrite a motion file (BVH ...), optionally changing units, axes, rate or range",
+        help="rewrite a motion file as BVH or MCAP, optionally changing units, axes, rate or range",
         description=(
             "Read IN (any supported format, chosen by suffix; 'example' is the bundled walk) and write "
             "OUT (by suffix). In order: cut the frame range [--start, --end), resample to --fps (slerp "
@@ -28,11 +28,12 @@ def register(subparsers) -> None:  # noqa: ANN001
         ),
     )
     p.add_argument("input", metavar="IN", help="input motion file, or 'example' for the bundled walk")
-    p.add_argument("output", metavar="OUT", help="output file (.bvh)")
+    p.add_argument("output", metavar="OUT", help="output file, by suffix: .bvh (rotational sources) or .mcap "
+                   "(Foxglove FrameTransforms; any source)")
     p.add_argument("--rotation-order", metavar="ORDER",
                    help="Euler order for every joint, e.g. ZXY, ZYX, XYZ (default: keep the input's)")
     p.add_argument("--units", metavar="UNIT",
-                   help="output length unit: m, cm, mm, inch, ft, cmu, or metres per unit (default: the input's)")
+                   help="BVH output length unit: m, dm, cm, mm, inch, ft, cmu, or metres per unit (default: the input's)")
     p.add_argument("--up", metavar="AXIS", choices=["Y", "Z", "y", "z"],
                    help="output up axis, Y or Z (default: the input's)")
     p.add_argument("--precision", metavar="N", type=int, default=None,
@@ -44,7 +45,7 @@ def register(subparsers) -> None:  # noqa: ANN001
     p.add_argument("--fps", metavar="RATE", type=float, default=None,
                    help="resample to this frame rate (quaternion slerp)")
     p.add_argument("--in-units", metavar="UNIT",
-                   help="the input's length unit when it cannot be detected reliably (default: detect)")
+                   help="the input's length unit when it cannot be detected reliably: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
     p.add_argument("--in-up", metavar="AXIS", choices=["Y", "Z", "y", "z"],
                    help="the input's up axis (default: the format's convention, Y for BVH)")
     p.set_defaults(func=run)
@@ -74,7 +75,10 @@ def run(args: argparse.Namespace) -> int:
     from ..fileio import check_not_input
     from ..sources import load_motion
 
+    from ..options import check_frame_range
+
     check_not_input([args.output], [args.input])
+    check_frame_range(args.start, args.end)
 
     in_opts = {}
     if args.in_units is not None:
@@ -96,9 +100,10 @@ def run(args: argparse.Namespace) -> int:
     _check_output(args.output, out_opts)
     motion = load_motion(args.input, **in_opts)
     F = motion.num_frames
+    ends = int(motion.skeleton.end_site.sum())
     print(
         f"physmocap: read {motion.source}: {F} frames at {motion.fps:.6g} fps, "
-        f"{motion.skeleton.num_joints} joints, units {motion.units}, {motion.file_up}-up",
+        f"{motion.skeleton.num_joints - ends} joints and {ends} end sites, units {motion.units}, {motion.file_up}-up",
         file=sys.stderr,
     )
     if args.start is not None or args.end is not None:

@@ -48,7 +48,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--map", metavar="MAP.toml", help="source mapping file (TOML) overriding the profile")
     p.add_argument(
         "--units", "--in-units", dest="units", metavar="U",
-        help="the file's length unit (m, cm, mm, inch, ft, cmu, or metres per unit); default: detect",
+        help="the file's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number; default: detect",
     )
     p.add_argument("--up", "--in-up", dest="up", metavar="AXIS", choices=["Y", "Z", "y", "z"],
                    help="the file's up axis (BVH default Y)")
@@ -118,6 +118,11 @@ def describe(motion, jmap) -> dict[str, Any]:
         "height_pose": where,
         "rest_height_m": _num(skel.height()),
         "floor_m": _num(motion.floor_height()),
+        # offset_m (each joint's rest offset from its parent) is in physmocap's world frame,
+        # whatever the file's up axis (file_up): say so in the document itself
+        "offset_axes": "Z-up",
+        "offset_note": "joints[].offset_m: metres, in physmocap's Z-up frame (converted from the file's "
+        f"{motion.file_up}-up axes)",
         "num_joints": int(np.count_nonzero(~skel.end_site)),
         "num_end_sites": int(np.count_nonzero(skel.end_site)),
         "joints": joints,

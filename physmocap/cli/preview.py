@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from ..errors import OptionError
@@ -78,7 +77,9 @@ def render_preview(
         else:
             shown, rate = video_frames(traj.num_frames, traj.fps, fps)
             write_video(scene, shown, out, rate, inp.first, progress)
-    print(f"wrote {out}", file=sys.stderr)
+    from ..fileio import announce
+
+    announce(f"wrote {out}")
 
 
 def _load(args: argparse.Namespace):

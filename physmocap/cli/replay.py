@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import OptionError
-from ..fileio import atomic_open, check_writable
+from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(out)
     if args.stats:
         check_writable(args.stats)
+    check_distinct([out, args.stats])
     motion = load_motion(args.input, min_frames=1)
     character = load_character(args.character, args.map)
     floor = args.floor if args.floor is not None else motion.meta.get("floor_z")
@@ -130,13 +130,14 @@ def run(args: argparse.Namespace) -> int:
     if args.compare:
         c = stats["offline_difference_cm"]
         print(f"streaming vs offline body positions: mean {c['mean']:.2f} cm, p95 {c['p95']:.2f} cm, max {c['max']:.2f} cm")
-    if out is not None:
-        from .retarget import write_outputs
+    with OutputSet():  # the result and the figures renamed into place together, or none
+        if out is not None:
+            from .retarget import write_outputs
 
-        write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
-    if args.stats:
-        with atomic_open(args.stats, "w") as fh:
-            json.dump(stats, fh, indent=2, sort_keys=True)
-            fh.write("\n")
-        print(f"wrote {args.stats}", file=sys.stderr)
+            write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
+        if args.stats:
+            with atomic_open(args.stats, "w") as fh:
+                json.dump(stats, fh, indent=2, sort_keys=True)
+                fh.write("\n")
+            announce(f"wrote {args.stats}")
     return 0

@@ -23,13 +23,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--source", metavar="CLIP", help="source motion (default: the path stored in the trajectory)")
     p.add_argument("--no-source", action="store_true", help="report on the trajectory alone")
     p.add_argument("--json", metavar="OUT.json", help="also write the report as JSON")
-    p.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR (needs: pip install physmocap[plot])")
+    p.add_argument("--plots", metavar="DIR", help="write PNG plots into DIR (needs: pip install 'physmocap[plot]')")
     p.add_argument("--contacts", metavar="LABELS.csv", help="contact labels (point,start,end) instead of detection")
     p.add_argument("--character", metavar="PATH", help="MJCF or bundled name (default: the one stored in the file)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
-    p.add_argument("--in-units", help="override the source's length unit (as for retarget)")
+    p.add_argument("--in-units", metavar="UNIT", help="override the source's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
     p.add_argument(
         "--start", type=int, default=None,
         help="source frame the trajectory starts at (retarget --start; default: stored in the file, else 0)"
@@ -42,6 +42,10 @@ def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
         return None
     if args.source:
         return Path(args.source)
+    from ..resources import EXAMPLE_NAME, resolve_input
+
+    if stored == EXAMPLE_NAME:
+        return resolve_input(stored)
     p = Path(stored)
     if stored and stored not in ("<memory>", "<unknown>") and p.exists():
         return p
@@ -52,14 +56,16 @@ def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
 def run(args: argparse.Namespace) -> int:
     from ..fileio import check_writable
     from ..ik.contacts import detect_contacts, load_contact_csv
-    from ..report import emit_report, load_trajectory, tracking_targets
+    from ..report import load_trajectory, tracking_targets
 
     if args.json:
-        check_writable(args.json)
+        check_writable(args.json, "report")
     if args.plots:
+        from ..fileio import check_output_dir
         from ..plots import require_matplotlib
 
         require_matplotlib()
+        check_output_dir(args.plots, "plot directory")
     if args.start is not None and args.start < 0:
         raise OptionError(f"--start must be >= 0, got {args.start}")
     traj = load_trajectory(args.trajectory, args.character, args.map)
@@ -100,6 +106,16 @@ def run(args: argparse.Namespace) -> int:
     if motion is not None and traj.targets is None:
         # files without stored targets: rebuild them (planting adjustments not reproduced)
         traj.targets = tracking_targets(motion, joint_indices, traj.character, contacts)
+    from ..fileio import OutputSet
+
+    with OutputSet():  # the JSON and the plots renamed into place together, or none
+        _emit(traj, motion, contacts, joint_indices, args)
+    return 0
+
+
+def _emit(traj, motion, contacts, joint_indices, args: argparse.Namespace) -> None:
+    from ..report import emit_report
+
     emit_report(
         traj,
         motion,
@@ -109,4 +125,3 @@ def run(args: argparse.Namespace) -> int:
         joint_indices=joint_indices,
         stream=sys.stdout,
     )
-    return 0

@@ -3,17 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import check_not_input, check_writable
+from ..fileio import OutputSet, announce, check_distinct, check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "retarget",
-        help="retarget a motion onto a character (BVH / NPZ / CSV out)",
+        help="retarget a motion onto a character (BVH / NPZ / CSV / MCAP out)",
         description=(
             "Retarget solved motion onto an MJCF character with differential IK under joint "
             "limits, velocity limits and a floor. INPUT may be 'example' (the bundled CMU walk)."
@@ -30,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
     p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
-    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs physmocap[plot])")
+    p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs: pip install 'physmocap[plot]')")
     p.add_argument("--preview", metavar="OUT.mp4", help="also render a preview (.mp4, .gif or .png sheet; see physmocap preview)")
     p.set_defaults(func=run)
 
@@ -41,7 +40,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
-    p.add_argument("--in-units", help="override the input's length unit (m, cm, inch, cmu or metres per unit)")
+    p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
     p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
@@ -56,13 +55,22 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar, report table or 'wrote' lines (warnings and errors still print)")
 
 
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 
 def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool = False) -> None:
+    """Write ``traj`` to every path of ``outputs`` (the first in ``args.format``'s layout),
+    all renamed into place together (:class:`~physmocap.fileio.OutputSet`): if one fails,
+    none is written."""
+    with OutputSet():
+        _write_outputs(traj, outputs, args, quiet)
+
+
+def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool) -> None:
     for k, out in enumerate(outputs):
         suffix = out.suffix.lower()
         layout = getattr(args, "format", "auto") if k == 0 else "auto"
@@ -91,7 +99,7 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bo
 
             write_trajectory_mcap(traj, out)
         if not quiet:
-            print(f"wrote {out}", file=sys.stderr)
+            announce(f"wrote {out}")
 
 
 def retarget_from_args(args: argparse.Namespace):
@@ -99,8 +107,10 @@ def retarget_from_args(args: argparse.Namespace):
     :func:`add_retarget_options`; returns the trajectory."""
     from ..ik.retarget import retarget
     from ..models import load_character
+    from ..options import check_frame_range
     from ..sources import load_motion
 
+    check_frame_range(args.start, args.end)
     read_opts = {}
     if args.in_units:
         read_opts["units"] = args.in_units
@@ -141,15 +151,19 @@ def run(args: argparse.Namespace) -> int:
     if wanted and outputs[0].suffix.lower() != wanted:
         raise OptionError(f"--format {args.format} writes a {wanted} file", path=outputs[0])
     for out in outputs:
+        check_writable(out)
         if out.suffix.lower() not in WRITERS:
             raise OptionError(
                 f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",
                 path=out,
             )
-        check_writable(out)
     if args.report:
-        check_writable(args.report)
+        check_writable(args.report, "report")
     check_not_input(outputs + [args.report, args.preview], [args.input, args.contacts, args.source_map, args.map])
+    check_distinct(outputs + [args.report, args.preview])
+    from ..options import check_frame_range
+
+    check_frame_range(args.start, args.end)
     if args.plots:
         from ..plots import require_matplotlib
         from ..report import _check_plot_dir
@@ -162,7 +176,13 @@ def run(args: argparse.Namespace) -> int:
         check_output(args.preview)
         require_imageio()
     traj = retarget_from_args(args)
-    write_outputs(traj, outputs, args)
+    with OutputSet():  # every file of the run renamed into place together, or none
+        _write_all(traj, outputs, args)
+    return 0
+
+
+def _write_all(traj, outputs: list[Path], args: argparse.Namespace) -> None:
+    write_outputs(traj, outputs, args, quiet=args.quiet)
     if args.report or args.plots:
         from ..report import emit_report
 
@@ -173,9 +193,9 @@ def run(args: argparse.Namespace) -> int:
             json_path=args.report,
             plots_dir=args.plots,
             joint_indices=traj.joint_indices,
+            quiet=args.quiet,
         )
     if args.preview:
         from .preview import render_preview
 
         render_preview(traj, Path(args.preview), quiet=args.quiet)
-    return 0

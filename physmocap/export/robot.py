@@ -33,7 +33,7 @@ import mujoco
 import numpy as np
 
 from ..errors import OutputError
-from ..fileio import atomic_open
+from ..fileio import OutputSet, atomic_open
 from ..rotations import wxyz_to_xyzw
 from ..trajectory import Trajectory
 from .trajectory import write_npz
@@ -112,9 +112,10 @@ def write_robot_csv(traj: Trajectory, path: str | os.PathLike, precision: int = 
         raise OutputError("non-finite joint positions: nothing written", path=p)
     fmt = f"{{:.{int(precision)}g}}"
     names_path = p.with_name(p.stem + ".joints.txt")
-    with atomic_open(names_path) as fh:
-        fh.write("\n".join(["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw", *names]) + "\n")
-    with atomic_open(p) as fh:
-        for row in rows:
-            fh.write(",".join(fmt.format(v) for v in row) + "\n")
+    with OutputSet():  # the CSV and its joint names renamed into place together, or neither
+        with atomic_open(names_path) as fh:
+            fh.write("\n".join(["root_x", "root_y", "root_z", "root_qx", "root_qy", "root_qz", "root_qw", *names]) + "\n")
+        with atomic_open(p) as fh:
+            for row in rows:
+                fh.write(",".join(fmt.format(v) for v in row) + "\n")
     return p

@@ -38,13 +38,13 @@ def load_motion(path: str | os.PathLike, *, min_frames: int = 0, **options) -> M
     ``inspect`` and ``convert`` take an empty clip as it is)."""
     p = resolve_input(path)
     suffix = p.suffix.lower()
+    if p.is_dir():
+        raise InputError("is a directory, expected a motion file (" + ", ".join(sorted(READERS)) + ")", path=p)
     if suffix not in READERS:
         known = ", ".join(sorted(READERS))
         raise InputError(f"unknown file type {suffix or '(none)'!r}; physmocap reads {known}", path=p)
     if not p.exists():
         raise InputError("file not found", path=p)
-    if p.is_dir():
-        raise InputError("is a directory, expected a file", path=p)
     module_name, func_name = READERS[suffix]
     reader = getattr(importlib.import_module(module_name), func_name)
     motion = reader(Path(p), **options)

@@ -52,13 +52,16 @@ __all__ = [
     "default_foot_height",
 ]
 
-#: Metres per unit.
-UNIT_SCALES: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254}
+#: Metres per unit: the same names as the BVH reader's (``--in-units`` takes them for
+#: every reader); ``cmu`` is :data:`physmocap.sources.bvh.CMU_UNIT`.
+UNIT_SCALES: dict[str, float] = {
+    "m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "ft": 0.3048, "cmu": 2.54 / 45.0,
+}  # fmt: skip
 _UNIT_ALIASES = {
     "meter": "m", "meters": "m", "metre": "m", "metres": "m",
     "centimeter": "cm", "centimeters": "cm", "centimetre": "cm", "centimetres": "cm",
     "millimeter": "mm", "millimeters": "mm", "millimetre": "mm", "millimetres": "mm",
-    "in": "inch", "inches": "inch",
+    "in": "inch", "inches": "inch", "foot": "ft", "feet": "ft",
 }  # fmt: skip
 
 #: Winter (2009), Biomechanics and Motor Control of Human Movement, fig. 4.1:

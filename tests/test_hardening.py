@@ -803,3 +803,24 @@ def test_the_same_path_twice_is_refused(tmp_path, capsys):
     out = str(tmp_path / "a.npz")
     assert main(["retarget", "example", "-o", out, "--qpos", out]) == 2
     assert "given twice as an output" in _one_line(capsys)
+
+
+def test_an_error_without_a_file_names_the_commands_input(tmp_path, capsys):
+    """Issue 15: clean errors that did not name the file, e.g. a skeleton whose hips coincide."""
+    import re
+
+    from physmocap.resources import resolve_input
+
+    text = resolve_input("example").read_text()
+
+    def offset(name: str) -> re.Match:
+        return re.search(r"JOINT %s\s*\{\s*OFFSET ([^\n]+)" % name, text)
+
+    for left, right in (("LHipJoint", "RHipJoint"), ("LeftUpLeg", "RightUpLeg")):
+        a, b = offset(left), offset(right)
+        text = text[: b.start(1)] + a.group(1) + text[b.end(1) :]
+    src = tmp_path / "hips.bvh"
+    src.write_text(text)
+    assert main(["retarget", str(src), "-o", str(tmp_path / "out.bvh")]) == 2
+    line = _one_line(capsys)
+    assert f"{src}: cannot tell which way the skeleton faces" in line, line

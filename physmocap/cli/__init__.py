@@ -13,7 +13,7 @@ import sys
 import warnings
 from typing import Sequence
 
-from ..errors import PhysmocapError, PhysmocapWarning
+from ..errors import OutputError, PhysmocapError, PhysmocapWarning
 
 #: Sub-command modules, in the order ``physmocap --help`` lists them.
 COMMAND_MODULES = (
@@ -76,6 +76,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         status = args.func(args)
     except PhysmocapError as exc:
+        if exc.path is None and isinstance(getattr(args, "input", None), str) and not isinstance(exc, OutputError):
+            exc.path = args.input  # every message names a file: the command's input unless another is named
         print(f"physmocap: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

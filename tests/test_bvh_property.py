@@ -20,6 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from corruption import byte_edit
 from physmocap.errors import InputError, PhysmocapWarning
 from physmocap.export.bvh import write_bvh
 from physmocap.sources.bvh import CHANNEL_NAMES, read_bvh
@@ -179,19 +180,8 @@ def corrupted(draw):
             else:
                 toks[i] = draw(st.sampled_from(_VOCAB))
             data = bytearray(b" ".join(toks))
-        elif kind == "truncate":
-            data = data[: draw(st.integers(0, len(data)))]
-        elif kind == "flip":
-            i = draw(st.integers(0, len(data) - 1))
-            data[i] ^= 1 << draw(st.integers(0, 7))
         else:
-            lines = bytes(data).split(b"\n")
-            i = draw(st.integers(0, len(lines) - 1))
-            if kind == "dup_line":
-                lines.insert(i, lines[i])
-            else:
-                del lines[i]
-            data = bytearray(b"\n".join(lines))
+            data = bytearray(byte_edit(draw, bytes(data), kind))
     return bytes(data)
 
 

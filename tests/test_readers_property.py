@@ -20,6 +20,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from corruption import byte_edit
 from physmocap.errors import PhysmocapError
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -71,12 +72,7 @@ def corrupted(draw, suffix: str):
         if not data:
             break
         kind = draw(st.sampled_from(["flip", "truncate", "del_line", "dup_line", "number"]))
-        if kind == "flip":
-            i = draw(st.integers(0, len(data) - 1))
-            data[i] ^= 1 << draw(st.integers(0, 7))
-        elif kind == "truncate":
-            data = data[: draw(st.integers(0, len(data)))]
-        elif kind == "number":
+        if kind == "number":
             import re
 
             spans = [m.span() for m in re.finditer(rb"-?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?", bytes(data))]
@@ -84,13 +80,7 @@ def corrupted(draw, suffix: str):
                 a, b = spans[draw(st.integers(0, len(spans) - 1))]
                 data[a:b] = draw(st.sampled_from(_EXTREMES))
         else:
-            lines = bytes(data).split(b"\n")
-            i = draw(st.integers(0, len(lines) - 1))
-            if kind == "dup_line":
-                lines.insert(i, lines[i])
-            else:
-                del lines[i]
-            data = bytearray(b"\n".join(lines))
+            data = bytearray(byte_edit(draw, bytes(data), kind))
     return bytes(data)
 
 

@@ -83,7 +83,9 @@ class SolverOptions:
         self_collision: Keep the limbs' collision geoms out of each other and out of
             the trunk (:class:`~physmocap.ik.limits.SelfCollisionLimit`, pairs from
             :func:`~physmocap.models.selfcollision.self_collision_pairs`).
-        self_collision_margin: Gap (metres) those geoms keep; 0 lets them touch.
+        self_collision_margin: Gap (metres) those geoms keep (5 mm: the linearised
+            constraint of two boxes sliding along each other, feet brushing, can
+            overshoot by about that much in one frame; 0 lets them touch).
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: qpsolvers backend name.
@@ -104,7 +106,7 @@ class SolverOptions:
     trust_region: float = 0.5
     limit_gain: float = 0.95
     self_collision: bool = True
-    self_collision_margin: float = 0.0
+    self_collision_margin: float = 0.005
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
 

@@ -38,7 +38,7 @@ from ..errors import OptionError
 from ..options import check_fields
 from .contacts import ContactDetector, ContactOptions, FloorPlane, central_velocity
 
-__all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points", "BodyContactStream", "BodyContactAnchor"]
+__all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points", "BodyContactStream", "BodyContactAnchor", "release_kneeling_feet"]
 
 #: Contact part -> the canonical joints measured (the lowest of them counts).
 BODY_PARTS: dict[str, tuple[str, ...]] = {
@@ -272,3 +272,23 @@ class BodyContactAnchor:
         else:
             self.offset = np.zeros(3)
         return self.offset.copy()
+
+
+def release_kneeling_feet(labels: Mapping[str, object], body_labels: Mapping[str, object]) -> dict[str, object]:
+    """Foot labels with each foot's contacts cleared while its knee rests on the floor.
+
+    A kneeling leg's foot lies on its instep or on tucked toes: holding its sole sites on
+    the floor would twist the ankle beyond its range, so the foot is left to the floor
+    constraint while the knee is down.  Works on whole-clip ``(F,)`` arrays and on one
+    frame's bools alike (same type out as in)."""
+    out = dict(labels)
+    for side in ("left", "right"):
+        knee = body_labels.get(f"{side}_knee")
+        if knee is None or not np.any(knee):
+            continue
+        for name in ("heel", "toe"):
+            key = f"{side}_{name}"
+            if key in out:
+                v = np.asarray(out[key], dtype=bool) & ~np.asarray(knee, dtype=bool)
+                out[key] = bool(v) if v.ndim == 0 else v
+    return out

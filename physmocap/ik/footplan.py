@@ -39,7 +39,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "plant_body_contacts", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -355,18 +355,26 @@ def plant_body_contacts(
     out = np.array(positions, dtype=float, copy=True)
     col = {n: i for i, n in enumerate(names)}
     for part, label in body_labels.items():
-        joints = [j for j in BODY_PART_JOINTS.get(part, ()) if j in col]
         label = np.asarray(label, dtype=bool)
-        if not joints or not label.any():
+        held = body_part_target(positions, col, part)
+        if held is None or not label.any():
             continue
-        if part == "pelvis":
-            if not all(h in col for h in ("left_hip", "right_hip")):
-                continue
-            point = 0.5 * (positions[:, col["left_hip"]] + positions[:, col["right_hip"]])
-        else:
-            point = positions[:, col[joints[0]]]
+        idx, point = held
         plan = foot_offsets({part: point}, {part: label}, fps, ease_time, {part: floor})
-        idx = [col[j] for j in joints]
         out[:, idx, :2] += plan.xy[:, None, :]
         out[:, idx, 2] += plan.z[part][:, None]
     return out
+
+
+def body_part_target(positions: np.ndarray, col: Mapping[str, int], part: str) -> tuple[list[int], np.ndarray] | None:
+    """``(target columns the part moves, its held point (..., 3))`` for a contact part, from
+    targets ``positions (..., N, 3)``: the first of :data:`BODY_PART_JOINTS` present (the
+    midpoint of the hips for the pelvis); None when the part has no target."""
+    idx = [col[j] for j in BODY_PART_JOINTS.get(part, ()) if j in col]
+    if not idx:
+        return None
+    if part == "pelvis":
+        if not all(h in col for h in ("left_hip", "right_hip")):
+            return None
+        return idx, 0.5 * (positions[..., col["left_hip"], :] + positions[..., col["right_hip"], :])
+    return idx, positions[..., idx[0], :]

@@ -439,7 +439,6 @@ class Planting:
         c = self.options.clearance
         if not self.options.plant or c <= 0:
             return {}
-        model = self.character.model
         out: dict[int, float] = {}
         for side in ("left", "right"):
             ks = [k for k, site in enumerate(self.sites) if site in self.character.contacts.get(side, ())]

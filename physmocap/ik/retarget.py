@@ -21,8 +21,9 @@ from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
 from ..trajectory import SolverStats, Trajectory
+from .body_contacts import release_kneeling_feet
 from .config import RetargetConfig
-from .contacts import ContactOptions, Contacts, detect_contacts, load_contact_csv
+from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footplan import plant_body_contacts, planted_positions
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
@@ -96,7 +97,9 @@ def _frame_range(motion: Motion, start: int, end: int | None) -> Motion:
     F = motion.num_frames
     s = int(start)
     e = F if end is None else int(end)
-    if s < 0 or e > F or s >= e:
+    if 0 <= s and e <= F and s >= e:
+        raise OptionError(f"frame range [{s}, {e}) is empty (--start is inclusive, --end exclusive)", path=motion.source)
+    if s < 0 or e > F:
         raise OptionError(
             f"frame range [{s}, {e}) is outside the clip, which has frames 0 to {F - 1} "
             f"(--start is inclusive, --end exclusive)",
@@ -195,23 +198,6 @@ def retarget(
     return traj
 
 
-def feet_off_kneeling(labels: dict[str, np.ndarray], body_labels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Foot labels with each foot's contact cleared while its knee rests on the floor.
-
-    A kneeling leg's foot lies on its instep or on tucked toes: holding its
-    sole sites on the floor would twist the ankle beyond its range, so the
-    foot is left to the floor constraint while the knee is down."""
-    out = dict(labels)
-    for side in ("left", "right"):
-        knee = body_labels.get(f"{side}_knee")
-        if knee is None or not np.any(knee):
-            continue
-        for name in list(out):
-            if name.startswith(side + "_"):
-                out[name] = np.asarray(out[name], dtype=bool) & ~np.asarray(knee, dtype=bool)
-    return out
-
-
 def plan_targets(
     targets: Targets,
     character,
@@ -222,7 +208,7 @@ def plan_targets(
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
     feet (and knees, hands, pelvis in contact) held where they land, eased in and out
-    (``labels`` as planted: :func:`feet_off_kneeling` applied).
+    (``labels`` as planted: :func:`~physmocap.ik.body_contacts.release_kneeling_feet` applied).
     The unplanned positions are kept in ``info["raw_positions"]``, the feet's
     horizontal offsets in ``info["foot_offsets"]``."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
@@ -258,7 +244,7 @@ def solve_targets(
     plant = plant or PlantOptions()
     planted = labels is not None and plant.plant
     if planted:
-        labels = feet_off_kneeling(labels, body_labels or {})
+        labels = release_kneeling_feet(labels, body_labels or {})
         targets = plan_targets(targets, character, labels, plant, options.floor_height, body_labels)
     pipeline = FrameRetargeter(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False

@@ -41,9 +41,9 @@ from ..errors import InputError, MappingError, OptionError, warn
 from ..motion import Motion, Skeleton
 from ..trajectory import SolverStats, Trajectory
 from .config import RetargetConfig
-from .body_contacts import BodyContactAnchor, BodyContactStream
+from .body_contacts import BodyContactAnchor, BodyContactStream, release_kneeling_feet
 from .contacts import ContactStream, Contacts, FloorPlane, contact_points
-from .footplan import BODY_PART_JOINTS
+from .footplan import body_part_target
 from .frame import FrameRetargeter
 from .retarget import map_motion
 from .targets import build_targets
@@ -248,24 +248,15 @@ class StreamingRetargeter:
         ride along so the planting leaves a kneeling knee's target alone."""
         out = np.array(positions, dtype=float, copy=True)
         col = {n: i for i, n in enumerate(names)}
-        labels = dict(labels)
         for part, anchor in self.body_anchors.items():
-            joints = [col[j] for j in BODY_PART_JOINTS.get(part, ()) if j in col]
-            if not joints:
-                continue
-            if part == "pelvis":
-                if not all(h in col for h in ("left_hip", "right_hip")):
-                    continue
-                point = 0.5 * (positions[col["left_hip"]] + positions[col["right_hip"]])
-            else:
-                point = positions[joints[0]]
-            out[joints] += anchor.step(bool(body.get(part, False)), point)
+            held = body_part_target(positions, col, part)
+            if held is not None:
+                idx, point = held
+                out[idx] += anchor.step(bool(body.get(part, False)), point)
+        labels = release_kneeling_feet(labels, body)
         for side in ("left", "right"):
             if body.get(f"{side}_knee", False):
                 labels[f"{side}_knee"] = True
-                for name in list(labels):
-                    if name.startswith(side + "_") and name != f"{side}_knee":
-                        labels[name] = False
         return out, labels
 
 

@@ -49,7 +49,7 @@ from pathlib import Path
 import mujoco
 
 from ..canonical import CANONICAL_NAMES
-from ..errors import InputError, MappingError
+from ..errors import MappingError
 from ..fileio import read_toml
 
 __all__ = ["TrackedFrame", "Mapping", "read_mapping", "mapping_from_text", "implicit_mapping", "AXES"]

@@ -837,7 +837,6 @@ def positional_motion(
     names_o = [names[k] for k in order]
     pos_o = pos[:, order_arr]
     conf_o = conf_all[:, order_arr]
-    valid_o = valid_meas[:, order_arr]
     new_index = {old: k for k, old in enumerate(order)}
     canon_o = {c: new_index[j] for c, j in canon.items()}
     heading = None

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ...canonical import CANONICAL_NAMES
-from ...errors import InputError, MappingError
+from ...errors import MappingError
 from ...fileio import read_toml
 
 __all__ = ["load_mapping_file", "check_mapping", "UserMapping"]

@@ -28,7 +28,7 @@ numbering) and a severity (degrees or metres).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -75,9 +75,9 @@ class CleanOptions:
     swap_min_distance: float = 0.05
 
     def __post_init__(self) -> None:
-        for name, v in asdict(self).items():
-            if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"CleanOptions.{name} must be positive, got {v}")
+        from ..options import check_fields
+
+        check_fields(self, "clean", positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"])
 
 
 @dataclass(frozen=True)

@@ -97,7 +97,7 @@ def _frame_range(motion: Motion, start: int, end: int | None) -> Motion:
     F = motion.num_frames
     s = int(start)
     e = F if end is None else int(end)
-    if 0 <= s and e <= F and s >= e:
+    if 0 <= s < F and e <= F and s >= e:
         raise OptionError(f"frame range [{s}, {e}) is empty (--start is inclusive, --end exclusive)", path=motion.source)
     if s < 0 or e > F:
         raise OptionError(

@@ -99,7 +99,7 @@ def _frame_range(motion: Motion, start: int, end: int | None) -> Motion:
     e = F if end is None else int(end)
     if 0 <= s < F and e <= F and s >= e:
         raise OptionError(f"frame range [{s}, {e}) is empty (--start is inclusive, --end exclusive)", path=motion.source)
-    if s < 0 or e > F:
+    if s < 0 or e > F or s >= e:
         raise OptionError(
             f"frame range [{s}, {e}) is outside the clip, which has frames 0 to {F - 1} "
             f"(--start is inclusive, --end exclusive)",

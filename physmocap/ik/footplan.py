@@ -215,7 +215,9 @@ def pelvis_drop(
     return drop
 
 
-def knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float) -> np.ndarray:
+def knee_between(
+    hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: float, l2: float, forward: np.ndarray | None = None
+) -> np.ndarray:
     r"""Knee positions ``(F, 3)`` for hips and (moved) ankles, keeping thigh ``l1`` and shank ``l2``.
 
     Two-bone IK in closed form: with :math:`d = |a - h|` (clamped to the
@@ -223,6 +225,15 @@ def knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: floa
     :math:`h + x u + y p` where :math:`x = (l_1^2 - l_2^2 + d^2)/(2d)`,
     :math:`y = \sqrt{l_1^2 - x^2}` and :math:`p` the unit direction of the
     original knee ``knee0`` off the hip-ankle line (the knee keeps its plane).
+
+    An actor's straight leg gives no plane (its knee lies on the line, and
+    which side it sits on is capture noise), yet the planned ankle may need
+    the character's knee to bend: the bend direction is then
+    :math:`p \propto w_\perp + \epsilon\, f_\perp`, with :math:`w_\perp` the
+    original knee's offset from the line, :math:`f_\perp` the unit ``forward``
+    hint (the foot's direction: knees bend over the toes) off the line, and
+    :math:`\epsilon = 0.05\, l_1`: a knee bent visibly keeps its own plane, a
+    straight one bends forward instead of flipping sideways.
     """
     v = ankle - hip
     d = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -232,6 +243,11 @@ def knee_between(hip: np.ndarray, ankle: np.ndarray, knee0: np.ndarray, l1: floa
     y = np.sqrt(np.maximum(l1 * l1 - x * x, 0.0))
     w = knee0 - hip
     p = w - np.sum(w * u, axis=-1, keepdims=True) * u
+    if forward is not None:
+        f = np.broadcast_to(np.asarray(forward, dtype=float), p.shape)
+        f = f - np.sum(f * u, axis=-1, keepdims=True) * u
+        fn = np.linalg.norm(f, axis=-1, keepdims=True)
+        p = p + 0.05 * l1 * np.where(fn > 1e-9, f / np.maximum(fn, 1e-9), 0.0)
     n = np.linalg.norm(p, axis=-1, keepdims=True)
     knee = hip + x * u + y * p / np.maximum(n, 1e-9)
     degenerate = (n[..., 0] < 1e-9) | (np.linalg.norm(v, axis=-1) < 1e-9)
@@ -311,10 +327,18 @@ def planted_positions(
         reach = np.array([REACH * (l1 + l2) for *_, (l1, l2), _ in legs])
         drop = pelvis_drop(hips, ankles, weights, reach, fps, ease_time)
         out[:, ~feet, 2] -= drop[:, None]
-        for _, h, k, a, (l1, l2), _ in legs:
+        for side, h, k, a, (l1, l2), _ in legs:
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
-            out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2)
+            out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
     return out, offsets
+
+
+def _foot_forward(positions: np.ndarray, col: Mapping[str, int], side: str) -> np.ndarray | None:
+    """``(..., 3)`` ankle-to-toe direction of a foot's targets (None without a toe target)."""
+    toe = next((f"{side}_{j}" for j in ("toe", "toe_end") if f"{side}_{j}" in col), None)
+    if toe is None or f"{side}_ankle" not in col:
+        return None
+    return positions[..., col[toe], :] - positions[..., col[f"{side}_ankle"], :]
 
 
 #: Contact part -> the canonical joints its plan moves (the first one is planned).

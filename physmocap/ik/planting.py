@@ -521,5 +521,6 @@ class Planting:
                 ih, ik, ia2, l1, l2 = self.lengths[side]
                 knee0 = positions[ik].copy()
                 knee0[:2] += self.root_offset
-                out[ik] = knee_between(out[ih][None], out[ia2][None], knee0[None], l1, l2)[0]
+                fwd = out[self.feet[side][1]] - out[self.feet[side][0]]
+                out[ik] = knee_between(out[ih][None], out[ia2][None], knee0[None], l1, l2, fwd[None])[0]
         return out, tasks, hard, offsets

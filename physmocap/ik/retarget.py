@@ -24,11 +24,12 @@ from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
+from .footlevel import level_feet
 from .footplan import plant_body_contacts, planted_positions
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, SolverOptions
-from .targets import Targets, build_targets
+from .targets import Targets, build_targets, character_rest_frames
 
 __all__ = ["retarget", "solve_targets", "map_motion", "RetargetConfig"]
 
@@ -207,18 +208,23 @@ def plan_targets(
     body_labels: dict[str, np.ndarray] | None = None,
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
-    feet (and knees, hands, pelvis in contact) held where they land, eased in and out
+    feet levelled on their flat-stance frames (:func:`~physmocap.ik.footlevel.level_feet`),
+    then (and knees, hands, pelvis in contact) held where they land, eased in and out
     (``labels`` as planted: :func:`~physmocap.ik.body_contacts.release_kneeling_feet` applied).
     The unplanned positions are kept in ``info["raw_positions"]``, the feet's
     horizontal offsets in ``info["foot_offsets"]``."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
+    levelled, orientations, levels = level_feet(
+        targets.positions, targets.orientations, targets.has_orientation, targets.names, labels,
+        character_rest_frames(character), targets.fps,
+    )
     positions, offsets = planted_positions(
-        targets.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
+        levelled, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
     )
     if body_labels:
         positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
-    info = {**targets.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets}
-    return dataclasses.replace(targets, positions=positions, info=info)
+    info = {**targets.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets, "foot_levels": levels}
+    return dataclasses.replace(targets, positions=positions, orientations=orientations, info=info)
 
 
 def solve_targets(

@@ -308,7 +308,7 @@ class GeomFloorContact:
             both frames of a transition), cm/s.
         resting_samples: Geom-transitions counted there.
         scuff_share: Share of near-floor geom-transitions (lowest point within
-            :data:`NEAR_FLOOR_HEIGHT`) moving faster than :data:`SCUFF_SPEED`.
+            :data:`NEAR_FLOOR_HEIGHT` on both frames) moving faster than :data:`SCUFF_SPEED`.
         near_samples: Near-floor geom-transitions.
     """
 
@@ -389,7 +389,9 @@ def geom_floor_contact(model: mujoco.MjModel, qpos: np.ndarray, fps: float, floo
     after = pos[1:] + np.einsum("fkij,fkj->fki", mat[1:], local[:-1])
     speed = np.linalg.norm((after - before)[..., :2], axis=-1) * fps
     resting = (low[1:] < RESTING_HEIGHT) & (low[:-1] < RESTING_HEIGHT)
-    near = (low[1:] < NEAR_FLOOR_HEIGHT) | (low[:-1] < NEAR_FLOOR_HEIGHT)
+    # near the floor on both frames: the whole move skims the floor (a geom lifting off or landing
+    # crosses the band in one transition, further the lower the frame rate, and does not scuff)
+    near = (low[1:] < NEAR_FLOOR_HEIGHT) & (low[:-1] < NEAR_FLOOR_HEIGHT)
     slip = speed[resting] * 100.0
     return GeomFloorContact(
         slip_mean_cm_s=float(slip.mean()) if slip.size else 0.0,

@@ -1,0 +1,147 @@
+r"""Feet levelled from the actor's stance: a foot flat on the floor becomes the character's flat foot.
+
+The orientation targets are calibrated on one pose (:mod:`.targets`), and for the
+feet that calibration inherits each skeleton's own idea of where the toe joint
+sits: the actor's ankle-to-toe bone may point 9 degrees down on one vendor's
+skeleton and 40 on another's, while the character's points 20 degrees down.
+Aligning those bone directions, or trusting a rest pose, leaves the character's
+foot tilted by 10-25 degrees whenever the actor's is flat, so during stance
+its toe target floats centimetres above the floor (or sinks below it) and the
+planted foot, the ankle and the pelvis fight over it.
+
+The contact labels say when a foot *is* flat: heel and toe both on the floor.
+On those frames the character's foot should have its rest orientation (its
+sole on the floor) turned only about the vertical to the actor's heading.
+With the ankle's orientation target :math:`Q(t)` (the actor's foot rotation
+times a constant calibration offset), the correction is one constant rotation
+:math:`C` in the foot's own frame,
+
+.. math::
+
+    C = \operatorname{mean}_{t \in \text{stance}} \; Q(t)^{-1}\, R_z(\psi(t))\, Q_{c,0},
+
+with :math:`Q_{c,0}` the character's rest orientation of the foot and
+:math:`\psi(t)` the heading of the actor's foot (ankle to toe on the floor,
+or where there is no toe target the rest forward direction turned by
+:math:`Q(t) Q_{c,0}^{-1}`), so toe-in and toe-out are kept.  Every frame's target
+becomes :math:`Q(t)\,C` (stance or not, so the actor's heel raise, toe-off and
+swing pitch are kept, relative to flat).  The toe joint is then placed
+rigidly from the corrected orientation,
+:math:`T_{toe} = T_{ankle} + Q(t) C Q_{c,0}^{-1} (x_{toe,0} - x_{ankle,0})`,
+and the toe tip keeps its direction relative to the foot (the actor's toe
+flexion).  Nothing is learnt from one file: a foot that is never flat on
+both contact points is left as it was.  Units: metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..rotations import quat_apply, quat_between
+
+__all__ = ["FootLevel", "level_feet", "MIN_STANCE_TIME"]
+
+#: Least time (seconds) a foot must stand flat on both contact points to be levelled.
+MIN_STANCE_TIME = 0.1
+
+
+@dataclass(frozen=True)
+class FootLevel:
+    """The levelling applied to one foot.
+
+    Attributes:
+        side: ``left`` or ``right``.
+        correction_deg: Angle of the constant correction :math:`C` (degrees).
+        stance_frames: Frames on which the foot stood flat (both contact points down).
+    """
+
+    side: str
+    correction_deg: float
+    stance_frames: int
+
+
+def _heading(rot: Rotation, forward: np.ndarray) -> np.ndarray:
+    """Heading (radians about +Z) of ``forward`` turned by ``rot``, projected on the floor."""
+    f = rot.apply(forward)
+    return np.arctan2(f[..., 1], f[..., 0])
+
+
+def level_feet(
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    has_orientation: np.ndarray,
+    names: tuple[str, ...],
+    labels: Mapping[str, np.ndarray],
+    rest: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    fps: float,
+) -> tuple[np.ndarray, np.ndarray, list[FootLevel]]:
+    """Targets with each foot levelled on its flat-stance frames (see the module docstring).
+
+    Args:
+        positions: ``(F, N, 3)`` target positions (metres; not modified).
+        orientations: ``(F, N, 4)`` target orientations x-y-z-w (not modified).
+        has_orientation: ``(N,)`` which targets have an orientation.
+        names: Canonical joint of each target column.
+        labels: ``left_heel``, ``left_toe``, ``right_heel``, ``right_toe`` -> ``(F,)`` bool.
+        rest: Canonical joint -> (rest position, rest orientation x-y-z-w) of the
+            character (:func:`~physmocap.ik.targets.character_rest_frames`).
+        fps: Frame rate.
+
+    Returns:
+        ``(positions, orientations, levels)``: new arrays, and one
+        :class:`FootLevel` per foot that was levelled.
+    """
+    pos = np.array(positions, dtype=float, copy=True)
+    ori = np.array(orientations, dtype=float, copy=True)
+    col = {n: i for i, n in enumerate(names)}
+    F = pos.shape[0]
+    need = max(2, int(round(MIN_STANCE_TIME * fps)))
+    levels: list[FootLevel] = []
+    for side in ("left", "right"):
+        ankle, toe, tip = f"{side}_ankle", f"{side}_toe", f"{side}_toe_end"
+        if ankle not in col or not has_orientation[col[ankle]] or ankle not in rest:
+            continue
+        heel_l, toe_l = labels.get(f"{side}_heel"), labels.get(f"{side}_toe")
+        if heel_l is None or toe_l is None:
+            continue
+        stance = np.asarray(heel_l, dtype=bool)[:F] & np.asarray(toe_l, dtype=bool)[:F]
+        if int(stance.sum()) < need:
+            continue
+        ia = col[ankle]
+        q_c0 = Rotation.from_quat(rest[ankle][1])
+        # the foot's rest forward direction on the floor (towards the toe, else the site's x axis)
+        fwd = rest[toe][0] - rest[ankle][0] if toe in rest else q_c0.apply([1.0, 0.0, 0.0])
+        fwd = np.array([fwd[0], fwd[1], 0.0])
+        if np.linalg.norm(fwd) < 1e-9:
+            continue
+        fwd /= np.linalg.norm(fwd)
+        Q = Rotation.from_quat(ori[stance, ia])
+        if toe in col:  # the heading the actor's foot points in (toe-in, toe-out kept)
+            d = positions[stance, col[toe]] - positions[stance, ia]
+            heading = np.arctan2(d[:, 1], d[:, 0])
+        else:
+            heading = _heading(Q * q_c0.inv(), fwd)
+        psi = heading - np.arctan2(fwd[1], fwd[0])
+        flat = Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])) * q_c0
+        C = (Q.inv() * flat).mean()
+        old_ankle_q = ori[:, ia].copy()
+        new = Rotation.from_quat(ori[:, ia]) * C
+        q_new = new.as_quat()
+        # keep the quaternion sign continuous with the old track (nicer for users)
+        q_new[np.sum(q_new * old_ankle_q, axis=-1) < 0] *= -1.0
+        ori[:, ia] = q_new
+        levels.append(FootLevel(side, float(np.degrees(C.magnitude())), int(stance.sum())))
+        if toe not in col or toe not in rest:
+            continue
+        it = col[toe]
+        old_dir = positions[:, it] - positions[:, ia]
+        pos[:, it] = pos[:, ia] + (new * q_c0.inv()).apply(rest[toe][0] - rest[ankle][0])
+        if tip in col:
+            ie = col[tip]
+            turn = quat_between(old_dir, pos[:, it] - pos[:, ia])
+            pos[:, ie] = pos[:, it] + quat_apply(turn, positions[:, ie] - positions[:, it])
+    return pos, ori, levels

@@ -1,0 +1,88 @@
+"""Feet levelled from the actor's stance, and knees that bend forward."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from physmocap.ik.footlevel import level_feet
+from physmocap.ik.footplan import knee_between
+
+NAMES = ("left_ankle", "left_toe", "left_toe_end")
+
+
+def _rest(pitch_deg: float = 0.0):
+    """A character foot: ankle site 7 cm up, toe joint 13 cm ahead and 2 cm up, tip 7 cm beyond."""
+    q0 = Rotation.from_euler("y", pitch_deg, degrees=True)
+    return {
+        "left_ankle": (np.array([0.0, 0.1, 0.07]), q0.as_quat()),
+        "left_toe": (np.array([0.13, 0.1, 0.02]), q0.as_quat()),
+        "left_toe_end": (np.array([0.20, 0.1, 0.02]), q0.as_quat()),
+    }
+
+
+@pytest.mark.parametrize("tilt_deg, rest_pitch", [(25.0, 0.0), (-12.0, 0.0), (20.0, 15.0)])
+def test_a_flat_actor_foot_becomes_the_characters_flat_foot(tilt_deg, rest_pitch):
+    """Targets whose foot orientation is off by a constant tilt (a skeleton that puts its toe
+    joint elsewhere) are levelled on the stance frames; heading and swing pitch are kept."""
+    F, fps = 120, 60.0
+    rest = _rest(rest_pitch)
+    heading = np.linspace(0.0, 1.2, F)  # the actor turns while walking
+    swing_pitch = np.where(np.arange(F) < 80, 0.0, np.linspace(0.0, 0.6, F))  # heel rises after frame 80
+    tilt = Rotation.from_euler("y", tilt_deg, degrees=True)
+    actor = Rotation.from_euler("zy", np.stack([heading, swing_pitch], axis=1))
+    q = (actor * tilt * Rotation.from_quat(rest["left_ankle"][1])).as_quat()
+    ori = np.zeros((F, 3, 4))
+    ori[..., 3] = 1.0
+    ori[:, 0] = q
+    pos = np.zeros((F, 3, 3))
+    pos[:, 0] = [0.0, 0.1, 0.09]
+    turn = Rotation.from_euler("z", heading[:, None])
+    pos[:, 1] = pos[:, 0] + turn.apply([0.12, 0.0, 0.03])  # the actor's toe sits higher than the character's
+    pos[:, 2] = pos[:, 1] + turn.apply([0.06, 0.0, 0.0])
+    down = np.arange(F) < 80
+    labels = {"left_heel": down, "left_toe": down}
+    has_q = np.array([True, False, False])
+    before_pos, before_ori = pos.copy(), ori.copy()
+    new_pos, new_ori, levels = level_feet(pos, ori, has_q, NAMES, labels, rest, fps)
+    assert np.array_equal(pos, before_pos) and np.array_equal(ori, before_ori)  # inputs untouched
+    assert len(levels) == 1 and levels[0].side == "left" and levels[0].correction_deg == pytest.approx(abs(tilt_deg), abs=0.5)
+    rel = Rotation.from_quat(new_ori[:, 0]) * Rotation.from_quat(rest["left_ankle"][1]).inv()
+    want = Rotation.from_euler("zy", np.stack([heading, swing_pitch], axis=1))
+    assert np.degrees((rel * want.inv()).magnitude()).max() < 0.5
+    # the toe joint sits where the character's foot puts it (flat: 5 cm below the ankle site)
+    assert np.allclose(new_pos[down, 1, 2] - new_pos[down, 0, 2], -0.05, atol=1e-6)
+    assert np.allclose(np.linalg.norm(new_pos[:, 1] - new_pos[:, 0], axis=1), np.hypot(0.13, 0.05))
+    # the toe tip keeps its length from the toe joint
+    assert np.allclose(np.linalg.norm(new_pos[:, 2] - new_pos[:, 1], axis=1), 0.06)
+
+
+def test_a_foot_never_flat_is_left_alone():
+    F = 50
+    rest = _rest()
+    ori = np.zeros((F, 3, 4))
+    ori[..., 3] = 1.0
+    ori[:, 0] = Rotation.from_euler("y", 30, degrees=True).as_quat()
+    pos = np.zeros((F, 3, 3))
+    labels = {"left_heel": np.zeros(F, bool), "left_toe": np.ones(F, bool)}  # on tiptoe throughout
+    new_pos, new_ori, levels = level_feet(pos, ori, np.array([True, False, False]), NAMES, labels, rest, 30.0)
+    assert levels == [] and np.array_equal(new_pos, pos) and np.array_equal(new_ori, ori)
+
+
+def test_a_straight_actor_leg_bends_forward_not_sideways():
+    """The actor's knee lies on the hip-ankle line up to capture noise (1 mm to the side); the
+    planned ankle is 5 cm closer, so the character's knee must bend: over the toes."""
+    hip = np.array([[0.0, 0.0, 0.9]])
+    ankle = np.array([[0.0, 0.0, 0.07]])
+    knee0 = np.array([[0.0, -0.001, 0.485]])  # straight, a millimetre of noise to the side
+    toe_dir = np.array([[1.0, 0.0, -0.3]])
+    knee = knee_between(hip, ankle + [0.0, 0.0, 0.05], knee0, 0.42, 0.42, toe_dir)
+    off = knee[0] - np.array([0.0, 0.0, knee[0, 2]])
+    assert off[0] > 0.1 and abs(off[1]) < 0.06 * off[0]  # 3 degrees at most
+    # a visibly bent actor knee keeps its own plane
+    bent = np.array([[0.0, -0.08, 0.485]])
+    knee = knee_between(hip, ankle + [0.0, 0.0, 0.05], bent, 0.42, 0.42, toe_dir)
+    assert knee[0, 1] < -0.1 and abs(knee[0, 0]) < 0.4 * abs(knee[0, 1])
+    # both lengths kept
+    assert np.linalg.norm(knee[0] - hip[0]) == pytest.approx(0.42, abs=1e-6)

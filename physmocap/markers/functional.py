@@ -230,17 +230,23 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
 
 
 # -- centre-of-rotation fits -----------------------------------------------------------
-def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: float = 0.02) -> tuple[np.ndarray, int]:
+def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: float = 0.02,
+                       min_eig: float = 0.0) -> tuple[np.ndarray, int]:
     """Least-squares solution of ``A x = b`` (A symmetric PSD) closest to ``prior`` along the
-    directions ``A`` barely determines (eigenvalues below ``rel`` times the largest); returns
-    ``(x, number of determined directions)``."""
+    directions ``A`` barely determines (eigenvalues below ``rel`` times the largest, or below
+    ``min_eig``); returns ``(x, number of determined directions)``."""
     lam, V = np.linalg.eigh(A)
-    good = lam > rel * max(lam.max(), 1e-300)
+    good = (lam > rel * max(lam.max(), 1e-300)) & (lam > min_eig)
     x = prior.copy()
     r = b - A @ prior
     for i in np.flatnonzero(good):
         x = x + V[:, i] * (V[:, i] @ r) / lam[i]
     return x, int(good.sum())
+
+
+#: Largest statistical uncertainty (metres) of a fitted centre along a direction for that
+#: direction to count as determined by the motion (else the regression's component is kept).
+MAX_STD = 0.002
 
 
 def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, float, int]:
@@ -251,24 +257,39 @@ def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, floa
         prior: Centre used along the directions the data leave undetermined.
     Returns:
         ``(centre, RMS radial residual in metres, determined directions)``.
+
+    A direction counts as determined when the fit's standard error along it (from the
+    radial residual, as ordinary least squares on the linear system) is below
+    :data:`MAX_STD` and its eigenvalue is at least 1 % of the largest.
     """
+    V = [v for v in V if len(v) >= 4]
     A = np.zeros((3, 3))
     b = np.zeros(3)
+    n = 0
     for v in V:
-        if len(v) < 4:
-            continue
         m = v.mean(0)
         q = np.sum(v * v, 1)
         A += 2.0 * np.cov(v.T, bias=True)
         b += (v * q[:, None]).mean(0) - m * q.mean()
-    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.05)
-    res = []
-    for v in V:
-        if len(v) < 4:
-            continue
-        d = np.linalg.norm(v - c, axis=1)
-        res.append(d - d.mean())
-    r = float(np.sqrt(np.mean(np.concatenate(res) ** 2))) if res else np.inf
+        n += len(v)
+    if not V:
+        return np.asarray(prior, float), np.inf, 0
+
+    def residual(c):
+        res, rad = [], []
+        for v in V:
+            d = np.linalg.norm(v - c, axis=1)
+            res.append(d - d.mean())
+            rad.append(d.mean())
+        return float(np.sqrt(np.mean(np.concatenate(res) ** 2))), float(np.mean(rad))
+
+    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01)
+    r, radius = residual(c)
+    # per-marker equations are averaged over N_k samples: sigma_b ~ 2 radius sigma_r / sqrt(N_k)
+    sigma_y = 2.0 * radius * max(r, 2e-4)
+    min_eig = len(V) * sigma_y**2 / (MAX_STD**2 * max(n / len(V), 1.0))
+    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig)
+    r, _ = residual(c)
     return c, r, rank
 
 
@@ -286,10 +307,18 @@ def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray,
     y = tc - tp
     A = np.einsum("nki,nkj->ij", M, M)
     b = np.einsum("nki,nk->i", M, y)
-    x, rank = _regularised_solve(A, b, np.concatenate([prior_p, prior_c]))
-    cp, cc = x[:3], x[3:]
-    gap = np.einsum("nij,j->ni", Rp, cp) + tp - np.einsum("nij,j->ni", Rc, cc) - tc
-    return cp, cc, float(np.sqrt(np.mean(np.sum(gap**2, 1))) / 2.0), rank
+    prior = np.concatenate([prior_p, prior_c])
+
+    def solve(min_eig):
+        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig)
+        gap = np.einsum("nij,j->ni", Rp, x[:3]) + tp - np.einsum("nij,j->ni", Rc, x[3:]) - tc
+        return x, rank, float(np.sqrt(np.mean(np.sum(gap**2, 1)) / 3.0))
+
+    x, _, sigma = solve(0.0)
+    # a direction is determined when the fit's standard error along it, sigma / sqrt(eigenvalue)
+    # (ordinary least squares), is below MAX_STD
+    x, rank, sigma = solve(max(sigma, 2e-4) ** 2 / MAX_STD**2)
+    return x[:3], x[3:], sigma * np.sqrt(3.0) / 2.0, rank
 
 
 def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
@@ -457,13 +486,13 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
                regression: np.ndarray | None):
     """``(why not, None)`` or ``("", (world centres (F, 3), centre in the parent frame, method))``."""
     if parent is None:
-        return "too few markers on the parent segment for a frame", None
+        return f"too few markers on {FUNCTIONAL_JOINTS[joint][0]} for a rigid frame (3 points needed)", None
     P = rec.positions
     prior_w = regression
     prior = _nanmedian_rows(parent.to_local(prior_w)) if prior_w is not None else None
     V = [parent.to_local(P[:, i]) for i in child_markers]
     if not V:
-        return "no marker on the child segment", None
+        return f"no marker on {FUNCTIONAL_JOINTS[joint][1]}", None
     if prior is None:  # no regression centre: start from the parent frame's points' far end
         allv = np.concatenate([v[np.all(np.isfinite(v), 1)] for v in V]) if V else np.zeros((0, 3))
         if not len(allv):

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import InputError, warn
 from .functional import Calibration, attach_by_rigidity, functional_joint_centres, warn_fallbacks
-from .joints import up_axis, warn_unused
+from .joints import up_axis
 from .markerset import MarkerSet, detect_marker_set, load_marker_set
 from .motion import _to_z_up
 from .recording import MarkerRecording
@@ -215,7 +215,6 @@ def solve_markers(
         ms = marker_set
     else:
         ms = detect_marker_set(rec.labels, load_marker_set(marker_set) if marker_set is not None else None)
-    warn_unused(rec, ms)
     valid = rec.valid
     if not valid.any():
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual): nothing to solve", path=rec.source)
@@ -284,6 +283,10 @@ def solve_markers(
         ignored = [rec.labels[i] for i in range(M) if i not in local]
         if not attached:
             raise InputError("no marker could be attached to a segment of the skeleton", path=rec.source)
+        if ignored:
+            shown = ", ".join(ignored[:12]) + (" ..." if len(ignored) > 12 else "")
+            warn(f"{rec.source}: {len(ignored)} marker(s) belong to no segment (props, strays, too few samples) "
+                 f"and are ignored: {shown}")
         scatter = np.full(M, np.nan)
         for _ in range(2):
             char, site_names = _with_marker_sites(spec, Path(tmp), rec.labels, attached, seg_of, local)
@@ -461,3 +464,72 @@ def marker_report(sol: MarkerSolution) -> dict:
             "held_frames": frame_ranges(sol.relaxed >= 5),
         },
     }
+
+
+# -- export --------------------------------------------------------------------------
+def actor_motion(sol: MarkerSolution, up: str = "Y"):
+    """The solved actor as a rotational :class:`~physmocap.motion.Motion` with canonical joint
+    names (each body named after the canonical joint that moves it: ``left_thigh`` ->
+    ``left_hip``; leaves' end sites ``head_end``, ``left_hand_end``, ``left_toe_end``)."""
+    import dataclasses
+
+    from ..canonical import CANONICAL_NAMES
+    from ..export.character_bvh import character_motion
+    from ..motion import Skeleton
+
+    motion = character_motion(sol.trajectory, up=up)
+    model = sol.trajectory.character.model
+    rename: dict[str, str] = {}
+    for b in range(1, model.nbody):
+        for s in range(model.nsite):
+            if int(model.site_bodyid[s]) == b and model.site(s).name in CANONICAL_NAMES and np.allclose(model.site_pos[s], 0):
+                rename[model.body(b).name] = model.site(s).name
+    ends = {"head": "head_end", "left_wrist": "left_hand_end", "right_wrist": "right_hand_end",
+            "left_toe": "left_toe_end", "right_toe": "right_toe_end"}
+    skel = motion.skeleton
+    names = []
+    for j, n in enumerate(skel.names):
+        if skel.end_site[j]:
+            parent = rename.get(skel.names[skel.parents[j]], skel.names[skel.parents[j]])
+            names.append(ends.get(parent, f"{parent}_End"))
+        else:
+            names.append(rename.get(n, n))
+    channels = {rename.get(k, k): v for k, v in motion.meta.get("bvh_channels", {}).items()}
+    meta = dict(motion.meta, bvh_channels=channels, character="actor (physmocap solve)")
+    return dataclasses.replace(motion, skeleton=Skeleton(tuple(names), skel.parents, skel.offsets, skel.end_site), meta=meta)
+
+
+def write_actor_bvh(sol: MarkerSolution, path: str | os.PathLike, up: str = "Y", units: str | float = "m") -> Path:
+    """Write the solved actor skeleton as BVH (atomically)."""
+    from ..export.bvh import write_bvh
+
+    write_bvh(actor_motion(sol, up=up), path, rotation_order=None, units=units, up=up)
+    return Path(path)
+
+
+def print_report(rep: dict, file=None) -> None:
+    """The residual table (per segment, overall), gaps and ignored markers, on ``file`` (stderr)."""
+    import sys
+
+    out = file or sys.stderr
+    print(f"marker residuals (measured marker to solved marker site), {rep['frames']} frames:", file=out)
+    print(f"  {'segment':16s} {'RMS mm':>7s} {'max mm':>7s}  markers", file=out)
+    for seg, e in rep["segments"].items():
+        rms = "-" if e["rms_mm"] is None else f"{e['rms_mm']:.1f}"
+        mx = "-" if e["max_mm"] is None else f"{e['max_mm']:.0f}"
+        print(f"  {seg:16s} {rms:>7s} {mx:>7s}  {' '.join(e['markers'])}", file=out)
+    o = rep["overall"]
+    if o["rms_mm"] is not None:
+        print(f"  {'all':16s} {o['rms_mm']:7.1f} {o['max_mm']:7.0f}", file=out)
+    gaps = {k: v["gap_frames"] for k, v in rep["markers"].items() if v["gap_frames"]}
+    if gaps:
+        print("gaps (frames missing per marker): " + ", ".join(f"{k} {v}" for k, v in gaps.items()), file=out)
+    bare = {k: v["frames_without_markers"] for k, v in rep["segments"].items() if v["frames_without_markers"]}
+    for seg, ranges in bare.items():
+        n = sum(b - a for a, b in ranges)
+        shown = ", ".join(f"{a}-{b - 1}" for a, b in ranges[:6]) + (" ..." if len(ranges) > 6 else "")
+        print(f"segment {seg} has no valid marker on {n} frame(s) ({shown}): posed by its joint limits and neighbours", file=out)
+    if rep["ignored_markers"]:
+        print("ignored (no segment explains them): " + ", ".join(rep["ignored_markers"]), file=out)
+    s = rep["solver"]
+    print(f"solve: {s['frames_per_second_cpu']:.0f} frames/s CPU, {s['relaxed_frames']} frame(s) relaxed", file=out)

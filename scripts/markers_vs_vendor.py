@@ -2,18 +2,26 @@
 """Marker-derived joint centres against the capture vendor's solved skeleton.
 
 ../shared/data/cmu_01_01_markers.c3d and cmu_01_01_jumps.bvh are the same take: the
-markers, and the skeleton CMU solved from them.  This script computes physmocap's joint
-centres from the markers (physmocap.markers), finds the time offset between the files
-(the lag minimising the distance, +-1 s), fits one rigid transform (rotation, translation)
-of the vendor's joints onto physmocap's over the whole take (Kabsch), and prints the mean
-distance per joint and the knee/elbow flexion angle differences.  Also the joint-centre
-speed in frames per second.
+markers, and the skeleton CMU solved from them.  This script compares three sets of
+physmocap joint centres with the vendor's joints:
 
-Usage:  python scripts/markers_vs_vendor.py
+* ``regression``: anatomical regression only (physmocap.markers.joints);
+* ``functional``: functional centres where the take exercises the joint (what
+  ``load_motion(take.c3d)`` returns; physmocap.markers.functional);
+* ``solved``: the joint centres of the actor skeleton solved by marker-driven IK
+  (``physmocap solve``; physmocap.markers.solve), with the marker residuals.
+
+For each, it finds the time offset between the files (the lag minimising the distance, +-1 s),
+fits one rigid transform (rotation, translation) of the vendor's joints onto physmocap's over
+the whole take (Kabsch), and prints the mean distance per joint and the knee/elbow flexion
+angle differences.
+
+Usage:  python scripts/markers_vs_vendor.py [--frames N] [--only regression,functional,solved]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import time
@@ -26,6 +34,7 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
 JOINTS = ["left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
           "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist"]
+ANGLES = {"knee": ("hip", "knee", "ankle"), "elbow": ("shoulder", "elbow", "wrist")}
 
 
 def kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -43,22 +52,9 @@ def angle(a, b, c) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1, 1)))
 
 
-def main() -> int:
-    warnings.simplefilter("ignore")
-    from physmocap.ik.retarget import map_motion
-    from physmocap.sources import load_motion
-
-    c3d, bvh = DATA / "cmu_01_01_markers.c3d", DATA / "cmu_01_01_jumps.bvh"
-    if not (c3d.exists() and bvh.exists()):
-        print(f"skip: {c3d} or {bvh} not found", file=sys.stderr)
-        return 0
-    t0 = time.process_time()
-    ours = load_motion(c3d)
-    dt = time.process_time() - t0
-    vendor = load_motion(bvh)
-    oi, vi = map_motion(ours), map_motion(vendor)
-    A = ours.world_positions()[:, [oi[j] for j in JOINTS]]
-    B = vendor.world_positions()[:, [vi[j] for j in JOINTS]]
+def compare(A: np.ndarray, B: np.ndarray) -> dict:
+    """Distances (m) per joint and flexion differences (deg) of ``A`` (F, 12, 3) against the
+    vendor's ``B`` after the best lag and one rigid transform."""
     best = None
     for lag in range(-120, 121):
         a = A[max(0, lag):]
@@ -75,17 +71,74 @@ def main() -> int:
     b = B[max(0, -lag):]
     n = min(len(a), len(b))
     a, b = a[:n], b[:n] @ R.T + t
-    d = np.linalg.norm(a - b, axis=-1) * 100
-    print(f"time offset {lag} frames; joint-centre speed {ours.num_frames / dt:.0f} frames/s CPU (whole reader)")
-    for k, j in enumerate(JOINTS):
-        print(f"{j:15s} {np.nanmean(d[:, k]):5.1f} cm mean  {np.nanpercentile(d[:, k], 95):5.1f} cm p95")
-    print(f"{'all':15s} {np.nanmean(d):5.1f} cm mean")
+    d = np.linalg.norm(a - b, axis=-1)
     col = {j: k for k, j in enumerate(JOINTS)}
+    angles = {}
     for s in ("left", "right"):
-        for name, (p, m, q) in {"knee": ("hip", "knee", "ankle"), "elbow": ("shoulder", "elbow", "wrist")}.items():
+        for name, (p, m, q) in ANGLES.items():
             ia, ib, ic = (col[f"{s}_{x}"] for x in (p, m, q))
-            diff = np.abs(angle(a[:, ia], a[:, ib], a[:, ic]) - angle(b[:, ia], b[:, ib], b[:, ic]))
-            print(f"{s}_{name} flexion difference {np.nanmean(diff):5.1f} deg mean")
+            angles[f"{s}_{name}"] = float(np.nanmean(np.abs(angle(a[:, ia], a[:, ib], a[:, ic]) - angle(b[:, ia], b[:, ib], b[:, ic]))))
+    return {"lag": lag, "mean": {j: float(np.nanmean(d[:, k])) for k, j in enumerate(JOINTS)},
+            "p95": {j: float(np.nanpercentile(d[:, k], 95)) for k, j in enumerate(JOINTS)},
+            "all": float(np.nanmean(d)), "angles": angles}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, help="only the first N frames of the take")
+    ap.add_argument("--only", default="regression,functional,solved")
+    args = ap.parse_args(argv)
+    warnings.simplefilter("ignore")
+    from physmocap.ik.retarget import map_motion
+    from physmocap.markers.functional import functional_joint_centres
+    from physmocap.markers.joints import joint_centres
+    from physmocap.markers.markerset import detect_marker_set
+    from physmocap.markers.recording import MarkerRecording
+    from physmocap.markers.solve import solve_markers
+    from physmocap.sources import load_motion
+    from physmocap.sources.c3d import read_c3d_markers
+
+    c3d, bvh = DATA / "cmu_01_01_markers.c3d", DATA / "cmu_01_01_jumps.bvh"
+    if not (c3d.exists() and bvh.exists()):
+        print(f"skip: {c3d} or {bvh} not found", file=sys.stderr)
+        return 0
+    rec = read_c3d_markers(c3d)
+    if args.frames:
+        rec = MarkerRecording(rec.labels, rec.positions[: args.frames], rec.fps, rec.source)
+    ms = detect_marker_set(rec.labels)
+    vendor = load_motion(bvh)
+    vi = map_motion(vendor)
+    B = vendor.world_positions()[:, [vi[j] for j in JOINTS]]
+    results = {}
+    only = args.only.split(",")
+    if "regression" in only:
+        t0 = time.process_time()
+        jc = joint_centres(rec, ms)
+        dt = time.process_time() - t0
+        results["regression"] = (np.stack([jc.positions[j] for j in JOINTS], 1), f"{rec.num_frames / dt:.0f} frames/s CPU")
+    if "functional" in only:
+        t0 = time.process_time()
+        cal = functional_joint_centres(rec, ms)
+        dt = time.process_time() - t0
+        results["functional"] = (np.stack([cal.positions[j] for j in JOINTS], 1), f"calibration {dt:.2f} s CPU")
+    if "solved" in only:
+        sol = solve_markers(rec, ms)
+        rep = sol.report()
+        results["solved"] = (np.stack([sol.joint_positions[j] for j in JOINTS], 1),
+                             f"{rep['solver']['frames_per_second_cpu']:.0f} frames/s CPU, "
+                             f"{rep['solver']['frames_per_second_wall']:.0f} wall; marker residual RMS "
+                             f"{rep['overall']['rms_mm']:.1f} mm, max {rep['overall']['max_mm']:.0f} mm")
+    out = {k: compare(A, B) for k, (A, _) in results.items()}
+    names = list(out)
+    print(f"{'joint (cm, mean)':17s}" + "".join(f"{n:>12s}" for n in names))
+    for j in JOINTS:
+        print(f"{j:17s}" + "".join(f"{100 * out[n]['mean'][j]:12.1f}" for n in names))
+    print(f"{'all':17s}" + "".join(f"{100 * out[n]['all']:12.1f}" for n in names))
+    print("flexion difference (deg, mean)")
+    for a in out[names[0]]["angles"]:
+        print(f"{a:17s}" + "".join(f"{out[n]['angles'][a]:12.1f}" for n in names))
+    for n in names:
+        print(f"{n}: time offset {out[n]['lag']} frames; {results[n][1]}")
     return 0
 
 

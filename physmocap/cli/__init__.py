@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "convert",
     "character",
     "retarget",
+    "solve",
     "report",
     "replay",
     "preview",

@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from ..motion import Motion
-from .joints import joint_centres, up_axis, warn_unused
+from .functional import functional_joint_centres, warn_fallbacks
+from .joints import up_axis, warn_unused
 from .markerset import detect_marker_set, load_marker_set
 from .recording import MarkerRecording
 
@@ -27,7 +28,8 @@ def _to_z_up(up: np.ndarray) -> np.ndarray:
 
 
 def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
-    """The recording's canonical joint centres (:func:`.joints.joint_centres`) as a
+    """The recording's canonical joint centres (functional where the clip exercises the
+    joint, else the regression: :func:`.functional.functional_joint_centres`) as a
     positional :class:`~physmocap.motion.Motion` (metres, Z-up, floor at 0), through the
     same conventions as tracker files (:func:`physmocap.sources.positions.positional_motion`:
     gaps up to ``max_gap`` filled, levelling, floor).
@@ -42,7 +44,8 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
     overrides = load_marker_set(marker_set) if marker_set is not None else None
     ms = detect_marker_set(rec.labels, overrides)
     warn_unused(rec, ms)
-    centres = joint_centres(rec, ms)
+    centres = functional_joint_centres(rec, ms)
+    warn_fallbacks(centres, rec.source)
     R = _to_z_up(up_axis(rec, ms))
     names = list(centres.positions)
     P = np.stack([centres.positions[n] for n in names], axis=1) @ R.T
@@ -52,4 +55,5 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
     motion = positional_motion(names, P, None, rec.fps, rec.source, **opts)
     motion.meta["joint_centre_methods"] = dict(centres.method)
     motion.meta["unused_markers"] = list(ms.unused)
+    motion.meta["segment_lengths"] = {f"{a}-{b}": v for (a, b), v in centres.lengths.items()}
     return motion

@@ -1,0 +1,89 @@
+"""``physmocap solve``: a marker recording (C3D, TRC) to the actor's own skeleton as BVH."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from ..errors import InputError, OptionError
+from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "solve",
+        help="solve optical markers (.c3d, .trc) into the actor's skeleton (BVH out)",
+        description=(
+            "Calibrate the actor from the markers (functional joint centres, fixed segment lengths), "
+            "then solve every frame by marker-driven IK under the joint ranges and the floor, and write "
+            "the actor's skeleton (canonical joint names) as BVH."
+        ),
+    )
+    p.add_argument("input", metavar="INPUT", help="marker file (.c3d or .trc)")
+    p.add_argument("-o", "--output", required=True, help="output .bvh")
+    p.add_argument("--report", metavar="REPORT.json", help="write the residual and gap report as JSON")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker roles overriding the built-in aliases")
+    p.add_argument("--start", type=int, help="first frame (inclusive)")
+    p.add_argument("--end", type=int, help="last frame (exclusive)")
+    p.add_argument("--max-iterations", type=int, default=2, help="IK iterations per frame (default 2)")
+    p.add_argument("--no-floor", action="store_true", help="do not keep the feet above the floor")
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
+    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    p.add_argument("--quiet", action="store_true", help="no residual table or 'wrote' lines")
+    p.set_defaults(func=run)
+
+
+def read_markers(path: str):
+    """The :class:`~physmocap.markers.recording.MarkerRecording` of a .c3d or .trc file."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".c3d":
+        from ..sources.c3d import read_c3d_markers
+
+        return read_c3d_markers(path)
+    if suffix == ".trc":
+        from ..sources.trc import read_trc_markers
+
+        return read_trc_markers(path)
+    raise InputError(f"physmocap solve reads marker files (.c3d, .trc), not {suffix or 'files without a suffix'!r}", path=path)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..markers.recording import MarkerRecording
+    from ..markers.solve import MarkerSolveOptions, print_report, solve_markers, write_actor_bvh
+    from ..options import check_frame_range
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".bvh":
+        raise OptionError("physmocap solve writes a .bvh file", path=out)
+    check_writable(out)
+    if args.report:
+        check_writable(args.report, "report")
+    check_not_input([out, args.report], [args.input, args.marker_set])
+    check_distinct([out, args.report])
+    check_frame_range(args.start, args.end)
+    if args.max_iterations < 1:
+        raise OptionError("--max-iterations must be at least 1")
+    rec = read_markers(args.input)
+    if args.start is not None or args.end is not None:
+        F = rec.num_frames
+        s = 0 if args.start is None else args.start
+        e = F if args.end is None else min(args.end, F)
+        if not 0 <= s < F:
+            raise OptionError(f"--start {s} is outside the recording (frames 0-{F - 1})", path=args.input)
+        rec = MarkerRecording(rec.labels, rec.positions[s:e], rec.fps, rec.source, rec.first_frame + s)
+    opts = MarkerSolveOptions(max_iterations=args.max_iterations, floor=not args.no_floor)
+    sol = solve_markers(rec, args.marker_set, opts)
+    rep = sol.report()
+    with OutputSet():
+        write_actor_bvh(sol, out, up=args.up.upper(), units=args.units)
+        if not args.quiet:
+            announce(f"wrote {out}")
+        if args.report:
+            with atomic_open(args.report) as fh:
+                json.dump(rep, fh, indent=1)
+            if not args.quiet:
+                announce(f"wrote {args.report}")
+    if not args.quiet:
+        print_report(rep)
+    return 0

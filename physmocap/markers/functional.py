@@ -1,0 +1,554 @@
+r"""Functional joint centres: centres of rotation fitted to the markers' motion.
+
+For each segment, a rigid frame per frame from its markers (three or more points, some of
+them joint centres already found, by weighted least squares: Kabsch / SVD, Arun et al. 1987)
+against the segment's mean marker constellation (Procrustes mean over the frames where every
+point is seen).  Then, proximal to distal, each joint's centre of rotation:
+
+* **SCoRE** (Ehrig et al. 2006, J. Biomech. 39:2798) where the child segment has a frame of its
+  own markers: the point fixed in both frames, :math:`\min_{c_p, c_c} \sum_t
+  \| R_p(t) c_p + t_p(t) - R_c(t) c_c - t_c(t) \|^2` (linear least squares);
+* else the closed-form **sphere fit** of Gamage & Lasenby (2002, J. Biomech. 35:87): every
+  child marker, seen in the parent's frame, moves on a sphere about the centre:
+  :math:`A c = b` with :math:`A = 2\sum_k \mathrm{cov}(v_k)`,
+  :math:`b = \sum_k \overline{v_k |v_k|^2} - \bar v_k \overline{|v_k|^2}`.
+
+Frames are chosen by how the joint moves, not by frame numbers: the relative rotation
+(child direction in the parent's frame) is binned on a grid of a few degrees and one frame
+per bin is kept, so a long static stretch does not outweigh a short range of motion; the
+joint counts as exercised when the angular spread of those directions (98th percentile of
+the pairwise angles) reaches :data:`MIN_SPREAD_DEG`.  A hinge (knee, elbow) determines its
+centre only across the axis (SCoRE's known weakness): the direction(s) the data leave
+undetermined take the regression estimate's component (:mod:`.joints`, Harrington 2007 for
+hips), so a knee centre lies on the functional axis at the depth of the anatomical one.
+Frames whose fit residual exceeds three times the median are dropped and the fit repeated
+once (marker glitches).  Where a joint is not exercised enough, its segments lack markers,
+or the fit's residual is implausible, the regression centre is kept; every joint records its
+method (``"functional (SCoRE, 412 frames, residual 6.1 mm)"`` or ``"regression (...)"``).
+
+Segment lengths are then fixed for the clip (rigid skeleton): the median over frames of the
+distance between consecutive centres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import warn
+from .joints import JointCentres, joint_centres
+from .markerset import MarkerSet
+from .recording import MarkerRecording, plain_label
+
+__all__ = [
+    "SEGMENT_ROLES",
+    "FUNCTIONAL_JOINTS",
+    "SegmentFrames",
+    "Calibration",
+    "kabsch_frames",
+    "sphere_fit",
+    "score_fit",
+    "functional_joint_centres",
+    "segment_markers",
+]
+
+#: Minimum angular spread (degrees) of the child segment's motion for a functional fit.
+MIN_SPREAD_DEG = 25.0
+#: Fewest distinct poses (bins) a functional fit uses.
+MIN_FRAMES = 30
+#: Largest fit residual (metres) still believed.
+MAX_RESIDUAL = 0.03
+#: Largest distance (metres) a functional centre may lie from the regression estimate.
+MAX_SHIFT = 0.12
+#: Bin size (radians) of the pose grid used to pick frames.
+BIN = 0.05
+#: Most frames one fit uses (evenly drawn from the bins when more).
+MAX_FRAMES = 800
+
+#: Segment -> marker roles on it (``{s}`` the side letter).  Cluster markers without a role
+#: are attached by :data:`LABEL_HINTS` or by rigidity (:func:`segment_markers`).
+SEGMENT_ROLES: dict[str, tuple[str, ...]] = {
+    "pelvis": ("LASI", "RASI", "LPSI", "RPSI", "SACR"),
+    "thorax": ("C7", "T10", "CLAV", "STRN"),
+    "head": ("LFHD", "RFHD", "LBHD", "RBHD"),
+    **{f"{side}_{seg}": tuple(f"{s}{r}" for r in roles)
+       for s, side in (("L", "left"), ("R", "right"))
+       for seg, roles in (("clavicle", ("SHO",)), ("thigh", ("THI", "KNE", "KNEM")), ("shank", ("TIB", "ANK", "ANKM")),
+                          ("foot", ("HEE", "TOE")), ("upper_arm", ("ELB", "ELBM")), ("forearm", ("WRA", "WRB")),
+                          ("hand", ("FIN",)))},
+}
+
+#: Label stems (after the side letter) of common cluster markers that play no joint-centre
+#: role, and their segment: CMU ``LUPA`` / ``LFRM`` / ``LMT5`` / ``RBAC``, Plug-in Gait-like
+#: ``LMT1``, ``LARM``...
+LABEL_HINTS: dict[str, str] = {
+    "UPA": "upper_arm", "UPPERARM": "upper_arm", "ARM": "upper_arm", "HUM": "upper_arm",
+    "FRM": "forearm", "FOREARM": "forearm", "FA": "forearm",
+    "MT5": "foot", "MT1": "foot", "MET5": "foot", "MET1": "foot", "FM5": "foot", "FM1": "foot",
+    "BAC": "thorax", "BACK": "thorax", "SCAP": "thorax", "SHB": "thorax",
+    "THI2": "thigh", "TIB2": "shank", "SHN2": "shank",
+}
+
+#: joint -> (parent segment, child segment, virtual point the child's frame gains).
+FUNCTIONAL_JOINTS: dict[str, tuple[str, str]] = {
+    **{f"{side}_{j}": (f"{side}_{p}" if p not in ("pelvis", "thorax") else p, f"{side}_{c}")
+       for side in ("left", "right")
+       for j, p, c in (("hip", "pelvis", "thigh"), ("knee", "thigh", "shank"), ("ankle", "shank", "foot"),
+                       ("shoulder", "clavicle", "upper_arm"), ("elbow", "upper_arm", "forearm"),
+                       ("wrist", "forearm", "hand"))},
+}
+
+#: Consecutive centres whose distance is a segment length (canonical parent, child).
+LENGTH_PAIRS = tuple(
+    (f"{side}_{a}", f"{side}_{b}") for side in ("left", "right")
+    for a, b in (("hip", "knee"), ("knee", "ankle"), ("shoulder", "elbow"), ("elbow", "wrist"))
+) + (("left_hip", "right_hip"), ("left_shoulder", "right_shoulder"))
+
+
+@dataclass(frozen=True)
+class SegmentFrames:
+    """A segment's rigid frame per frame: ``world = R @ local + t``.
+
+    Attributes:
+        R: ``(F, 3, 3)`` rotations (NaN where fewer than three points are seen).
+        t: ``(F, 3)`` origins.
+        ok: ``(F,)`` True where the frame is defined.
+        local: ``(K, 3)`` the points' positions in the frame (Procrustes mean).
+        points: Names of the K points (marker labels or joint names).
+        rms: ``(F,)`` RMS distance (metres) of the seen points from the fitted constellation.
+    """
+
+    R: np.ndarray
+    t: np.ndarray
+    ok: np.ndarray
+    local: np.ndarray
+    points: tuple[str, ...]
+    rms: np.ndarray
+
+    def to_local(self, X: np.ndarray) -> np.ndarray:
+        """``(F, 3)`` world points into this frame (NaN where either is undefined)."""
+        return np.einsum("fji,fj->fi", self.R, X - self.t)
+
+    def to_world(self, c: np.ndarray) -> np.ndarray:
+        """A local point ``(3,)`` or ``(F, 3)`` to world, per frame."""
+        c = np.broadcast_to(c, self.t.shape)
+        return np.einsum("fij,fj->fi", self.R, c) + self.t
+
+
+@dataclass(frozen=True)
+class Calibration(JointCentres):
+    """Joint centres (functional where the motion allows, else regression) and the rest.
+
+    Attributes:
+        positions: Canonical joint -> ``(F, 3)`` centres (metres, the file's axes).
+        method: Canonical joint -> how its centre was found.
+        lengths: ``(joint, joint)`` -> metres, fixed for the clip (median over frames).
+        frames: Segment -> :class:`SegmentFrames` (segments with a frame).
+        segment_of: Marker index -> segment it is attached to.
+        local_centres: Joint -> its centre in the parent segment's frame (functional ones).
+    """
+
+    lengths: dict[tuple[str, str], float] = field(default_factory=dict)
+    frames: dict[str, SegmentFrames] = field(default_factory=dict)
+    segment_of: dict[int, str] = field(default_factory=dict)
+    local_centres: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+# -- rigid frames ------------------------------------------------------------------
+def _kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, R, t minimising sum_k w_k |R A_k + t - X_k|^2.  A ``(K, 3)``, X ``(F, K, 3)``
+    (NaN allowed where w is 0), w ``(F, K)``."""
+    Xz = np.where(w[..., None] > 0, X, 0.0)
+    sw = w.sum(1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ca = (w @ A) / sw  # (F, 3)
+        cx = np.einsum("fk,fkj->fj", w, Xz) / sw
+    Ac = A[None] - ca[:, None]
+    Xc = Xz - cx[:, None]
+    H = np.einsum("fk,fki,fkj->fij", w, Xc, Ac)  # sum w x a^T
+    H = np.nan_to_num(H)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(U @ Vt))
+    D = np.ones((len(X), 3))
+    D[:, 2] = np.where(d == 0, 1.0, d)
+    R = (U * D[:, None, :]) @ Vt
+    t = cx - np.einsum("fij,fj->fi", R, ca)
+    return R, t
+
+
+def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_points: int = 3) -> SegmentFrames | None:
+    """A segment's frames from ``(F, K, 3)`` point trajectories (NaN = unseen).
+
+    The constellation is the Procrustes mean over the frames where every point is seen
+    (points seen too rarely are dropped first); each frame is then the weighted Kabsch fit
+    of the seen points (at least ``min_points``, not collinear).  None if no frame can be built.
+    """
+    P = np.asarray(points, dtype=float)
+    names = list(names)
+    F = P.shape[0]
+    seen = np.all(np.isfinite(P), axis=2)
+    keep = np.arange(P.shape[1])
+    while len(keep) >= min_points:
+        full = np.all(seen[:, keep], axis=1)
+        if full.sum() >= 10:
+            break
+        worst = keep[np.argmin(seen[:, keep].sum(0))]
+        keep = keep[keep != worst]
+    else:
+        return None
+    P, seen, names = P[:, keep], seen[:, keep], [names[k] for k in keep]
+    full_idx = np.flatnonzero(np.all(seen, axis=1))
+    if len(full_idx) > 400:
+        full_idx = full_idx[np.linspace(0, len(full_idx) - 1, 400).astype(int)]
+    S = P[full_idx]  # (n, K, 3)
+    ref = S[0] - S[0].mean(0)
+    if np.linalg.svd(ref, compute_uv=False)[1] < 1e-3:  # collinear points: no frame
+        return None
+    for _ in range(3):  # Procrustes mean
+        R, t = _kabsch(ref, S, np.ones(S.shape[:2]))
+        aligned = np.einsum("fji,fkj->fki", R, S - t[:, None])
+        ref = aligned.mean(0)
+        ref = ref - ref.mean(0)
+    w = seen.astype(float)
+    R, t = _kabsch(ref, P, w)
+    n = seen.sum(1)
+    ok = n >= min_points
+    # collinear seen points (e.g. two markers and a centre on one line) do not fix a rotation
+    sv = np.zeros(F)
+    for k in np.flatnonzero(ok & (n < P.shape[1])):
+        sv[k] = np.linalg.svd(ref[seen[k]] - ref[seen[k]].mean(0), compute_uv=False)[1]
+    ok &= (n == P.shape[1]) | (sv > 5e-3)
+    with np.errstate(invalid="ignore"):
+        fit = np.einsum("fij,kj->fki", R, ref) + t[:, None]
+        d2 = np.where(seen, np.sum((fit - np.where(seen[..., None], P, 0.0)) ** 2, -1), 0.0)
+        rms = np.sqrt(d2.sum(1) / np.maximum(n, 1))
+    R[~ok] = np.nan
+    t[~ok] = np.nan
+    rms[~ok] = np.nan
+    return SegmentFrames(R=R, t=t, ok=ok, local=ref, points=tuple(names), rms=rms)
+
+
+# -- centre-of-rotation fits -----------------------------------------------------------
+def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: float = 0.02,
+                       min_eig: float = 0.0) -> tuple[np.ndarray, int]:
+    """Least-squares solution of ``A x = b`` (A symmetric PSD) closest to ``prior`` along the
+    directions ``A`` barely determines (eigenvalues below ``rel`` times the largest, or below
+    ``min_eig``); returns ``(x, number of determined directions)``."""
+    lam, V = np.linalg.eigh(A)
+    good = (lam > rel * max(lam.max(), 1e-300)) & (lam > min_eig)
+    x = prior.copy()
+    r = b - A @ prior
+    for i in np.flatnonzero(good):
+        x = x + V[:, i] * (V[:, i] @ r) / lam[i]
+    return x, int(good.sum())
+
+
+#: Largest statistical uncertainty (metres) of a fitted centre along a direction for that
+#: direction to count as determined by the motion (else the regression's component is kept).
+MAX_STD = 0.002
+
+
+def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, float, int]:
+    """Common centre of several markers each moving on a sphere (Gamage & Lasenby 2002).
+
+    Args:
+        V: Per marker, ``(N_k, 3)`` positions in the parent's frame (finite rows only).
+        prior: Centre used along the directions the data leave undetermined.
+    Returns:
+        ``(centre, RMS radial residual in metres, determined directions)``.
+
+    A direction counts as determined when the fit's standard error along it (from the
+    radial residual, as ordinary least squares on the linear system) is below
+    :data:`MAX_STD` and its eigenvalue is at least 1 % of the largest.
+    """
+    V = [v for v in V if len(v) >= 4]
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    n = 0
+    for v in V:
+        m = v.mean(0)
+        q = np.sum(v * v, 1)
+        A += 2.0 * np.cov(v.T, bias=True)
+        b += (v * q[:, None]).mean(0) - m * q.mean()
+        n += len(v)
+    if not V:
+        return np.asarray(prior, float), np.inf, 0
+
+    def residual(c):
+        res, rad = [], []
+        for v in V:
+            d = np.linalg.norm(v - c, axis=1)
+            res.append(d - d.mean())
+            rad.append(d.mean())
+        return float(np.sqrt(np.mean(np.concatenate(res) ** 2))), float(np.mean(rad))
+
+    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01)
+    r, radius = residual(c)
+    # per-marker equations are averaged over N_k samples: sigma_b ~ 2 radius sigma_r / sqrt(N_k)
+    sigma_y = 2.0 * radius * max(r, 2e-4)
+    min_eig = len(V) * sigma_y**2 / (MAX_STD**2 * max(n / len(V), 1.0))
+    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig)
+    r, _ = residual(c)
+    return c, r, rank
+
+
+def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """SCoRE (Ehrig et al. 2006): the point fixed in both frames.
+
+    Args:
+        Rp, tp, Rc, tc: ``(N, 3, 3)`` and ``(N, 3)`` parent and child frames.
+        prior_p, prior_c: The prior centre in each frame (for undetermined directions).
+    Returns:
+        ``(c_parent, c_child, RMS distance in metres between the two world estimates / 2,
+        determined directions of 6)``.
+    """
+    M = np.concatenate([Rp, -Rc], axis=2)  # (N, 3, 6)
+    y = tc - tp
+    A = np.einsum("nki,nkj->ij", M, M)
+    b = np.einsum("nki,nk->i", M, y)
+    prior = np.concatenate([prior_p, prior_c])
+
+    def solve(min_eig):
+        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig)
+        gap = np.einsum("nij,j->ni", Rp, x[:3]) + tp - np.einsum("nij,j->ni", Rc, x[3:]) - tc
+        return x, rank, float(np.sqrt(np.mean(np.sum(gap**2, 1)) / 3.0))
+
+    x, _, sigma = solve(0.0)
+    # a direction is determined when the fit's standard error along it, sigma / sqrt(eigenvalue)
+    # (ordinary least squares), is below MAX_STD
+    x, rank, sigma = solve(max(sigma, 2e-4) ** 2 / MAX_STD**2)
+    return x[:3], x[3:], sigma * np.sqrt(3.0) / 2.0, rank
+
+
+def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
+    """Frames spread over the poses: one per bin of the pose descriptor ``dirs`` ``(F, D)``
+    (unit-vector components, radians-ish), and the angular spread in degrees."""
+    idx = np.flatnonzero(usable)
+    if len(idx) < MIN_FRAMES:
+        return idx, 0.0
+    keys = np.floor(dirs[idx] / BIN).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    chosen = idx[np.sort(first)]
+    if len(chosen) > MAX_FRAMES:
+        chosen = chosen[np.linspace(0, len(chosen) - 1, MAX_FRAMES).astype(int)]
+    sub = chosen if len(chosen) <= 300 else chosen[np.linspace(0, len(chosen) - 1, 300).astype(int)]
+    u = dirs[sub, :3]
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    ang = np.degrees(np.arccos(np.clip(u @ u.T, -1, 1)))
+    spread = float(np.percentile(ang, 98)) if len(sub) > 1 else 0.0
+    return chosen, spread
+
+
+# -- marker attachment -----------------------------------------------------------------
+def _side_stem(label: str) -> tuple[str | None, str]:
+    p = plain_label(label)
+    if len(p) > 1 and p[0] in "LR":
+        return ("left" if p[0] == "L" else "right"), p[1:]
+    if len(p) > 1 and p[-1] in "LR" and p[:-1].isalpha():
+        return ("left" if p[-1] == "L" else "right"), p[:-1]
+    return None, p
+
+
+def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
+    """Marker index -> segment for the markers playing a role, and cluster markers named
+    in :data:`LABEL_HINTS` (``LUPA`` -> ``left_upper_arm``, ``RBAC`` -> ``thorax``)."""
+    out: dict[int, str] = {}
+    for seg, roles in SEGMENT_ROLES.items():
+        for r in roles:
+            if r in ms.roles:
+                out[ms.roles[r]] = seg
+    used = set(ms.roles.values())
+    for i, lab in enumerate(rec.labels):
+        if i in used:
+            continue
+        side, stem = _side_stem(lab)
+        seg = LABEL_HINTS.get(stem)
+        if seg is None:
+            continue
+        if seg in SEGMENT_ROLES:
+            out[i] = seg
+        elif side is not None:
+            out[i] = f"{side}_{seg}"
+    return out
+
+
+def attach_by_rigidity(rec: MarkerRecording, frames: dict[str, SegmentFrames], taken: dict[int, str],
+                       limit: float = 0.02) -> dict[int, str]:
+    """Markers not yet attached, each to the segment in whose frame it moves least (RMS
+    scatter below ``limit`` metres over at least half the clip); others stay unattached."""
+    out = dict(taken)
+    P = rec.positions
+    for i in range(P.shape[1]):
+        if i in out:
+            continue
+        best = (limit, None)
+        for seg, fr in frames.items():
+            v = fr.to_local(P[:, i])
+            ok = np.all(np.isfinite(v), 1)
+            if ok.sum() < max(30, 0.5 * rec.num_frames):
+                continue
+            s = float(np.sqrt(np.mean(np.sum((v[ok] - np.median(v[ok], 0)) ** 2, 1))))
+            if s < best[0]:
+                best = (s, seg)
+        if best[1] is not None:
+            out[i] = best[1]
+    return out
+
+
+# -- the calibration --------------------------------------------------------------------
+def _nanmedian_rows(X: np.ndarray) -> np.ndarray | None:
+    ok = np.all(np.isfinite(X), 1)
+    return np.median(X[ok], 0) if ok.any() else None
+
+
+def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: JointCentres | None = None) -> Calibration:
+    """Joint centres of a recording: functional where the clip exercises the joint, else the
+    regression of :func:`.joints.joint_centres`; segment frames, marker attachment and the
+    clip's fixed segment lengths (see the module docstring)."""
+    reg = regression if regression is not None else joint_centres(rec, ms)
+    P = rec.positions
+    F = rec.num_frames
+    positions = {k: v.copy() for k, v in reg.positions.items()}
+    method = {k: f"regression ({v})" for k, v in reg.method.items()}
+    seg_of = segment_markers(rec, ms)
+    members: dict[str, list[int]] = {}
+    for i, s in seg_of.items():
+        members.setdefault(s, []).append(i)
+    frames: dict[str, SegmentFrames] = {}
+    local_centres: dict[str, np.ndarray] = {}
+
+    def own_frame(seg: str, extra: tuple[str, ...] = ()) -> SegmentFrames | None:
+        idx = members.get(seg, [])
+        pts = [P[:, i] for i in idx] + [positions[j] for j in extra if j in positions]
+        names = [rec.labels[i] for i in idx] + [j for j in extra if j in positions]
+        if len(pts) < 3:
+            return None
+        return kabsch_frames(np.stack(pts, 1), names)
+
+    for seg in ("pelvis", "thorax", "head"):
+        fr = own_frame(seg)
+        if fr is not None:
+            frames[seg] = fr
+    # the acromion marker carries the shoulder girdle: the thorax's orientation at the marker
+    for side, s in (("left", "L"), ("right", "R")):
+        if "thorax" in frames and f"{s}SHO" in ms.roles:
+            th = frames["thorax"]
+            sho = P[:, ms.roles[f"{s}SHO"]]
+            ok = th.ok & np.all(np.isfinite(sho), 1)
+            t = np.where(ok[:, None], sho, np.nan)
+            frames[f"{side}_clavicle"] = SegmentFrames(R=th.R, t=t, ok=ok, local=np.zeros((1, 3)),
+                                                       points=(rec.labels[ms.roles[f"{s}SHO"]],), rms=th.rms)
+
+    order = ("hip", "knee", "ankle", "shoulder", "elbow", "wrist")
+    for j in order:
+        for side in ("left", "right"):
+            joint = f"{side}_{j}"
+            parent, child = FUNCTIONAL_JOINTS[joint]
+            proximal = {"knee": f"{side}_hip", "ankle": f"{side}_knee", "elbow": f"{side}_shoulder",
+                        "wrist": f"{side}_elbow"}.get(j)
+            if parent not in frames and proximal is not None:
+                fr = own_frame(parent, (proximal,))
+                if fr is not None:
+                    frames[parent] = fr
+            why, fit = _fit_joint(rec, joint, frames.get(parent), own_frame(child), members.get(child, []), positions.get(joint))
+            if fit is None:
+                if why:
+                    method[joint] = (method[joint] + f"; not functional: {why}") if joint in method else f"none ({why})"
+                continue
+            c_world, c_local, how = fit
+            if joint in positions:  # frames where the parent frame is unseen keep the regression centre
+                c_world = np.where(np.isfinite(c_world), c_world, positions[joint])
+            positions[joint] = c_world
+            method[joint] = how
+            local_centres[joint] = c_local
+    # distal segments' frames, with their proximal centre, for the attachment and the solve
+    for side in ("left", "right"):
+        for seg, prox in (("thigh", "hip"), ("shank", "knee"), ("foot", "ankle"), ("upper_arm", "shoulder"),
+                          ("forearm", "elbow"), ("hand", "wrist")):
+            name = f"{side}_{seg}"
+            if name not in frames:
+                fr = own_frame(name, (f"{side}_{prox}",))
+                if fr is not None:
+                    frames[name] = fr
+    lengths: dict[tuple[str, str], float] = {}
+    for a, b in LENGTH_PAIRS:
+        if a in positions and b in positions:
+            d = np.linalg.norm(positions[a] - positions[b], axis=1)
+            d = d[np.isfinite(d)]
+            if d.size:
+                lengths[(a, b)] = float(np.median(d))
+    return Calibration(positions=positions, method=method, lengths=lengths, frames=frames,
+                       segment_of=seg_of, local_centres=local_centres)
+
+
+def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | None, child_markers: list[int],
+               regression: np.ndarray | None):
+    """``(why not, None)`` or ``("", (world centres (F, 3), centre in the parent frame, method))``."""
+    if parent is None:
+        return f"too few markers on {FUNCTIONAL_JOINTS[joint][0]} for a rigid frame (3 points needed)", None
+    P = rec.positions
+    prior_w = regression
+    prior = _nanmedian_rows(parent.to_local(prior_w)) if prior_w is not None else None
+    V = [parent.to_local(P[:, i]) for i in child_markers]
+    if not V:
+        return f"no marker on {FUNCTIONAL_JOINTS[joint][1]}", None
+    if prior is None:  # no regression centre: start from the parent frame's points' far end
+        allv = np.concatenate([v[np.all(np.isfinite(v), 1)] for v in V]) if V else np.zeros((0, 3))
+        if not len(allv):
+            return "the child's markers are never seen with the parent's", None
+        prior = allv.mean(0)
+    # pose descriptor: directions of the child's markers from the prior centre, parent frame
+    dirs = []
+    for v in V:
+        u = v - prior
+        dirs.append(u / np.linalg.norm(u, axis=1, keepdims=True))
+    D = np.concatenate(dirs, 1)
+    use_score = child is not None and len(child_markers) >= 3
+    usable = parent.ok & np.all(np.isfinite(D), 1)
+    if use_score:
+        usable &= child.ok
+    chosen, spread = _pick_frames(np.nan_to_num(D), usable)
+    if len(chosen) < MIN_FRAMES:
+        return f"the parent and child are seen together in only {len(chosen)} distinct poses", None
+    if len(child_markers) == 1 and len(chosen) < 100:
+        return f"one marker on the child segment, seen in only {len(chosen)} distinct poses (100 needed)", None
+    if spread < MIN_SPREAD_DEG:
+        return f"the joint moves only {spread:.0f} degrees (a functional fit needs {MIN_SPREAD_DEG:.0f})", None
+    sel = chosen
+    for _ in range(2):  # fit, drop glitch frames, refit
+        if use_score:
+            prior_c = _nanmedian_rows(child.to_local(parent.to_world(prior))[sel])
+            if prior_c is None:
+                return "no child frame", None
+            cp, cc, res, rank = score_fit(parent.R[sel], parent.t[sel], child.R[sel], child.t[sel], prior, prior_c)
+            gap = np.linalg.norm(parent.to_world(cp)[sel] - child.to_world(cc)[sel], axis=1)
+        else:
+            vs = [v[sel][np.all(np.isfinite(v[sel]), 1)] for v in V]
+            cp, res, rank = sphere_fit(vs, prior)
+            gap = np.zeros(len(sel))
+            for v in V:
+                d = np.linalg.norm(v[sel] - cp, axis=1)
+                ok = np.isfinite(d)
+                if ok.sum():
+                    gap = np.maximum(gap, np.where(ok, np.abs(d - np.median(d[ok])), 0.0))
+        keep = gap <= 3.0 * max(np.median(gap), 1e-4)
+        if keep.all():
+            break
+        sel = sel[keep]
+    kind = "SCoRE" if use_score else "sphere fit"
+    if res > MAX_RESIDUAL:
+        return f"{kind} residual {1000 * res:.0f} mm is too large", None
+    if regression is not None and np.linalg.norm(cp - prior) > MAX_SHIFT:
+        return f"{kind} centre {100 * np.linalg.norm(cp - prior):.0f} cm from the anatomical estimate", None
+    axis_note = "" if rank == (6 if use_score else 3) else ", axis depth from regression"
+    how = f"functional ({kind}, {len(sel)} frames, residual {1000 * res:.1f} mm{axis_note})"
+    return "", (parent.to_world(cp), cp, how)
+
+
+def warn_fallbacks(cal: Calibration, source) -> None:
+    """One warning naming the limb joints left to the regression, with the reason."""
+    weak = [f"{j} ({m.split('not functional: ', 1)[1]})" for j, m in cal.method.items()
+            if j in FUNCTIONAL_JOINTS and "not functional:" in m]
+    if weak:
+        warn(f"{source}: joint centres from the anatomical regression, not the motion: " + "; ".join(weak))

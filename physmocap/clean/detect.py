@@ -50,6 +50,8 @@ class CleanOptions:
         context_time: Seconds of neighbours (each side) for that median.
         max_glitch_time: Longest glitch between a jump and its return (seconds).
         return_ratio: The return brings the joint back to within this fraction of the jump.
+        return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
+            twice the joint's own motion (neighbours' median step) on the two frames.
         flip_deg: A glitch whose jump is at least this large is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (positional).
@@ -68,6 +70,7 @@ class CleanOptions:
     context_time: float = 0.1
     max_glitch_time: float = 0.5
     return_ratio: float = 0.5
+    return_deg: float = 2.0
     flip_deg: float = 150.0
     frozen_time: float = 0.1
     stretch_ratio: float = 0.1
@@ -127,38 +130,75 @@ def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
 
 
 def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0) -> list[Glitch]:
-    """Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``."""
+    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+
+    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
+    neighbours' median.  A jump at :math:`a` is paired with the first later jump at
+    :math:`b` (within ``max_glitch_time``) that *undoes* it: the exit step composed with
+    the entry step is the identity up to ``return_ratio`` of the jump, in either
+    convention (an offset applied in the parent's frame, :math:`D_b D_a \approx 1` with
+    :math:`D_t = q_t q_{t-1}^{-1}`, or in the joint's own, :math:`E_a E_b \approx 1` with
+    :math:`E_t = q_{t-1}^{-1} q_t`), or the joint is back where it was before :math:`a`.
+    This does not depend on how far the real joint moves during a long glitch, and two
+    unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
+    paired glitch is evidence on its own (real motion does not jump out and back), so it
+    needs no speed limit; an unpaired jump is a ``discontinuity`` only if it is also faster
+    than ``max_speed``.
+    """
+    from ..rotations import quat_conj, quat_mul
+
     F = len(rot)
     step = np.zeros(F)
     step[1:] = _angle(rot[1:], rot[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
-    is_jump = (step > max(opt.jump_deg, opt.max_speed / fps)) & (step > opt.jump_ratio * ref)
+    is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
+    # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
+    # is the joint's real motion: a step that only continues an acceleration is no entry
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    padded = np.concatenate([np.full(half, np.inf), step, np.full(half, np.inf)])
+    win = sliding_window_view(padded, half)
+    before = np.nanmedian(np.where(np.isinf(win[:F]), np.nan, win[:F]), axis=1)  # t-half .. t-1
+    after = np.nanmedian(np.where(np.isinf(win[half + 1 : half + 1 + F]), np.nan, win[half + 1 : half + 1 + F]), axis=1)
+    before, after = np.nan_to_num(before), np.nan_to_num(after)
+    entry = is_jump & (step > opt.jump_ratio * before)
+    exit_ = is_jump & (step > opt.jump_ratio * after)
     jumps = np.flatnonzero(is_jump)
     out: list[Glitch] = []
+    if not len(jumps):
+        return out
+    inv = quat_conj(rot)
+    D = np.zeros_like(rot)
+    E = np.zeros_like(rot)
+    D[1:] = quat_mul(rot[1:], inv[:-1])  # q_t q_{t-1}^-1
+    E[1:] = quat_mul(inv[:-1], rot[1:])  # q_{t-1}^-1 q_t
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
     longest = max(1, int(round(opt.max_glitch_time * fps)))
     used: set[int] = set()
     for a in jumps:
         if a in used:
             continue
-        before = rot[a - 1]
         back = None
-        for b in jumps[(jumps > a) & (jumps <= a + longest)]:
-            if b in used:
+        for b in jumps[(jumps > a) & (jumps <= a + longest)] if entry[a] else ():
+            if b in used or not exit_[b]:
                 continue
-            # does the joint return (near) to where it was before the jump?
-            if _angle(rot[b], before) <= opt.return_ratio * step[a]:
+            # what is left of the entry after the exit: the joint's own motion on those two frames
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (ref[a] + ref[b]) + opt.return_deg)
+            undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
+            if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
                 break
         if back is not None:
             used.update((int(a), int(back)))
-            size = float(np.max(_angle(rot[a:back], before)))
+            size = float(np.max(_angle(rot[a:back], rot[a - 1])))
             kind = "flip" if size >= opt.flip_deg else "spike"
             out.append(Glitch(kind, joint, int(a), int(back - 1), size))
         else:
             used.add(int(a))
-            out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
+            if step[a] > opt.max_speed / fps:
+                out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
     return out
 
 
@@ -232,20 +272,80 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
                 d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
                 for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
                     glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
-    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt))
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt), motion)
+    glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
 
 
-def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch]) -> list[Glitch]:
-    """An out-of-range span inside a spike or flip of the same joint is that glitch's
-    anatomical movement, not a second glitch: name the movement on it instead."""
-    import dataclasses
+def _drop_boundary_jumps(glitches: list[Glitch]) -> list[Glitch]:
+    """A discontinuity on the first frame of a glitch span of the same joint, or on the
+    frame right after it, is that span's own entry or exit (a frozen joint catching up,
+    a bend past the range of motion snapping back), not a second glitch."""
+    spans: dict[str, list[tuple[int, int]]] = {}
+    for g in glitches:
+        if g.kind != "discontinuity":
+            spans.setdefault(g.joint, []).append((g.start, g.end))
+    return [
+        g
+        for g in glitches
+        if g.kind != "discontinuity" or not any(s == g.start or e + 1 == g.start for s, e in spans.get(g.joint, ()))
+    ]
 
+
+def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
+    """Source joints whose local rotation can change an anatomical angle: the ancestors
+    of the joint centres it is read from, except those common to all of them (which
+    move them rigidly together)."""
+    from .anatomy import ANCHORS
+
+    parents = motion.skeleton.parents
+    chains = []
+    for c in ANCHORS.get(movement.key.replace("left_", "").replace("right_", ""), ()):
+        c = c.format(side=movement.key.split("_", 1)[0])
+        if c not in ji:
+            continue
+        up, p = set(), int(parents[ji[c]])
+        while p >= 0:
+            up.add(p)
+            p = int(parents[p])
+        chains.append(up)
+    if not chains:
+        return set()
+    return set().union(*chains) - set.intersection(*chains)
+
+
+def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: Motion | None = None) -> list[Glitch]:
+    """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
+    a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
+    shoulder line the trunk angles are read from), is that glitch's anatomical
+    movement, not a second glitch: name the movement on it instead."""
+    import dataclasses
+    import warnings
+
+    from ..errors import MappingError
+    from ..ik.retarget import map_motion
+    from .anatomy import MOVEMENTS
+
+    names = motion.skeleton.names if motion is not None else []
+    ji: dict[str, int] = {}
+    if motion is not None:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ji = map_motion(motion)
+        except MappingError:
+            ji = {}
+    by_name = {m.joint.replace("_", " ") if m.joint != "spine" else "trunk": m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
+        related = {a.joint}
+        if ji:
+            m = next((m for w, m in by_name.items() if a.movement.startswith(w + " ")), None)
+            if m is not None:
+                related |= {names[j] for j in _movement_joints(motion, ji, m)}
         for i, g in enumerate(out):
-            if g.joint == a.joint and g.kind in ("spike", "flip") and g.start <= a.start and a.end <= g.end:
-                if not g.movement:
+            if g.joint in related and g.kind in ("spike", "flip", "frozen") and g.start <= a.start and a.end <= g.end:
+                if not g.movement and g.joint == a.joint:
                     out[i] = dataclasses.replace(g, movement=a.movement, plane=a.plane)
                 break
         else:

@@ -158,11 +158,9 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     # is the joint's real motion: a step that only continues an acceleration is no entry
     from numpy.lib.stride_tricks import sliding_window_view
 
-    padded = np.concatenate([np.full(half, np.inf), step, np.full(half, np.inf)])
-    win = sliding_window_view(padded, half)
-    before = np.nanmedian(np.where(np.isinf(win[:F]), np.nan, win[:F]), axis=1)  # t-half .. t-1
-    after = np.nanmedian(np.where(np.isinf(win[half + 1 : half + 1 + F]), np.nan, win[half + 1 : half + 1 + F]), axis=1)
-    before, after = np.nan_to_num(before), np.nan_to_num(after)
+    win = sliding_window_view(np.pad(step, half, mode="edge"), half)
+    before = np.median(win[:F], axis=1)  # t-half .. t-1
+    after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
     entry = is_jump & (step > opt.jump_ratio * before)
     exit_ = is_jump & (step > opt.jump_ratio * after)
     jumps = np.flatnonzero(is_jump)

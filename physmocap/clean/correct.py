@@ -1,8 +1,11 @@
 """Repairing glitches: only the glitched joint on the glitched frames changes.
 
-A rotational glitch is replaced by the spherical interpolation between the joint's last
-good rotation before it and its first good one after it (at the clip's ends the nearest
-good rotation is held), so no new discontinuity appears; a positional one (bone stretch,
+A spike or flip of 0.15 s or more (``OFFSET_MIN_TIME``) has its offset taken off (the entry
+jump and the inverse of the exit jump, interpolated over the span), which brings back the
+real motion under it; any other rotational glitch is bridged by a cubic Hermite curve in
+rotation space between the joint's last good rotation before it and its first good one
+after it, leaving and arriving at the joint's own speed on both sides (at the clip's ends
+the nearest good rotation is held), so no new discontinuity appears; a positional one (bone stretch,
 gap) by linear interpolation of the joint's position; a left/right swap by trading the
 two joints' positions back over the span.  Discontinuities (a jump with no
 return) are reported, not changed: the motion after them may be the real one.
@@ -110,7 +113,7 @@ def _twin(name: str, names: dict[str, int]) -> int | None:
 
 def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches interpolated over, and the glitch list
-    with ``corrected`` filled in ("slerp", "linear" or "" for reported only)."""
+    with ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space), "slerp" (at the clip's ends), "linear" or "" for reported only)."""
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     rot = None if motion.rotations is None else np.array(motion.rotations, copy=True)
     pos = None if motion.positions is None else np.array(motion.positions, copy=True)
@@ -153,7 +156,8 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
         else:
             w = (np.arange(1, n + 1) / (n + 1))[:, None]
             arr[g.start : g.end + 1, j] = (1 - w) * first + w * last
-        out.append(dataclasses.replace(g, corrected="slerp" if how == "rotation" else "linear"))
+        curve = "cubic" if 0 <= a and b < F else "slerp"
+        out.append(dataclasses.replace(g, corrected=curve if how == "rotation" else "linear"))
     fixed = dataclasses.replace(motion, rotations=rot) if rot is not None else motion
     if pos is not None:
         fixed = dataclasses.replace(fixed, positions=pos)

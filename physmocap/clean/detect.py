@@ -46,6 +46,16 @@ class CleanOptions:
         max_speed: ... and faster than this (degrees per second): joints of the fastest
             human motions (throws, kicks) stay below about 1500 deg/s outside the
             shoulder's internal rotation, so at a low frame rate a large step is no glitch.
+        pair_speed: A jump paired with a later jump that undoes it needs only this speed
+            (degrees per second, both jumps): going out and coming back is stronger evidence
+            than one step, but a joint stepping no faster than a walking knee (about 400
+            deg/s) cannot be told from real motion sampled at a low rate.
+        novelty_ratio: A spike (not a flip) is a glitch only if the poses it holds lie at
+            least this fraction of its entry jump away from every pose the joint takes
+            elsewhere in the clip (outside the span and as many frames each side): a joint
+            popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
+            solved spine settling) is the capture's own behaviour, an offset injected or added
+            by a solver error puts the joint where it never goes.
         jump_ratio: ... and at least this many times the median of its neighbours.
         context_time: Seconds of neighbours (each side) for that median.
         max_glitch_time: Longest glitch between a jump and its return (seconds).
@@ -66,6 +76,8 @@ class CleanOptions:
 
     jump_deg: float = 10.0
     max_speed: float = 1500.0
+    pair_speed: float = 500.0
+    novelty_ratio: float = 0.2
     jump_ratio: float = 5.0
     context_time: float = 0.1
     max_glitch_time: float = 0.5
@@ -129,7 +141,9 @@ def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
     return median_filter(x, footprint=footprint, mode="nearest")
 
 
-def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0) -> list[Glitch]:
+def _jumps(
+    rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, world: np.ndarray | None = None
+) -> list[Glitch]:
     r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
 
     A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
@@ -141,15 +155,23 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     :math:`E_t = q_{t-1}^{-1} q_t`), or the joint is back where it was before :math:`a`.
     This does not depend on how far the real joint moves during a long glitch, and two
     unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
-    paired glitch is evidence on its own (real motion does not jump out and back), so it
-    needs no speed limit; an unpaired jump is a ``discontinuity`` only if it is also faster
-    than ``max_speed``.
+    paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
+    limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
+    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`); an unpaired
+    jump (or one whose pair fails those) is a ``discontinuity`` only if it is faster than
+    ``max_speed``, both in the joint's local rotation and, when ``world (F, 4)`` is given, in
+    its world orientation: a local jump its parent's jump cancels (a solver moving a twist
+    from one joint to the next, the limb itself not turning) moves no segment.
     """
     from ..rotations import quat_conj, quat_mul
 
     F = len(rot)
     step = np.zeros(F)
     step[1:] = _angle(rot[1:], rot[:-1])
+    wstep = step
+    if world is not None:
+        wstep = np.zeros(F)
+        wstep[1:] = _angle(world[1:], world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
     is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
@@ -175,6 +197,7 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     identity = np.array([0.0, 0.0, 0.0, 1.0])
     longest = max(1, int(round(opt.max_glitch_time * fps)))
     used: set[int] = set()
+    pairs: list[tuple[int, int]] = []
     for a in jumps:
         if a in used:
             continue
@@ -188,16 +211,40 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
                 break
-        if back is not None:
+        if back is not None and min(step[a], step[back]) * fps > opt.pair_speed:
             used.update((int(a), int(back)))
-            size = float(np.max(_angle(rot[a:back], rot[a - 1])))
-            kind = "flip" if size >= opt.flip_deg else "spike"
-            out.append(Glitch(kind, joint, int(a), int(back - 1), size))
+            pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            if step[a] > opt.max_speed / fps:
+            if min(step[a], wstep[a]) > opt.max_speed / fps:
                 out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
-    return out
+    # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
+    # glitches of one joint do not vouch for each other)
+    elsewhere = np.ones(F, dtype=bool)
+    elsewhere[: skip + 1] = False
+    for a, b in pairs:
+        n = max(2, b - a)
+        elsewhere[max(0, a - n) : b + n] = False
+    for a, b in pairs:
+        size = float(np.max(_angle(rot[a:b], rot[a - 1])))
+        if step[a] < opt.flip_deg and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]:
+            for t in (a, b):  # a pop to a pose the joint takes anyway: each jump on its own
+                if min(step[t], wstep[t]) > opt.max_speed / fps:
+                    out.append(Glitch("discontinuity", joint, t, t, float(step[t])))
+            continue
+        kind = "flip" if size >= opt.flip_deg else "spike"
+        out.append(Glitch(kind, joint, a, b - 1, size))
+    return sorted(out, key=lambda g: g.start)
+
+
+def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
+    """Median over the rotations ``span (n, 4)`` of the angle (degrees) to the nearest of the
+    rotations ``elsewhere (m, 4)`` (180 when there are none)."""
+    if not len(elsewhere):
+        return 180.0
+    # |<q_t, q>| is largest for the nearest rotation: one matrix product for the whole span
+    dots = np.abs(span @ elsewhere.T).max(axis=1)
+    return float(np.median(np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))))
 
 
 def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
@@ -239,8 +286,9 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
             warnings.simplefilter("ignore")
             skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
+        W = np.asarray(motion.world_rotations(), dtype=float)
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip)
+            glitches += _jumps(R[:, j], fps, opt, names[j], skip, W[:, j])
         # the body moves on a frame where the median joint moves more than 0.05 degrees
         moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
         for j in animated:

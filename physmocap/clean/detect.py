@@ -76,7 +76,7 @@ class CleanOptions:
 
     jump_deg: float = 10.0
     max_speed: float = 1500.0
-    pair_speed: float = 500.0
+    pair_speed: float = 400.0
     novelty_ratio: float = 0.2
     jump_ratio: float = 5.0
     context_time: float = 0.1

@@ -272,3 +272,58 @@ def test_frozen_repair_keeps_the_joints_speed_and_leaves_no_catch_up_jump(walk):
 
     step = joint_angles_step(np.asarray(fixed.rotations))[:, j]
     assert step[299:342].max() < 3.0 * max(step[280:299].max(), step[341:360].max())
+
+
+def test_a_pop_to_a_pose_the_joint_takes_anyway_is_not_a_spike(walk):
+    """A forearm set, for 0.2 s, to a rotation it holds elsewhere in the clip (a solved joint
+    popping to a pose it reaches anyway) is no spike; the same span offset 35 degrees about an
+    axis the joint never turns about is one."""
+    j = _joint(walk, "LeftForeArm")
+    R = np.array(walk.rotations, copy=True)
+    frames = list(range(200, 224))
+    far = 300 + int(np.argmin(np.abs(R[300:, j] @ R[199, j])))  # its own pose farthest from frame 199
+    R[frames, j] = R[far, j]
+    step = np.degrees(2 * np.arccos(np.clip(np.abs(np.sum(R[199, j] * R[200, j])), 0, 1)))
+    assert step > 10.0  # a real jump in and out
+    _, report = clean(dataclasses.replace(walk, rotations=R))
+    assert not [g for g in report.glitches if g.joint == "LeftForeArm" and g.kind in ("spike", "flip")]
+    q = Rotation.from_rotvec(np.radians(35.0) * np.array([0.6, 0.0, 0.8])).as_quat()
+    _, report = clean(_with(walk, j, frames, q))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "LeftForeArm"] == [("spike", 200, 223)]
+
+
+def test_slow_out_and_back_at_30_hz_is_not_a_spike(walk):
+    """10 degrees out and back at 30 Hz is 300 deg/s: slower than a walking knee, not a glitch."""
+    from physmocap.clean import CleanOptions
+
+    m = walk.resample(30.0)
+    j = _joint(m, "LeftForeArm")
+    q = Rotation.from_rotvec(np.radians(11.0) * np.array([0.6, 0.0, 0.8])).as_quat()
+    bad = _with(m, j, [60, 61], q)
+    _, report = clean(bad)
+    assert not [g for g in report.glitches if g.joint == "LeftForeArm" and g.kind == "spike"]
+    _, report = clean(bad, CleanOptions(pair_speed=200.0))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "LeftForeArm"] == [("spike", 60, 61)]
+
+
+@pytest.mark.parametrize("order", ["XYZ", "ZYX"])
+def test_detections_do_not_depend_on_the_files_euler_order(walk, tmp_path, order):
+    """The same glitched motion written with other rotation channels is found the same."""
+    from physmocap.export.bvh import write_bvh
+
+    m = walk.slice_frames(0, 400)
+    j, k = _joint(m, "LeftForeArm"), _joint(m, "RightUpLeg")
+    q = Rotation.from_rotvec(np.radians(40.0) * np.array([0.6, 0.0, 0.8])).as_quat()
+    bad = _with(_with(m, j, list(range(100, 130)), q), k, list(range(200, 230)), hold=True)
+    bad = _with(bad, _joint(m, "RightForeArm"), [300], Rotation.from_rotvec(np.radians(180.0) * np.array([1.0, 0, 0])).as_quat())
+    ref = write_bvh(bad, tmp_path / "ref.bvh", precision=9)
+    other = write_bvh(bad, tmp_path / f"{order}.bvh", rotation_order=order, precision=9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        a = clean(load_motion(ref))[1].glitches
+        b = clean(load_motion(other))[1].glitches
+    key = lambda g: (g.kind, g.joint, g.start, g.end, g.movement)  # noqa: E731
+    assert sorted(map(key, a)) == sorted(map(key, b))
+    assert {g.kind for g in a} >= {"spike", "frozen", "flip"}
+    for ga, gb in zip(sorted(a, key=key), sorted(b, key=key)):
+        assert abs(ga.severity - gb.severity) < 0.05

@@ -7,9 +7,11 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
   (sign-invariant: a quaternion sign flip is not a rotation) is a *jump* where it exceeds
   ``jump_deg`` and ``jump_ratio`` times the median of its neighbours over
   ``context_time`` (fast real motion, a kick or a spin, moves every frame, a glitch
-  moves in one), and the step is faster than ``max_speed`` degrees per second.  A jump followed, within ``max_glitch_time``, by a jump back to within
-  ``return_ratio`` of the angle jumped marks the frames between as a ``spike`` (one or a
-  few frames) or a ``flip`` (a jump of 150 degrees or more); a jump with no return is a
+  moves in one).  A jump followed, within ``max_glitch_time``, by a jump that undoes it
+  (to within ``return_ratio``), both faster than ``pair_speed`` degrees per second, marks
+  the frames between as a ``flip`` (a jump of 150 degrees or more) or, if the joint holds
+  there poses it takes nowhere else in the clip (``novelty_ratio``), a ``spike``; any other
+  jump faster than ``max_speed`` in both its local rotation and its world orientation is a
   ``discontinuity`` (reported on its frame).
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value

@@ -327,3 +327,27 @@ def test_detections_do_not_depend_on_the_files_euler_order(walk, tmp_path, order
     assert {g.kind for g in a} >= {"spike", "frozen", "flip"}
     for ga, gb in zip(sorted(a, key=key), sorted(b, key=key)):
         assert abs(ga.severity - gb.severity) < 0.05
+
+
+def test_shortened_benchmark_on_the_bundled_walk(walk):
+    """scripts/glitch_benchmark.py's injection, 3 glitches of each type into the bundled walk:
+    every type found with recall and precision of at least 0.95 (the walk's own flag, a toe
+    stepping 15 degrees in one frame, left out as the benchmark's injected precision does)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
+    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    names = {n: j for j, n in enumerate(walk.skeleton.names)}
+    own = bench._flagged(clean(walk)[1], names)
+    assert len({t for _, t in own}) < 0.005 * walk.num_frames
+    for ti, kind in enumerate(bench.TYPES):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            glitched, truth, faint = bench.inject(walk, np.random.default_rng([7, ti]), 3, (kind,))
+            _, report = clean(glitched)
+        det = bench._flagged(report, names) - faint - (own - truth[kind])
+        p, r, _ = bench._prf(len(det & truth[kind]), len(det - truth[kind]), len(truth[kind] - det))
+        assert r >= 0.95 and p >= 0.95, (kind, p, r)

@@ -225,6 +225,18 @@ def beyond_range(angle: np.ndarray, lo: float, hi: float) -> list[tuple[int, int
     return sorted(out)
 
 
+#: Canonical joint centres each movement is read from (``{side}`` is the movement's side;
+#: the trunk's carry the pelvis and chest frames).
+ANCHORS: dict[str, tuple[str, ...]] = {
+    "knee_flexion": ("{side}_hip", "{side}_knee", "{side}_ankle"),
+    "elbow_flexion": ("{side}_shoulder", "{side}_elbow", "{side}_wrist"),
+    "hip_flexion": ("left_hip", "right_hip", "{side}_knee"),
+    "hip_adduction": ("left_hip", "right_hip", "{side}_knee"),
+    "trunk_flexion": ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "neck"),
+    "trunk_lateral_flexion": ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "neck"),
+    "trunk_rotation": ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "neck"),
+}
+
 #: Canonical joints whose segment's world rotation the angles use (rotational sources).
 ROTATED_SEGMENTS = ("pelvis", "left_hip", "right_hip", "left_shoulder", "right_shoulder")
 

@@ -7,9 +7,11 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
   (sign-invariant: a quaternion sign flip is not a rotation) is a *jump* where it exceeds
   ``jump_deg`` and ``jump_ratio`` times the median of its neighbours over
   ``context_time`` (fast real motion, a kick or a spin, moves every frame, a glitch
-  moves in one), and the step is faster than ``max_speed`` degrees per second.  A jump followed, within ``max_glitch_time``, by a jump back to within
-  ``return_ratio`` of the angle jumped marks the frames between as a ``spike`` (one or a
-  few frames) or a ``flip`` (a jump of 150 degrees or more); a jump with no return is a
+  moves in one).  A jump followed, within ``max_glitch_time``, by a jump that undoes it
+  (to within ``return_ratio``), both faster than ``pair_speed`` degrees per second, marks
+  the frames between as a ``flip`` (a jump of 150 degrees or more) or, if the joint holds
+  there poses it takes nowhere else in the clip (``novelty_ratio``), a ``spike``; any other
+  jump faster than ``max_speed`` in both its local rotation and its world orientation is a
   ``discontinuity`` (reported on its frame).
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value
@@ -46,10 +48,22 @@ class CleanOptions:
         max_speed: ... and faster than this (degrees per second): joints of the fastest
             human motions (throws, kicks) stay below about 1500 deg/s outside the
             shoulder's internal rotation, so at a low frame rate a large step is no glitch.
+        pair_speed: A jump paired with a later jump that undoes it needs only this speed
+            (degrees per second, both jumps): going out and coming back is stronger evidence
+            than one step, but a joint stepping no faster than a walking knee (about 400
+            deg/s) cannot be told from real motion sampled at a low rate.
+        novelty_ratio: A spike (not a flip) is a glitch only if the poses it holds lie at
+            least this fraction of its entry jump away from every pose the joint takes
+            elsewhere in the clip (outside the span and as many frames each side): a joint
+            popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
+            solved spine settling) is the capture's own behaviour, an offset injected or added
+            by a solver error puts the joint where it never goes.
         jump_ratio: ... and at least this many times the median of its neighbours.
         context_time: Seconds of neighbours (each side) for that median.
         max_glitch_time: Longest glitch between a jump and its return (seconds).
         return_ratio: The return brings the joint back to within this fraction of the jump.
+        return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
+            twice the joint's own motion (neighbours' median step) on the two frames.
         flip_deg: A glitch whose jump is at least this large is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (positional).
@@ -64,10 +78,13 @@ class CleanOptions:
 
     jump_deg: float = 10.0
     max_speed: float = 1500.0
+    pair_speed: float = 400.0
+    novelty_ratio: float = 0.2
     jump_ratio: float = 5.0
     context_time: float = 0.1
     max_glitch_time: float = 0.5
     return_ratio: float = 0.5
+    return_deg: float = 2.0
     flip_deg: float = 150.0
     frozen_time: float = 0.1
     stretch_ratio: float = 0.1
@@ -126,40 +143,110 @@ def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
     return median_filter(x, footprint=footprint, mode="nearest")
 
 
-def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0) -> list[Glitch]:
-    """Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``."""
+def _jumps(
+    rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, world: np.ndarray | None = None
+) -> list[Glitch]:
+    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+
+    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
+    neighbours' median.  A jump at :math:`a` is paired with the first later jump at
+    :math:`b` (within ``max_glitch_time``) that *undoes* it: the exit step composed with
+    the entry step is the identity up to ``return_ratio`` of the jump, in either
+    convention (an offset applied in the parent's frame, :math:`D_b D_a \approx 1` with
+    :math:`D_t = q_t q_{t-1}^{-1}`, or in the joint's own, :math:`E_a E_b \approx 1` with
+    :math:`E_t = q_{t-1}^{-1} q_t`), or the joint is back where it was before :math:`a`.
+    This does not depend on how far the real joint moves during a long glitch, and two
+    unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
+    paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
+    limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
+    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`); an unpaired
+    jump (or one whose pair fails those) is a ``discontinuity`` only if it is faster than
+    ``max_speed``, both in the joint's local rotation and, when ``world (F, 4)`` is given, in
+    its world orientation: a local jump its parent's jump cancels (a solver moving a twist
+    from one joint to the next, the limb itself not turning) moves no segment.
+    """
+    from ..rotations import quat_conj, quat_mul
+
     F = len(rot)
     step = np.zeros(F)
     step[1:] = _angle(rot[1:], rot[:-1])
+    wstep = step
+    if world is not None:
+        wstep = np.zeros(F)
+        wstep[1:] = _angle(world[1:], world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
-    is_jump = (step > max(opt.jump_deg, opt.max_speed / fps)) & (step > opt.jump_ratio * ref)
+    is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
+    # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
+    # is the joint's real motion: a step that only continues an acceleration is no entry
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    win = sliding_window_view(np.pad(step, half, mode="edge"), half)
+    before = np.median(win[:F], axis=1)  # t-half .. t-1
+    after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
+    entry = is_jump & (step > opt.jump_ratio * before)
+    exit_ = is_jump & (step > opt.jump_ratio * after)
     jumps = np.flatnonzero(is_jump)
     out: list[Glitch] = []
+    if not len(jumps):
+        return out
+    inv = quat_conj(rot)
+    D = np.zeros_like(rot)
+    E = np.zeros_like(rot)
+    D[1:] = quat_mul(rot[1:], inv[:-1])  # q_t q_{t-1}^-1
+    E[1:] = quat_mul(inv[:-1], rot[1:])  # q_{t-1}^-1 q_t
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
     longest = max(1, int(round(opt.max_glitch_time * fps)))
     used: set[int] = set()
+    pairs: list[tuple[int, int]] = []
     for a in jumps:
         if a in used:
             continue
-        before = rot[a - 1]
         back = None
-        for b in jumps[(jumps > a) & (jumps <= a + longest)]:
-            if b in used:
+        for b in jumps[(jumps > a) & (jumps <= a + longest)] if entry[a] else ():
+            if b in used or not exit_[b]:
                 continue
-            # does the joint return (near) to where it was before the jump?
-            if _angle(rot[b], before) <= opt.return_ratio * step[a]:
+            # what is left of the entry after the exit: the joint's own motion on those two frames
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (ref[a] + ref[b]) + opt.return_deg)
+            undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
+            if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
                 break
-        if back is not None:
+        if back is not None and min(step[a], step[back]) * fps > opt.pair_speed:
             used.update((int(a), int(back)))
-            size = float(np.max(_angle(rot[a:back], before)))
-            kind = "flip" if size >= opt.flip_deg else "spike"
-            out.append(Glitch(kind, joint, int(a), int(back - 1), size))
+            pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
-    return out
+            if min(step[a], wstep[a]) > opt.max_speed / fps:
+                out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
+    # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
+    # glitches of one joint do not vouch for each other)
+    elsewhere = np.ones(F, dtype=bool)
+    elsewhere[: skip + 1] = False
+    for a, b in pairs:
+        n = max(2, b - a)
+        elsewhere[max(0, a - n) : b + n] = False
+    for a, b in pairs:
+        size = float(np.max(_angle(rot[a:b], rot[a - 1])))
+        if step[a] < opt.flip_deg and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]:
+            for t in (a, b):  # a pop to a pose the joint takes anyway: each jump on its own
+                if min(step[t], wstep[t]) > opt.max_speed / fps:
+                    out.append(Glitch("discontinuity", joint, t, t, float(step[t])))
+            continue
+        kind = "flip" if size >= opt.flip_deg else "spike"
+        out.append(Glitch(kind, joint, a, b - 1, size))
+    return sorted(out, key=lambda g: g.start)
+
+
+def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
+    """Median over the rotations ``span (n, 4)`` of the angle (degrees) to the nearest of the
+    rotations ``elsewhere (m, 4)`` (180 when there are none)."""
+    if not len(elsewhere):
+        return 180.0
+    # |<q_t, q>| is largest for the nearest rotation: one matrix product for the whole span
+    dots = np.abs(span @ elsewhere.T).max(axis=1)
+    return float(np.median(np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))))
 
 
 def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
@@ -201,8 +288,9 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
             warnings.simplefilter("ignore")
             skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
+        W = np.asarray(motion.world_rotations(), dtype=float)
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip)
+            glitches += _jumps(R[:, j], fps, opt, names[j], skip, W[:, j])
         # the body moves on a frame where the median joint moves more than 0.05 degrees
         moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
         for j in animated:
@@ -232,20 +320,80 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
                 d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
                 for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
                     glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
-    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt))
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt), motion)
+    glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
 
 
-def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch]) -> list[Glitch]:
-    """An out-of-range span inside a spike or flip of the same joint is that glitch's
-    anatomical movement, not a second glitch: name the movement on it instead."""
-    import dataclasses
+def _drop_boundary_jumps(glitches: list[Glitch]) -> list[Glitch]:
+    """A discontinuity on the first frame of a glitch span of the same joint, or on the
+    frame right after it, is that span's own entry or exit (a frozen joint catching up,
+    a bend past the range of motion snapping back), not a second glitch."""
+    spans: dict[str, list[tuple[int, int]]] = {}
+    for g in glitches:
+        if g.kind != "discontinuity":
+            spans.setdefault(g.joint, []).append((g.start, g.end))
+    return [
+        g
+        for g in glitches
+        if g.kind != "discontinuity" or not any(s == g.start or e + 1 == g.start for s, e in spans.get(g.joint, ()))
+    ]
 
+
+def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
+    """Source joints whose local rotation can change an anatomical angle: the ancestors
+    of the joint centres it is read from, except those common to all of them (which
+    move them rigidly together)."""
+    from .anatomy import ANCHORS
+
+    parents = motion.skeleton.parents
+    chains = []
+    for c in ANCHORS.get(movement.key.replace("left_", "").replace("right_", ""), ()):
+        c = c.format(side=movement.key.split("_", 1)[0])
+        if c not in ji:
+            continue
+        up, p = set(), int(parents[ji[c]])
+        while p >= 0:
+            up.add(p)
+            p = int(parents[p])
+        chains.append(up)
+    if not chains:
+        return set()
+    return set().union(*chains) - set.intersection(*chains)
+
+
+def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: Motion | None = None) -> list[Glitch]:
+    """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
+    a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
+    shoulder line the trunk angles are read from), is that glitch's anatomical
+    movement, not a second glitch: name the movement on it instead."""
+    import dataclasses
+    import warnings
+
+    from ..errors import MappingError
+    from ..ik.retarget import map_motion
+    from .anatomy import MOVEMENTS
+
+    names = motion.skeleton.names if motion is not None else []
+    ji: dict[str, int] = {}
+    if motion is not None:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ji = map_motion(motion)
+        except MappingError:
+            ji = {}
+    by_name = {m.joint.replace("_", " ") if m.joint != "spine" else "trunk": m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
+        related = {a.joint}
+        if ji:
+            m = next((m for w, m in by_name.items() if a.movement.startswith(w + " ")), None)
+            if m is not None:
+                related |= {names[j] for j in _movement_joints(motion, ji, m)}
         for i, g in enumerate(out):
-            if g.joint == a.joint and g.kind in ("spike", "flip") and g.start <= a.start and a.end <= g.end:
-                if not g.movement:
+            if g.joint in related and g.kind in ("spike", "flip", "frozen") and g.start <= a.start and a.end <= g.end:
+                if not g.movement and g.joint == a.joint:
                     out[i] = dataclasses.replace(g, movement=a.movement, plane=a.plane)
                 break
         else:

@@ -88,15 +88,27 @@ class FrameStepLimit(mink.Limit):
         prev = self.q_prev[self.qposadr]
         return prev - step + self.shrink, prev + step - self.shrink
 
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
-        del dt  # bounds are in motion time, not the QP's step
+    def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        r"""The limit as simple bounds on the step: ``(dofs, lo, hi)`` with
+        :math:`lo \le \Delta q_{dofs} \le hi` (rad or m), or None when inactive.
+
+        :math:`hi = \max(q^{prev} + \dot q^{max} T - q, 0)`,
+        :math:`lo = -\max(q - (q^{prev} - \dot q^{max} T), 0)`: if an earlier relaxed
+        step left :math:`q` outside the band, only moving back is allowed.
+        """
         if self.q_prev is None or len(self.dofadr) == 0:
-            return mink.Constraint()
+            return None
         lo, hi = self.step_bounds()
         q = configuration.q[self.qposadr]
-        # If an earlier relaxed step left q outside the band, allow moving back only.
-        h = np.concatenate([np.maximum(hi - q, 0.0), np.maximum(q - lo, 0.0)])
-        return mink.Constraint(G=self._G, h=h)
+        return self.dofadr, -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # bounds are in motion time, not the QP's step
+        spec = self.box(configuration)
+        if spec is None:
+            return mink.Constraint()
+        _, lo, hi = spec
+        return mink.Constraint(G=self._G, h=np.concatenate([hi, -lo]))
 
 
 class GeomCandidates:
@@ -287,6 +299,7 @@ class RootStepLimit(mink.Limit):
         self.step_lin = float(v_max) * float(frame_interval)
         self.step_ang = float(w_max) * float(frame_interval)
         self.q_prev: np.ndarray | None = None
+        self._dofs = np.arange(self.dadr, self.dadr + 6) if free else np.zeros(0, dtype=int)
         if free:
             G = np.zeros((12, model.nv))
             for k in range(6):
@@ -297,10 +310,8 @@ class RootStepLimit(mink.Limit):
     def set_previous(self, q_prev: np.ndarray | None) -> None:
         self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
 
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
-        del dt
-        if self.qadr < 0:
-            return mink.Constraint()
+    def _h(self, configuration: mink.Configuration) -> np.ndarray:
+        """Right-hand sides of the rows ``+e_k`` (k = 0..5) then ``-e_k``; inf when absent."""
         p = configuration.q[self.qadr : self.qadr + 3]
         if self.q_prev is None:
             hi_lin = np.full(3, np.inf)
@@ -310,7 +321,21 @@ class RootStepLimit(mink.Limit):
             hi_lin = np.maximum(prev + self.step_lin - p, 0.0)
             lo_lin = np.maximum(p - (prev - self.step_lin), 0.0)
         ang = np.full(3, self.step_ang)
-        h = np.concatenate([hi_lin, ang, lo_lin, ang])
+        return np.concatenate([hi_lin, ang, lo_lin, ang])
+
+    def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        r"""The limit as simple bounds ``(dofs, lo, hi)`` on the root's six step
+        coordinates (:math:`\pm\infty` where absent), or None without a free root."""
+        if self.qadr < 0:
+            return None
+        h = self._h(configuration)
+        return self._dofs, -h[6:], h[:6]
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        if self.qadr < 0:
+            return mink.Constraint()
+        h = self._h(configuration)
         keep = np.isfinite(h)
         return mink.Constraint(G=self._G[keep], h=h[keep])
 

@@ -44,6 +44,7 @@ from ..errors import OptionError
 from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit, RootStepLimit, SelfCollisionLimit
+from .qp import QP, QPBuilder, solve as solve_qp
 from .tasks import SitesPositionTask
 from .targets import weight_of
 
@@ -224,6 +225,8 @@ class FrameSolver:
         self._lim_qadr = model.jnt_qposadr[lim]
         self._lim_range = model.jnt_range[lim]
         self.q_prev: np.ndarray | None = None
+        self._builder = QPBuilder(model)
+        self._com_stale = False  # kinematics current, mj_comPos (Jacobians) not yet
         self._residual: float | None = None
         self._res_cache: tuple[bytes, tuple[float, float]] | None = None
         self._constraints: list[mink.Task] = []
@@ -265,43 +268,88 @@ class FrameSolver:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""
         q0 = self.character.rest_qpos if q is None else q
         self.configuration.update(np.array(q0, dtype=float))
+        self._com_stale = False
         self.q_prev = None
 
     # -- solving ----------------------------------------------------------------
-    def _limits(self, level: int) -> list[mink.Limit]:
-        limits: list[mink.Limit] = [self.config_limit, self.root_limit]
-        if level <= 2 and self.options.velocity_limits and self.q_prev is not None:
-            limits.append(self.step_limit)
-        if level <= 3 and self.options.floor:
-            limits.append(self.floor_limit)
+    def _limits(self, level: int) -> tuple[list, list[mink.Limit]]:
+        """``(boxes, general)`` limits at relaxation ``level``: those folded into the QP's
+        simple bounds (root step, frame-to-frame step; the joint ranges always are) and
+        those that are general rows (floor, self-collision)."""
+        opt = self.options
+        boxes: list = [self.root_limit]
+        if level <= 2 and opt.velocity_limits and self.q_prev is not None:
+            boxes.append(self.step_limit)
+        general: list[mink.Limit] = []
+        if level <= 3 and opt.floor:
+            general.append(self.floor_limit)
         if level <= 3 and self.self_limit is not None and not self._first:
-            limits.append(self.self_limit)
-        return limits
+            general.append(self.self_limit)
+        return boxes, general
+
+    # -- kinematics: mj_kinematics on every move, mj_comPos only before a QP ------------
+    def _set_q(self, q: np.ndarray) -> None:
+        """Move to ``q``: forward kinematics only (positions for the residuals)."""
+        self.configuration.data.qpos[:] = q
+        mujoco.mj_kinematics(self.model, self.configuration.data)
+        self._com_stale = True
+
+    def _integrate(self, v: np.ndarray, alpha: float) -> None:
+        r""":math:`q \leftarrow q \oplus \alpha v`, forward kinematics only."""
+        data = self.configuration.data
+        mujoco.mj_integratePos(self.model, data.qpos, v, alpha)
+        mujoco.mj_kinematics(self.model, data)
+        self._com_stale = True
+
+    def _sync(self) -> None:
+        """Complete the kinematics for Jacobians (``mj_comPos``) if a move left them stale."""
+        if self._com_stale:
+            mujoco.mj_comPos(self.model, self.configuration.data)
+            if self.model.neq > 0:
+                mujoco.mj_makeConstraint(self.model, self.configuration.data)
+            self._com_stale = False
+
+    def _solve(self, problem: QP) -> np.ndarray:
+        """Solve with daqp directly, or with another qpsolvers backend (``options.solver``)."""
+        if self.options.solver == "daqp":
+            return solve_qp(problem)
+        G, A = (problem.G, problem.h), (problem.A, problem.b)
+        result = qpsolvers.solve_problem(
+            qpsolvers.Problem(
+                problem.H, problem.c,
+                G[0] if len(G[1]) else None, G[1] if len(G[1]) else None,
+                A[0] if len(A[1]) else None, A[1] if len(A[1]) else None,
+                problem.lb, problem.ub,
+            ),
+            solver=self.options.solver,
+        )
+        v = result.x
+        if not result.found or v is None or not np.all(np.isfinite(v)):
+            raise mink.NoSolutionFound(self.options.solver)
+        return v
 
     def _step(self, level: int) -> np.ndarray:
+        """One QP step at relaxation ``level`` (:data:`RELAXATION_LEVELS`), see :mod:`~physmocap.ik.qp`."""
         opt = self.options
-        tasks = [*self.tasks, self.posture, *self._extra_tasks]
+        self._sync()
+        tasks = [*self.tasks, *self._extra_tasks]
         constraints = self._constraints if level == 0 else []
         if level >= 1:  # equalities softened into high-cost tasks
             tasks += self._constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
-        # mink builds the QP; the trust region goes in as simple bounds, which daqp
-        # handles natively (cheaper than 2 nv inequality rows)
-        problem = mink.build_ik(
+        boxes, general = self._limits(level)
+        problem = self._builder.build(
             self.configuration,
             tasks,
-            1.0,
-            damping=damping,
-            limits=self._limits(level),
-            constraints=constraints or None,
+            damping,
+            posture=self.posture,
+            trust=self._trust,
+            config_limit=self.config_limit,
+            boxes=boxes,
+            limits=general,
+            constraints=constraints,
         )
-        problem.lb = -self._trust
-        problem.ub = self._trust
-        result = qpsolvers.solve_problem(problem, solver=opt.solver)
-        v = result.x
-        if not result.found or v is None or not np.all(np.isfinite(v)):
-            raise mink.NoSolutionFound(opt.solver)
-        return v
+        return self._solve(problem)
 
     def _settle_from_rest(self) -> None:
         """First stage of frame 0: converge with a strong pull towards the rest pose.
@@ -319,7 +367,7 @@ class FrameSolver:
                     v = self._step(1)
                 except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                     break
-                self.configuration.integrate_inplace(v, 1.0)
+                self._integrate(v, 1.0)
                 if np.max(np.abs(v)) < opt.tolerance:
                     break
         finally:
@@ -333,21 +381,23 @@ class FrameSolver:
         (same limits as ``level``), a few times, which converges quickly.
         """
         for _ in range(5):
+            self._sync()
+            boxes, general = self._limits(level)
             try:
-                v = mink.solve_ik(
-                    self.configuration,
-                    [],
-                    1.0,
-                    self.options.solver,
-                    damping=1e-6,
-                    limits=self._limits(level),
-                    constraints=(self._constraints if level == 0 and self._constraints else None),
+                v = self._solve(
+                    self._builder.build(
+                        self.configuration,
+                        [],
+                        1e-6,
+                        config_limit=self.config_limit,
+                        boxes=boxes,
+                        limits=general,
+                        constraints=self._constraints if level == 0 else (),
+                    )
                 )
             except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                 return
-            if not np.all(np.isfinite(v)):
-                return
-            self.configuration.integrate_inplace(v, 1.0)
+            self._integrate(v, 1.0)
             if self._floor_ok():
                 return
 
@@ -382,23 +432,23 @@ class FrameSolver:
         on the hard-constraint residual removes that oscillation.
         """
         if not self._constraints and not self.options.floor:
-            self.configuration.integrate_inplace(v, 1.0)
+            self._integrate(v, 1.0)
             return
         q0 = self.configuration.q.copy()
         r0 = self._residual if self._residual is not None else self._hard_residual()
         alpha = 1.0
         for _ in range(4):
-            self.configuration.integrate_inplace(v, alpha)
+            self._integrate(v, alpha)
             r1 = self._hard_residual()
             if r1 <= max(r0, tol):
                 self._residual = r1
                 return
             alpha *= 0.5
-            self.configuration.update(q0)
-        self.configuration.integrate_inplace(v, alpha)
+            self._set_q(q0)
+        self._integrate(v, alpha)
         r1 = self._hard_residual()
         if r1 > max(r0, tol) + 1e-3:  # still clearly worse: reject the step
-            self.configuration.update(q0)
+            self._set_q(q0)
             r1 = r0
         self._residual = r1
 
@@ -501,5 +551,6 @@ class FrameSolver:
             qa = self.step_limit.qposadr
             q[qa] = np.clip(q[qa], lo - self.step_limit.shrink, hi + self.step_limit.shrink)
         self.configuration.update(q)
+        self._com_stale = False
         self.q_prev = q.copy()
         return q, it, worst

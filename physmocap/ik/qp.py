@@ -64,7 +64,7 @@ try:  # mink's compiled SE(3) operations (what FrameTask uses when present)
 except ImportError:  # pragma: no cover - pure-Python mink
     _native = None
 
-__all__ = ["QP", "QPBuilder", "solve", "INFINITY"]
+__all__ = ["QP", "QPBuilder", "WarmSolver", "solve", "INFINITY"]
 
 #: What daqp reads as an absent bound.
 INFINITY = 1e30
@@ -116,6 +116,8 @@ class QPBuilder:
         self._dq2 = np.zeros(nv)
         self._diag = np.arange(nv) * (nv + 1)
         self._ids: dict[tuple, int] = {}
+        self._views: dict[tuple, tuple] = {}
+        self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
 
     # -- objective ----------------------------------------------------------------
     def _rows(self, m: int) -> None:
@@ -126,21 +128,38 @@ class QPBuilder:
 
     def _frame_rows(self, task: mink.FrameTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray) -> None:
         r"""``FrameTask`` rows: :math:`W = -\mathrm{diag}(w) J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J`,
-        :math:`\epsilon = -\alpha\, w \odot \log(T_{bt})` (metres, radians)."""
+        :math:`\epsilon = -\alpha\, w \odot \log(T_{bt})` (metres, radians), :math:`J` the
+        frame's ``(6, nv)`` Jacobian in world axes (``mj_jacSite``/``mj_jacBody``)."""
         kind = task.frame_type
-        fid = self._ids.get((task.frame_name, kind))
+        key = (task.frame_name, kind)
+        fid = self._ids.get(key)
         if fid is None:
-            fid = self._ids[(task.frame_name, kind)] = _resolve(self.model, task.frame_name, kind)
+            fid = self._ids[key] = _resolve(self.model, task.frame_name, kind)
         xmat = getattr(data, _XMAT[kind])[fid]
         frame = _native.xmat_xpos_to_wxyz_xyz(xmat, getattr(data, _XPOS[kind])[fid])
         target = task.transform_target_to_world.wxyz_xyz
-        jac, tmp = self._jac6, self._tmp6
+        jac = self._jac6
         _JAC[kind](self.model, data, jac[:3], jac[3:], fid)
-        np.matmul(_native.se3_rotation_adjoint_from_xmat(xmat), jac, out=tmp)  # body-frame Jacobian
-        np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)), tmp, out=jac)
+        M = _native.se3_jlog(_native.se3_inverse_multiply(target, frame)) @ _native.se3_rotation_adjoint_from_xmat(xmat)
         cost = task.cost
-        np.multiply(-cost[:, None], jac, out=W)
+        M *= -cost[:, None]
+        np.matmul(M, jac, out=W)
         np.multiply(cost, -task.gain * _native.se3_rminus(target, frame), out=eps)
+
+    def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
+        r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked
+        ``mj_jacSite`` rows, :math:`\epsilon = -\alpha\, w \odot (x - x^*)` (metres)."""
+        views = self._views.get((id(task), r))
+        if views is None or views[0] is not task.site_ids or views[1] is not self._W:
+            # the same rows of the same buffer from one call to the next: their views are kept
+            views = self._views[(id(task), r)] = (
+                task.site_ids, self._W, [(W[3 * i : 3 * i + 3], int(sid)) for i, sid in enumerate(task.site_ids)],
+            )
+        model = self.model
+        for view, sid in views[2]:
+            mujoco.mj_jacSite(model, data, view, None, sid)
+        W *= task.cost[:, None]
+        np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
 
     def objective(
         self,
@@ -154,23 +173,22 @@ class QPBuilder:
         ``H`` and ``c`` are the builder's buffers, overwritten by the next call.
         """
         data, model = configuration.data, self.model
-        m = sum(int(t.k) if hasattr(t, "k") else len(t.cost) for t in tasks)
+        m = 0
+        for t in tasks:
+            m += t.k if hasattr(t, "k") else len(t.cost)
         self._rows(m)
         W, eps = self._W, self._eps
         r = 0
         mu = 0.0
         for task in tasks:
-            if isinstance(task, mink.FrameTask) and _native is not None and task.transform_target_to_world is not None:
+            kind = type(task)
+            if kind is mink.FrameTask and _native is not None and task.transform_target_to_world is not None:
                 k = 6
                 self._frame_rows(task, data, W[r : r + 6], eps[r : r + 6])
-            elif isinstance(task, SitesPositionTask):
+            elif kind is SitesPositionTask:
                 k = task.k
-                Wk = W[r : r + k]
-                for i, sid in enumerate(task.site_ids):
-                    mujoco.mj_jacSite(model, data, Wk[3 * i : 3 * i + 3], None, int(sid))
-                Wk *= task.cost[:, None]
-                np.multiply(task.cost, -task.gain * task.compute_error(configuration), out=eps[r : r + k])
-            elif isinstance(task, SitePositionTask):
+                self._sites_rows(task, data, W[r : r + k], eps[r : r + k], r)
+            elif kind is SitePositionTask:
                 k = task.k
                 mujoco.mj_jacSite(model, data, self._jac3, None, task.site_id)
                 np.multiply(task.cost[:, None], self._jac3[task.axes, :], out=W[r : r + k])
@@ -227,11 +245,15 @@ class QPBuilder:
             ub[:] = trust
             np.negative(ub, out=lb)
         if config_limit is not None and config_limit.projection_matrix is not None:
-            q, idx, g = configuration.q, config_limit.indices, config_limit.gain
-            mujoco.mj_differentiatePos(self.model, self._dq, 1.0, q, config_limit.upper)
-            mujoco.mj_differentiatePos(self.model, self._dq2, 1.0, config_limit.lower, q)
-            ub[idx] = np.minimum(ub[idx], g * self._dq[idx])
-            lb[idx] = np.maximum(lb[idx], -(g * self._dq2[idx]))
+            if self._box is None or self._box[0] is not config_limit:
+                idx = np.asarray(config_limit.indices, dtype=int)
+                qadr = self.model.jnt_qposadr[self.model.dof_jntid[idx]]
+                self._box = (config_limit, idx, qadr, config_limit.upper[qadr], config_limit.lower[qadr])
+            _, idx, qadr, upper, lower = self._box
+            # hinge and slide joints: q_max ⊖ q = q_max - q (what mj_differentiatePos computes)
+            q, g = configuration.data.qpos[qadr], config_limit.gain
+            ub[idx] = np.minimum(ub[idx], g * (upper - q))
+            lb[idx] = np.maximum(lb[idx], -(g * (q - lower)))
         for box in boxes:
             spec = box.box(configuration)
             if spec is None:
@@ -302,12 +324,8 @@ def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:
     return int(fid)
 
 
-def solve(qp: QP) -> np.ndarray:
-    r"""Solve ``qp`` with ``daqp.solve`` (bounds first, then :math:`G`, then :math:`A` with sense 5).
-
-    Returns :math:`\Delta q` ``(nv,)``; raises ``mink.NoSolutionFound`` if daqp reports
-    no solution (infeasible, iteration limit) or a non-finite one.
-    """
+def _stack(qp: QP) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """daqp's ``(A, bupper, blower, sense)``: simple bounds first, then :math:`G`, then :math:`A` (sense 5)."""
     nv, m, p = qp.c.size, qp.h.size, qp.b.size
     if m or p:
         Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
@@ -318,7 +336,64 @@ def solve(qp: QP) -> np.ndarray:
         bupper, blower = qp.ub, qp.lb
     sense = np.zeros(nv + m + p, dtype=c_int)
     sense[nv + m :] = 5
-    x, _, exitflag, _ = daqp.solve(qp.H, qp.c, Atot, bupper, blower, sense)
+    return Atot, bupper, blower, sense
+
+
+def solve(qp: QP, dual_start: np.ndarray | None = None) -> np.ndarray:
+    r"""Solve ``qp`` with ``daqp.solve`` (bounds first, then :math:`G`, then :math:`A` with sense 5).
+
+    ``dual_start``: a guess of the multipliers of every constraint (daqp's order), which
+    only sets daqp's initial active set.  Returns :math:`\Delta q` ``(nv,)``; raises
+    ``mink.NoSolutionFound`` if daqp reports no solution (infeasible, iteration limit) or a
+    non-finite one.
+    """
+    return _solve(qp, dual_start)[0]
+
+
+def _solve(qp: QP, dual_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    Atot, bupper, blower, sense = _stack(qp)
+    x, _, exitflag, info = daqp.solve(qp.H, qp.c, Atot, bupper, blower, sense, dual_start=dual_start)
     if exitflag <= 0 or x is None or not np.all(np.isfinite(x)):
         raise mink.NoSolutionFound("daqp")
-    return np.asarray(x)
+    return np.asarray(x), info["lam"]
+
+
+class WarmSolver:
+    r"""``daqp`` with the previous solution's active simple bounds as the next start.
+
+    The QP is strictly convex (:math:`H \succ 0` by the damping), so its minimiser is
+    unique and the starting active set changes only how quickly daqp reaches it (to
+    round-off, about 1e-15); consecutive IK iterations mostly keep the same joints at
+    their range or velocity bounds, which roughly halves daqp's time.  The general rows
+    (floor, self-collision) change from one iteration to the next and start inactive.
+    If a warm start ever fails, the QP is solved again from a cold start, so a warm start
+    never makes a feasible QP look infeasible.
+    """
+
+    def __init__(self, nv: int) -> None:
+        self.nv = int(nv)
+        self._lam: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the previous active set (the next solve starts cold)."""
+        self._lam = None
+
+    def solve(self, qp: QP) -> np.ndarray:
+        """Solve ``qp`` (see :func:`solve`), warm-started from the previous solve's bounds."""
+        start = None
+        if self._lam is not None:
+            start = np.zeros(self.nv + qp.h.size + qp.b.size)
+            start[: self.nv] = self._lam
+        try:
+            x, lam = _solve(qp, start)
+        except mink.NoSolutionFound:
+            if start is None:
+                self._lam = None
+                raise
+            try:
+                x, lam = _solve(qp)
+            except mink.NoSolutionFound:
+                self._lam = None
+                raise
+        self._lam = lam[: self.nv].copy()
+        return x

@@ -44,8 +44,8 @@ from ..errors import OptionError
 from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit, RootStepLimit, SelfCollisionLimit
-from .qp import QP, QPBuilder, solve as solve_qp
-from .tasks import SitesPositionTask
+from .qp import QP, QPBuilder, WarmSolver
+from .tasks import SitePositionTask, SitesPositionTask
 from .targets import weight_of
 
 __all__ = ["SolverOptions", "ContactHolds", "FrameSolver", "RELAXATION_LEVELS"]
@@ -226,10 +226,12 @@ class FrameSolver:
         self._lim_range = model.jnt_range[lim]
         self.q_prev: np.ndarray | None = None
         self._builder = QPBuilder(model)
+        self._daqp = WarmSolver(model.nv)
         self._com_stale = False  # kinematics current, mj_comPos (Jacobians) not yet
         self._residual: float | None = None
         self._res_cache: tuple[bytes, tuple[float, float]] | None = None
         self._constraints: list[mink.Task] = []
+        self._hold_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._extra_tasks: list[mink.Task] = []
 
     # -- targets ----------------------------------------------------------------
@@ -256,6 +258,13 @@ class FrameSolver:
     def _set_holds(self, holds: "ContactHolds") -> None:
         self._extra_tasks = list(holds.tasks)
         self._constraints = list(holds.constraints)
+        # the planted contacts' residual rows at once: site, world axis, target (metres)
+        self._hold_rows = None
+        if self._constraints and all(type(t) is SitePositionTask for t in self._constraints):
+            sites = np.concatenate([np.full(t.k, t.site_id) for t in self._constraints])
+            axes = np.concatenate([np.array(t.axes, dtype=int) for t in self._constraints])
+            target = np.concatenate([t.target[list(t.axes)] for t in self._constraints])
+            self._hold_rows = (sites, axes, target)
         self.floor_limit.clearance = dict(holds.clearance_sites)
         self.floor_limit.swing_bodies = dict(holds.clearance_bodies)
 
@@ -269,6 +278,7 @@ class FrameSolver:
         q0 = self.character.rest_qpos if q is None else q
         self.configuration.update(np.array(q0, dtype=float))
         self._com_stale = False
+        self._daqp.reset()
         self.q_prev = None
 
     # -- solving ----------------------------------------------------------------
@@ -312,7 +322,7 @@ class FrameSolver:
     def _solve(self, problem: QP) -> np.ndarray:
         """Solve with daqp directly, or with another qpsolvers backend (``options.solver``)."""
         if self.options.solver == "daqp":
-            return solve_qp(problem)
+            return self._daqp.solve(problem)
         G, A = (problem.G, problem.h), (problem.A, problem.b)
         result = qpsolvers.solve_problem(
             qpsolvers.Problem(
@@ -408,11 +418,15 @@ class FrameSolver:
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
         rc = 0.0
-        for task in self._constraints:
-            rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        if self._hold_rows is not None:
+            sites, axes, target = self._hold_rows
+            rc = max(rc, float(np.max(np.abs(self.configuration.data.site_xpos[sites, axes] - target))))
+        else:
+            for task in self._constraints:
+                rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
         rf = 0.0
         if self.options.floor:
-            z, _, _ = self.floor_limit.heights(self.configuration.data)
+            z = self.floor_limit.z(self.configuration.data)
             if z.size:
                 rf = max(0.0, float(self.options.floor_height - z.min()))
         self._res_cache = (key, (rc, rf))

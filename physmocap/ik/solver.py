@@ -417,13 +417,7 @@ class FrameSolver:
         key = self.configuration.data.qpos.tobytes()
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
-        rc = 0.0
-        if self._hold_rows is not None:
-            sites, axes, target = self._hold_rows
-            rc = max(rc, float(np.max(np.abs(self.configuration.data.site_xpos[sites, axes] - target))))
-        else:
-            for task in self._constraints:
-                rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        rc = self._contact_residual()
         rf = 0.0
         if self.options.floor:
             z = self.floor_limit.z(self.configuration.data)
@@ -431,6 +425,17 @@ class FrameSolver:
                 rf = max(0.0, float(self.options.floor_height - z.min()))
         self._res_cache = (key, (rc, rf))
         return rc, rf
+
+    def _contact_residual(self) -> float:
+        """How far (metres, largest coordinate) the planted contacts are off their anchors."""
+        rc = 0.0
+        if self._hold_rows is not None:
+            sites, axes, target = self._hold_rows
+            rc = max(rc, float(np.max(np.abs(self.configuration.data.site_xpos[sites, axes] - target))))
+        else:
+            for task in self._constraints:
+                rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        return rc
 
     def _hard_residual(self) -> float:
         """Largest violation of the hard constraints that are linearised: planted
@@ -450,15 +455,20 @@ class FrameSolver:
             return
         q0 = self.configuration.q.copy()
         r0 = self._residual if self._residual is not None else self._hard_residual()
+        bound = max(r0, tol)
+        qpos = self.configuration.data.qpos
         alpha = 1.0
         for _ in range(4):
             self._integrate(v, alpha)
-            r1 = self._hard_residual()
-            if r1 <= max(r0, tol):
-                self._residual = r1
-                return
+            # the contacts' residual first: when it alone is too large the step is refused
+            # without the floor's (the same decision as on their maximum)
+            if self._contact_residual() <= bound:
+                r1 = self._hard_residual()
+                if r1 <= bound:
+                    self._residual = r1
+                    return
             alpha *= 0.5
-            self._set_q(q0)
+            qpos[:] = q0  # the next trial integrates from q0 (its kinematics are not needed)
         self._integrate(v, alpha)
         r1 = self._hard_residual()
         if r1 > max(r0, tol) + 1e-3:  # still clearly worse: reject the step

@@ -138,3 +138,71 @@ def test_lean_qp_matches_mink_build_ik(name, seed, level):
         assert x is None
     else:
         np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-9)
+
+
+def _floor_rows_reference(limit, data):
+    """The floor rows point by point (one mj_jac each), as the limit first wrote them."""
+    z, anchor, body = limit.heights(data)
+    G, h = [], []
+    jac = np.zeros((3, limit.model.nv))
+    for k in np.flatnonzero(z < limit.floor + limit.activation):
+        mujoco.mj_jac(limit.model, data, jac, None, anchor[k], int(body[k]))
+        G.append(-jac[2].copy())
+        c = limit.swing_bodies.get(int(body[k]))
+        h.append(z[k] - limit.floor - limit.margin if c is None else z[k] - min(limit.floor + max(c, limit.margin), z[k] + limit.max_rise))
+    for sid, c in limit.clearance.items():
+        zs = data.site_xpos[sid, 2]
+        mujoco.mj_jacSite(limit.model, data, jac, None, sid)
+        G.append(-jac[2].copy())
+        h.append(zs - min(limit.floor + c, zs + limit.max_rise))
+    return np.array(G), np.array(h)
+
+
+def _self_rows_reference(limit, data):
+    """The self-collision rows pair by pair, as the limit first wrote them."""
+    model = limit.model
+    ja, jb, fromto = np.zeros((3, model.nv)), np.zeros((3, model.nv)), np.zeros(6)
+    G, h = [], []
+    for k in limit.near_pairs(data):
+        g1, g2 = (int(x) for x in limit.pairs[k])
+        d = mujoco.mj_geomDistance(model, data, g1, g2, limit.activation, fromto)
+        if d >= limit.activation:
+            continue
+        pa, pb = fromto[:3].copy(), fromto[3:].copy()
+        n = pb - pa
+        n /= np.linalg.norm(n)
+        if d < 0:
+            n = -n
+        mujoco.mj_jac(model, data, ja, None, pa, int(model.geom_bodyid[g1]))
+        mujoco.mj_jac(model, data, jb, None, pb, int(model.geom_bodyid[g2]))
+        G.append(-(n @ (jb - ja)))
+        h.append(d - limit.margin if d >= limit.margin else -min(limit.margin - d, limit.recovery))
+    return np.array(G).reshape(-1, model.nv), np.array(h)
+
+
+@pytest.mark.parametrize("name,seed", [("humanoid", 0), ("robot", 2)])
+def test_floor_and_self_collision_rows_match_point_by_point(name, seed):
+    solver = _setup(name, seed)
+    data = solver.configuration.data
+    solver._sync()
+    body = int(solver.model.site_bodyid[solver.model.site(solver.character.contacts["left"][0]).id])
+    solver.floor_limit.swing_bodies = {body: 0.012}
+    con = solver.floor_limit.compute_qp_inequalities(solver.configuration, 1.0)
+    G, h = _floor_rows_reference(solver.floor_limit, data)
+    np.testing.assert_allclose(con.G, G, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(con.h, h)
+    # bring two limbs close: the self-collision rows, pair by pair
+    limit = solver.self_limit
+    assert limit is not None
+    for q in np.linspace(0.0, 1.0, 6):
+        qpos = solver.configuration.q
+        qpos[7:] *= 1.0 - 0.1 * q
+        solver.reset(qpos)
+        solver._first = False
+        con = limit.compute_qp_inequalities(solver.configuration, 1.0)
+        G, h = _self_rows_reference(limit, data)
+        if con.inactive:
+            assert len(h) == 0
+        else:
+            np.testing.assert_allclose(con.G, G, rtol=0, atol=1e-12)
+            np.testing.assert_allclose(con.h, h, rtol=0, atol=1e-15)

@@ -328,9 +328,14 @@ class FloorLimit(mink.Limit):
         za = z[active]
         h[:n_act] = za - self.floor - self.margin
         if self.swing_bodies:
-            for row in np.flatnonzero(np.isin(b, list(self.swing_bodies))).tolist():
-                c = self.swing_bodies[int(b[row])]
-                h[row] = za[row] - min(self.floor + max(c, self.margin), za[row] + self.max_rise)
+            clear = np.full(self.model.nbody, np.nan)
+            for body_id, c in self.swing_bodies.items():
+                clear[body_id] = c
+            c = clear[b]
+            swing = ~np.isnan(c)
+            if swing.any():
+                zs = za[swing]
+                h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
         for row, (sid, c) in enumerate(self.clearance.items(), start=n_act):
             zs = data.site_xpos[sid, 2]

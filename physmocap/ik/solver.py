@@ -15,7 +15,12 @@ constraints (planted feet), then integrates :math:`q \\leftarrow q \\oplus
 \\Delta q` until the step is below ``tolerance`` or ``max_iterations`` is hit.
 The tasks :math:`k` are mink ``FrameTask``s, one per tracked site, with position
 cost per metre and orientation cost per radian; :math:`\\lambda` is the
-Levenberg-Marquardt damping.  QPs are solved with ``daqp``.
+Levenberg-Marquardt damping.  The QP is the one ``mink.build_ik`` would build,
+assembled by :mod:`physmocap.ik.qp` into preallocated arrays (the posture term
+as a diagonal; joint ranges, velocity and root steps and the trust region as
+simple bounds) and solved by ``daqp`` directly.  Forward kinematics run on
+every move; ``mj_comPos`` (needed by Jacobians only) once before each QP, so a
+line search's trial poses cost ``mj_kinematics`` alone.
 
 **Relaxation order** when a QP is infeasible or the backend fails (each level
 is tried in turn, and the frame is reported):
@@ -89,7 +94,8 @@ class SolverOptions:
             overshoot by about that much in one frame; 0 lets them touch).
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
-        solver: qpsolvers backend name.
+        solver: QP solver: ``daqp`` (called directly, warm-started) or any other
+            qpsolvers backend name (the same problem through qpsolvers).
     """
 
     max_iterations: int = 4

@@ -109,8 +109,11 @@ class QPBuilder:
         self.ub = np.zeros(nv)
         self._W = np.zeros((64, nv))  # stacked weighted Jacobians, grown on demand
         self._eps = np.zeros(64)
-        self._jac6 = np.zeros((6, nv))
-        self._tmp6 = np.zeros((6, nv))
+        self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
+        self._M = np.zeros((0, 6, 6))
+        self._E = np.zeros((0, 6))
+        self._C = np.zeros((0, 6))
+        self._g = np.zeros((0, 1))
         self._jac3 = np.zeros((3, nv))
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
@@ -126,25 +129,39 @@ class QPBuilder:
             self._W = np.zeros((size, self.nv))
             self._eps = np.zeros(size)
 
-    def _frame_rows(self, task: mink.FrameTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray) -> None:
-        r"""``FrameTask`` rows: :math:`W = -\mathrm{diag}(w) J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J`,
-        :math:`\epsilon = -\alpha\, w \odot \log(T_{bt})` (metres, radians), :math:`J` the
-        frame's ``(6, nv)`` Jacobian in world axes (``mj_jacSite``/``mj_jacBody``)."""
-        kind = task.frame_type
-        key = (task.frame_name, kind)
-        fid = self._ids.get(key)
-        if fid is None:
-            fid = self._ids[key] = _resolve(self.model, task.frame_name, kind)
-        xmat = getattr(data, _XMAT[kind])[fid]
-        frame = _native.xmat_xpos_to_wxyz_xyz(xmat, getattr(data, _XPOS[kind])[fid])
-        target = task.transform_target_to_world.wxyz_xyz
-        jac = self._jac6
-        _JAC[kind](self.model, data, jac[:3], jac[3:], fid)
-        M = _native.se3_jlog(_native.se3_inverse_multiply(target, frame)) @ _native.se3_rotation_adjoint_from_xmat(xmat)
-        cost = task.cost
-        M *= -cost[:, None]
-        np.matmul(M, jac, out=W)
-        np.multiply(cost, -task.gain * _native.se3_rminus(target, frame), out=eps)
+    def _frame_rows(self, tasks: Sequence[mink.FrameTask], data: mujoco.MjData, W: np.ndarray, eps: np.ndarray) -> None:
+        r"""Rows of consecutive ``FrameTask`` s, 6 each: :math:`W_k = -\mathrm{diag}(w_k)
+        J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J_k`, :math:`\epsilon_k = -\alpha_k\, w_k \odot
+        \log(T_{bt})` (metres, radians), :math:`J_k` the frame's ``(6, nv)`` Jacobian in world
+        axes (``mj_jacSite``/``mj_jacBody``); the products in one batched ``matmul``."""
+        n = len(tasks)
+        if n > len(self._jacF):
+            self._jacF = np.zeros((n, 6, self.nv))
+            self._M = np.zeros((n, 6, 6))
+            self._E = np.zeros((n, 6))
+            self._C = np.zeros((n, 6))
+            self._g = np.zeros((n, 1))
+        J, M, E, C, g = self._jacF, self._M, self._E, self._C, self._g
+        model, ids = self.model, self._ids
+        for i, task in enumerate(tasks):
+            kind = task.frame_type
+            key = (task.frame_name, kind)
+            fid = ids.get(key)
+            if fid is None:
+                fid = ids[key] = _resolve(model, task.frame_name, kind)
+            xmat = getattr(data, _XMAT[kind])[fid]
+            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, getattr(data, _XPOS[kind])[fid])
+            target = task.transform_target_to_world.wxyz_xyz
+            Ji = J[i]
+            _JAC[kind](model, data, Ji[:3], Ji[3:], fid)
+            np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)),
+                      _native.se3_rotation_adjoint_from_xmat(xmat), out=M[i])
+            E[i] = _native.se3_rminus(target, frame)
+            C[i] = task.cost
+            g[i] = task.gain
+        M[:n] *= -C[:n, :, None]
+        np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
+        np.multiply(C[:n], -g[:n] * E[:n], out=eps.reshape(n, 6))
 
     def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
         r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked
@@ -180,11 +197,26 @@ class QPBuilder:
         W, eps = self._W, self._eps
         r = 0
         mu = 0.0
-        for task in tasks:
+        i, ntask = 0, len(tasks)
+        while i < ntask:
+            task = tasks[i]
             kind = type(task)
             if kind is mink.FrameTask and _native is not None and task.transform_target_to_world is not None:
-                k = 6
-                self._frame_rows(task, data, W[r : r + 6], eps[r : r + 6])
+                j = i + 1  # the run of frame tasks from i, done at once
+                while (
+                    j < ntask
+                    and type(tasks[j]) is mink.FrameTask
+                    and tasks[j].transform_target_to_world is not None
+                ):
+                    j += 1
+                k = 6 * (j - i)
+                self._frame_rows(tasks[i:j], data, W[r : r + k], eps[r : r + k])
+                for t in tasks[i:j]:
+                    if t.lm_damping:
+                        mu += t.lm_damping * float(eps[r : r + 6] @ eps[r : r + 6])
+                    r += 6
+                i = j
+                continue
             elif kind is SitesPositionTask:
                 k = task.k
                 self._sites_rows(task, data, W[r : r + k], eps[r : r + k], r)
@@ -201,6 +233,7 @@ class QPBuilder:
             if task.lm_damping:
                 mu += task.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
             r += k
+            i += 1
         H, c = self.H, self.c
         Wm = W[:r]
         np.matmul(Wm.T, Wm, out=H)

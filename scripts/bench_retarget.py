@@ -9,19 +9,33 @@ For each shared BVH clip (../shared/data) and each bundled character:
 * **IK fps** and **per-frame latency** (median, p99): the per-frame loop alone
   (:func:`physmocap.ik.retarget.solve_targets` with the contacts);
 
-each the median of ``--runs`` runs.  Peak memory is the process's maximum
-resident set size at the end (ru_maxrss).  Also prints the streaming
-retargeter's latency on the CMU walk.
+each the median of ``--runs`` runs, in frames per second of CPU time
+(``time.process_time``: what one core does, whatever the other processes on the
+machine) and of wall time.  The runs are interleaved (every clip and character
+once, then again), so that a slow spell of the machine spreads over all of them.
+Peak memory is the process's maximum resident set size at the end (ru_maxrss).
+Also prints the streaming retargeter's latency on the CMU walk.
 
-Usage:  python scripts/bench_retarget.py [--runs 3] [--frames N] [--characters humanoid robot]
+``--compare REF_DIR`` runs the same benchmark on another checkout (``REF_DIR``,
+e.g. the main branch) in a subprocess with ``PYTHONPATH=REF_DIR``, run by run
+alternating with this one, and prints both and the ratio (this / reference) of
+the median retarget CPU fps.
+
+A character is a bundled name (``humanoid``, ``robot``) or an MJCF path (e.g.
+``../shared/robots/unitree_g1/g1_mocap_29dof.xml``).
+
+Usage:  python scripts/bench_retarget.py [--runs 5] [--frames N] [--characters humanoid robot]
+        [--clips cmu_12_01_walk.bvh] [--no-plant] [--compare ../main]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import statistics
+import subprocess
 import sys
 import time
 import warnings
@@ -34,57 +48,116 @@ DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "da
 CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"]
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--runs", type=int, default=3)
-    ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
-    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
-    ap.add_argument("--clips", nargs="+", default=CLIPS)
-    ap.add_argument("--no-plant", action="store_true", help="pure tracking: no contact detection or planting")
-    args = ap.parse_args()
-    warnings.simplefilter("ignore")
-
+def _measure(clip: str, character: str, frames: int | None, plant: bool) -> dict[str, float]:
+    """One run: retarget ``clip`` onto ``character``; CPU and wall frames/s, IK latencies."""
     from physmocap.ik.contacts import detect_contacts
     from physmocap.ik.retarget import map_motion, retarget, solve_targets
-    from physmocap.ik.stream import stream_motion
     from physmocap.ik.targets import build_targets
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
-    print(
-        f"{'clip':27s} {'character':9s} {'frames':>6s} {'retarget fps':>12s} {'IK fps':>7s}"
-        f" {'lat med ms':>10s} {'lat p99 ms':>10s}"
+    motion = load_motion(DATA / clip)
+    if frames:
+        motion = motion.slice_frames(0, min(frames, motion.num_frames))
+    ch = load_character(character)
+    c0, w0 = time.process_time(), time.perf_counter()
+    retarget(motion, ch, progress=False, plant=plant)
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    idx = map_motion(motion)
+    contacts = detect_contacts(motion, idx)
+    targets = build_targets(motion, idx, ch, floor=contacts.floor)
+    c0 = time.process_time()
+    traj = solve_targets(targets, ch, labels=contacts.labels if plant else None, progress=False)
+    ik_cpu = time.process_time() - c0
+    lat = np.asarray(traj.solver.latency[1:]) * 1000.0
+    n = motion.num_frames
+    return {
+        "frames": n,
+        "cpu_fps": n / cpu,
+        "wall_fps": n / wall,
+        "ik_cpu_fps": n / ik_cpu,
+        "lat_med": float(np.median(lat)),
+        "lat_p99": float(np.percentile(lat, 99)),
+    }
+
+
+def _worker() -> int:
+    """``--worker CLIP CHARACTER FRAMES PLANT``: one run, printed as JSON (for ``--compare``)."""
+    clip, character, frames, plant = sys.argv[2:6]
+    warnings.simplefilter("ignore")
+    print(json.dumps(_measure(clip, character, int(frames) or None, plant == "1")))
+    return 0
+
+
+def _subprocess_run(ref: Path, clip: str, character: str, frames: int | None, plant: bool) -> dict[str, float]:
+    """One run of this script's worker with ``PYTHONPATH=ref`` (the reference checkout)."""
+    env = dict(os.environ, PYTHONPATH=str(ref))
+    out = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve()), "--worker", clip, character, str(frames or 0), "1" if plant else "0"],
+        env=env, check=True, capture_output=True, text=True,
     )
-    for clip in args.clips:
-        path = DATA / clip
-        if not path.exists():
-            print(f"skip {clip}: {path} not found", file=sys.stderr)
-            continue
-        motion = load_motion(path)
-        if args.frames:
-            motion = motion.slice_frames(0, min(args.frames, motion.num_frames))
-        for name in args.characters:
-            character = load_character(name)
-            full, ik, lat = [], [], []
-            for _ in range(args.runs):
-                t0 = time.perf_counter()
-                retarget(motion, character, progress=False, plant=not args.no_plant)
-                full.append(motion.num_frames / (time.perf_counter() - t0))
-                idx = map_motion(motion)
-                contacts = detect_contacts(motion, idx)
-                targets = build_targets(motion, idx, character, floor=contacts.floor)
-                t0 = time.perf_counter()
-                labels = None if args.no_plant else contacts.labels
-                traj = solve_targets(targets, character, labels=labels, progress=False)
-                ik.append(motion.num_frames / (time.perf_counter() - t0))
-                lat.extend(traj.solver.latency[1:])
-            lat_ms = np.array(lat) * 1000.0
-            print(
-                f"{clip:27s} {name:9s} {motion.num_frames:6d} {statistics.median(full):12.0f}"
-                f" {statistics.median(ik):7.0f} {np.median(lat_ms):10.2f} {np.percentile(lat_ms, 99):10.2f}"
-            )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _char_label(name: str) -> str:
+    return Path(name).stem if name.endswith(".xml") else name
+
+
+def main() -> int:
+    if len(sys.argv) > 1 and sys.argv[1] == "--worker":
+        return _worker()
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
+    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
+    ap.add_argument("--clips", nargs="+", default=CLIPS)
+    ap.add_argument("--no-plant", action="store_true", help="pure tracking: no contact detection or planting")
+    ap.add_argument("--compare", type=Path, default=None, metavar="REF_DIR",
+                    help="also run the checkout REF_DIR (PYTHONPATH=REF_DIR), alternating runs, and print the ratio")
+    ap.add_argument("--no-stream", action="store_true", help="skip the streaming latency")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    plant = not args.no_plant
+
+    import physmocap
+
+    combos = [(c, n) for c in args.clips if (DATA / c).exists() for n in args.characters]
+    for c in args.clips:
+        if not (DATA / c).exists():
+            print(f"skip {c}: {DATA / c} not found", file=sys.stderr)
+    ours: dict = {k: [] for k in combos}
+    ref: dict = {k: [] for k in combos}
+    for _ in range(args.runs):  # interleaved: every combination once per round
+        for clip, name in combos:
+            if args.compare is not None:
+                ref[(clip, name)].append(_subprocess_run(args.compare, clip, name, args.frames, plant))
+            ours[(clip, name)].append(_measure(clip, name, args.frames, plant))
+
+    def med(runs: list[dict], key: str) -> float:
+        return statistics.median(r[key] for r in runs)
+
+    print(f"physmocap from {Path(physmocap.__file__).parent.parent}; {'planting' if plant else 'no planting'};"
+          f" medians of {args.runs} interleaved runs")
+    head = (f"{'clip':27s} {'character':17s} {'frames':>6s} {'CPU fps':>8s} {'wall fps':>8s} {'IK CPU fps':>10s}"
+            f" {'lat med ms':>10s} {'lat p99 ms':>10s}")
+    for label, table in [("this checkout", ours)] + ([(f"reference {args.compare}", ref)] if args.compare else []):
+        print(f"-- {label}")
+        print(head)
+        for (clip, name), runs in table.items():
+            print(f"{clip:27s} {_char_label(name):17s} {runs[0]['frames']:6d} {med(runs, 'cpu_fps'):8.0f}"
+                  f" {med(runs, 'wall_fps'):8.0f} {med(runs, 'ik_cpu_fps'):10.0f}"
+                  f" {med(runs, 'lat_med'):10.2f} {med(runs, 'lat_p99'):10.2f}")
+    if args.compare is not None:
+        print("-- ratio this / reference (median retarget fps)")
+        for key in combos:
+            print(f"{key[0]:27s} {_char_label(key[1]):17s} CPU x{med(ours[key], 'cpu_fps') / med(ref[key], 'cpu_fps'):.2f}"
+                  f"  wall x{med(ours[key], 'wall_fps') / med(ref[key], 'wall_fps'):.2f}")
     walk = DATA / "cmu_12_01_walk.bvh"
-    if walk.exists():
+    if walk.exists() and not args.no_stream:
+        from physmocap.ik.stream import stream_motion
+        from physmocap.models import load_character
+        from physmocap.sources import load_motion
+
         motion = load_motion(walk)
         for name in args.characters:
             lat = []
@@ -92,7 +165,7 @@ def main() -> int:
                 lat.extend(stream_motion(motion, load_character(name)).solver.latency[1:])
             lat_ms = np.array(lat) * 1000.0
             print(
-                f"streaming {walk.name} onto {name}: latency median {np.median(lat_ms):.2f} ms,"
+                f"streaming {walk.name} onto {_char_label(name)}: latency median {np.median(lat_ms):.2f} ms,"
                 f" p99 {np.percentile(lat_ms, 99):.2f} ms (first frame excluded)"
             )
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -24,7 +24,46 @@ import numpy as np
 from ..models.geometry import geom_candidates
 from ..models.geometry import is_visual_only
 
-__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "RootStepLimit", "SelfCollisionLimit"]
+__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "RootStepLimit", "SelfCollisionLimit"]
+
+
+class PointJacobians:
+    r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
+    of points fixed to bodies, written into preallocated buffers (the floor and
+    self-collision rows need a few dozen per iteration, on a few bodies)."""
+
+    def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
+        self.model = model
+        self._buf = np.zeros((capacity, 3, model.nv))
+        self._jp: np.ndarray | None = None
+        self._jr: np.ndarray | None = None
+
+    def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
+        a view of the buffer, valid until the next call."""
+        k = len(bodies)
+        if k > len(self._buf):
+            self._buf = np.zeros((max(k, 2 * len(self._buf)), 3, self.model.nv))
+        buf, model = self._buf, self.model
+        for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
+            mujoco.mj_jac(model, data, buf[i], None, p, b)
+        return buf[:k]
+
+    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
+        r"""``(k, nv)`` vertical rows :math:`J_z(p)` of points ``(k, 3)`` on ``bodies`` ``(k,)``,
+        one ``mj_jacBody`` per distinct body: with :math:`J_p, J_r` the body origin's
+        translational and rotational Jacobians and :math:`d = p - x_b`,
+        :math:`J_z(p) = J_{p,z} + J_{r,x} d_y - J_{r,y} d_x` (the z row of
+        :math:`J_p + J_r \times d`, what ``mj_jac`` gives up to round-off)."""
+        uniq, inv = np.unique(bodies, return_inverse=True)
+        if self._jp is None:
+            self._jp = np.zeros((self.model.nbody, 3, self.model.nv))
+            self._jr = np.zeros((self.model.nbody, 3, self.model.nv))
+        jp, jr, model = self._jp, self._jr, self.model
+        for j, b in enumerate(uniq.tolist()):
+            mujoco.mj_jacBody(model, data, jp[j], jr[j], b)
+        d = points - data.xpos[bodies]
+        return jp[inv, 2] + jr[inv, 0] * d[:, 1:2] - jr[inv, 1] * d[:, 0:1]
 
 
 class FrameStepLimit(mink.Limit):
@@ -88,15 +127,27 @@ class FrameStepLimit(mink.Limit):
         prev = self.q_prev[self.qposadr]
         return prev - step + self.shrink, prev + step - self.shrink
 
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
-        del dt  # bounds are in motion time, not the QP's step
+    def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        r"""The limit as simple bounds on the step: ``(dofs, lo, hi)`` with
+        :math:`lo \le \Delta q_{dofs} \le hi` (rad or m), or None when inactive.
+
+        :math:`hi = \max(q^{prev} + \dot q^{max} T - q, 0)`,
+        :math:`lo = -\max(q - (q^{prev} - \dot q^{max} T), 0)`: if an earlier relaxed
+        step left :math:`q` outside the band, only moving back is allowed.
+        """
         if self.q_prev is None or len(self.dofadr) == 0:
-            return mink.Constraint()
+            return None
         lo, hi = self.step_bounds()
         q = configuration.q[self.qposadr]
-        # If an earlier relaxed step left q outside the band, allow moving back only.
-        h = np.concatenate([np.maximum(hi - q, 0.0), np.maximum(q - lo, 0.0)])
-        return mink.Constraint(G=self._G, h=h)
+        return self.dofadr, -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # bounds are in motion time, not the QP's step
+        spec = self.box(configuration)
+        if spec is None:
+            return mink.Constraint()
+        _, lo, hi = spec
+        return mink.Constraint(G=self._G, h=np.concatenate([hi, -lo]))
 
 
 class GeomCandidates:
@@ -145,6 +196,30 @@ class GeomCandidates:
         pts[rows] = data.geom_xpos[gid] + np.einsum("kij,kj->ki", R, self.local[rows, :3])
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
+
+    def heights(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
+        """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
+        metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
+        if len(self.gid) == 0:
+            return np.zeros(0)
+        z = np.full(len(self.gid), np.inf)
+        if below is not None:
+            near = data.geom_xpos[self.geoms, 2] - self.radius < below
+            if not near.all():
+                rows = np.flatnonzero(near[self.owner])
+                gid = self.gid[rows]
+                z[rows] = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
+                z[rows] -= self.local[rows, 3]
+                return z
+        z[:] = data.geom_xpos[self.gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[self.gid, 6:9], self.local[:, :3])
+        z -= self.local[:, 3]
+        return z
+
+    def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
+        """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``."""
+        gid = self.gid[rows]
+        R = data.geom_xmat[gid].reshape(-1, 3, 3)
+        return data.geom_xpos[gid] + np.einsum("kij,kj->ki", R, self.local[rows, :3])
 
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
@@ -209,9 +284,11 @@ class FloorLimit(mink.Limit):
         self.activation = float(activation)
         self.enabled = True
         self._jacp = np.zeros((3, model.nv))
+        self._pj = PointJacobians(model)
         self._cand = GeomCandidates(model, self.geoms)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
         self._cache: tuple[bytes, tuple] | None = None
+        self._zcache: tuple[bytes, np.ndarray] | None = None
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
         #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
@@ -235,28 +312,50 @@ class FloorLimit(mink.Limit):
         self._cache = (key, out)  # the same configuration is queried several times per iteration
         return out
 
+    def z(self, data: mujoco.MjData) -> np.ndarray:
+        """``z (n,)`` of :meth:`heights` alone (metres; ``inf`` beyond the activation
+        band for geoms), cached per configuration: what the residuals need."""
+        key = data.qpos.tobytes()
+        if self._zcache is not None and self._zcache[0] == key:
+            return self._zcache[1]
+        z_g = self._cand.heights(data, below=self.floor + self.activation)
+        z = np.concatenate([z_g, data.site_xpos[self.sites, 2]]) if len(self.sites) else z_g
+        self._zcache = (key, z)
+        return z
+
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt
         if not self.enabled:
             return mink.Constraint()
         data = configuration.data
-        z, anchor, body = self.heights(data)
+        z = self.z(data)
         active = np.flatnonzero(z < self.floor + self.activation)
         if active.size == 0:
             return mink.Constraint()
-        rows = len(active) + len(self.clearance)
+        n_act = len(active)
+        rows = n_act + len(self.clearance)
         G = np.empty((rows, self.model.nv))
         h = np.empty(rows)
-        for row, k in enumerate(active):
-            mujoco.mj_jac(self.model, data, self._jacp, None, anchor[k], int(body[k]))
-            G[row] = -self._jacp[2]
-            c = self.swing_bodies.get(int(body[k]))
-            if c is None:
-                h[row] = z[k] - self.floor - self.margin
-            else:
-                h[row] = z[k] - min(self.floor + max(c, self.margin), z[k] + self.max_rise)
+        b = self._bodies[active]
+        ng = len(self._cand.gid)
+        split = int(np.searchsorted(active, ng))
+        anchor = np.empty((n_act, 3))
+        anchor[:split] = self._cand.points_at(data, active[:split])
+        anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
+        np.negative(self._pj.vertical(data, b, anchor), out=G[:n_act])
+        za = z[active]
+        h[:n_act] = za - self.floor - self.margin
+        if self.swing_bodies:
+            clear = np.full(self.model.nbody, np.nan)
+            for body_id, c in self.swing_bodies.items():
+                clear[body_id] = c
+            c = clear[b]
+            swing = ~np.isnan(c)
+            if swing.any():
+                zs = za[swing]
+                h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, (sid, c) in enumerate(self.clearance.items(), start=len(active)):
+        for row, (sid, c) in enumerate(self.clearance.items(), start=n_act):
             zs = data.site_xpos[sid, 2]
             mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
             G[row] = -self._jacp[2]
@@ -287,6 +386,7 @@ class RootStepLimit(mink.Limit):
         self.step_lin = float(v_max) * float(frame_interval)
         self.step_ang = float(w_max) * float(frame_interval)
         self.q_prev: np.ndarray | None = None
+        self._dofs = np.arange(self.dadr, self.dadr + 6) if free else np.zeros(0, dtype=int)
         if free:
             G = np.zeros((12, model.nv))
             for k in range(6):
@@ -297,10 +397,8 @@ class RootStepLimit(mink.Limit):
     def set_previous(self, q_prev: np.ndarray | None) -> None:
         self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
 
-    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
-        del dt
-        if self.qadr < 0:
-            return mink.Constraint()
+    def _h(self, configuration: mink.Configuration) -> np.ndarray:
+        """Right-hand sides of the rows ``+e_k`` (k = 0..5) then ``-e_k``; inf when absent."""
         p = configuration.q[self.qadr : self.qadr + 3]
         if self.q_prev is None:
             hi_lin = np.full(3, np.inf)
@@ -310,7 +408,21 @@ class RootStepLimit(mink.Limit):
             hi_lin = np.maximum(prev + self.step_lin - p, 0.0)
             lo_lin = np.maximum(p - (prev - self.step_lin), 0.0)
         ang = np.full(3, self.step_ang)
-        h = np.concatenate([hi_lin, ang, lo_lin, ang])
+        return np.concatenate([hi_lin, ang, lo_lin, ang])
+
+    def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        r"""The limit as simple bounds ``(dofs, lo, hi)`` on the root's six step
+        coordinates (:math:`\pm\infty` where absent), or None without a free root."""
+        if self.qadr < 0:
+            return None
+        h = self._h(configuration)
+        return self._dofs, -h[6:], h[:6]
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        if self.qadr < 0:
+            return mink.Constraint()
+        h = self._h(configuration)
         keep = np.isfinite(h)
         return mink.Constraint(G=self._G[keep], h=h[keep])
 
@@ -351,10 +463,12 @@ class SelfCollisionLimit(mink.Limit):
         self.margin = float(margin)
         self.activation = float(activation)
         self._rsum = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]] if len(self.pairs) else np.zeros(0)
-        self._fromto = np.empty(6)
-        self._cache: tuple[bytes, list] | None = None
-        self._ja = np.empty((3, model.nv))
-        self._jb = np.empty((3, model.nv))
+        self._cache: tuple[bytes, tuple] | None = None
+        self._g1 = self.pairs[:, 0].tolist()
+        self._g2 = self.pairs[:, 1].tolist()
+        self._b1 = model.geom_bodyid[self.pairs[:, 0]]
+        self._b2 = model.geom_bodyid[self.pairs[:, 1]]
+        self._pj = PointJacobians(model)
 
     def near_pairs(self, data: mujoco.MjData) -> np.ndarray:
         """Indices of the pairs whose bounding spheres are within ``activation``."""
@@ -364,48 +478,50 @@ class SelfCollisionLimit(mink.Limit):
         bound = self._rsum + self.activation
         return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= bound * bound)
 
-    def _close(self, data: mujoco.MjData) -> list[tuple[int, float, np.ndarray]]:
-        """``(pair index, signed distance, fromto (6,))`` of the pairs closer than
-        ``activation``, cached per configuration (the solver asks several times)."""
+    def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(pair indices (k,), signed distances (k,), fromto (k, 6))`` of the pairs closer
+        than ``activation``, cached per configuration (the solver asks several times)."""
         key = data.qpos.tobytes()
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
-        out = []
-        for k in self.near_pairs(data):
-            g1, g2 = self.pairs[k]
-            d = mujoco.mj_geomDistance(self.model, data, int(g1), int(g2), self.activation, self._fromto)
-            if d < self.activation:
-                out.append((int(k), float(d), self._fromto.copy()))
+        near = self.near_pairs(data)
+        d = np.empty(len(near))
+        fromto = np.empty((len(near), 6))
+        model, act, g1s, g2s = self.model, self.activation, self._g1, self._g2
+        for i, k in enumerate(near.tolist()):
+            d[i] = mujoco.mj_geomDistance(model, data, g1s[k], g2s[k], act, fromto[i])
+        keep = d < act
+        out = (near[keep], d[keep], fromto[keep])
         self._cache = (key, out)
         return out
 
     def distances(self, data: mujoco.MjData) -> np.ndarray:
         """Signed distances of every pair (capped at ``activation``), metres."""
         out = np.full(len(self.pairs), self.activation)
-        for k, d, _ in self._close(data):
-            out[k] = d
+        k, d, _ = self._close(data)
+        out[k] = d
         return out
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt
-        model, data = self.model, configuration.data
-        rows, h = [], []
-        for k, d, fromto in self._close(data):
-            g1, g2 = (int(x) for x in self.pairs[k])
-            pa, pb = fromto[:3], fromto[3:]
-            n = pb - pa
-            norm = np.linalg.norm(n)
-            if norm < 1e-9:
-                continue
-            n /= norm
-            if d < 0:  # overlapping: fromto runs from b's deepest point into a's surface
-                n = -n
-            mujoco.mj_jac(model, data, self._ja, None, pa, int(model.geom_bodyid[g1]))
-            mujoco.mj_jac(model, data, self._jb, None, pb, int(model.geom_bodyid[g2]))
-            rows.append(-(n @ (self._jb - self._ja)))
-            # the distance may shrink to the margin; a pair inside it must move apart, by at
-            # most ``recovery`` per iteration (so that the QP stays feasible)
-            h.append(d - self.margin if d >= self.margin else -min(self.margin - d, self.recovery))
-        if not rows:
+        data = configuration.data
+        k, d, fromto = self._close(data)
+        if not len(k):
             return mink.Constraint()
-        return mink.Constraint(G=np.array(rows), h=np.array(h))
+        pa, pb = fromto[:, :3], fromto[:, 3:]
+        n = pb - pa
+        norm = np.linalg.norm(n, axis=1)
+        ok = norm >= 1e-9
+        if not ok.all():
+            k, d, pa, pb, n, norm = k[ok], d[ok], pa[ok], pb[ok], n[ok], norm[ok]
+            if not len(k):
+                return mink.Constraint()
+        n /= norm[:, None]
+        n[d < 0] *= -1.0  # overlapping: fromto runs from b's deepest point into a's surface
+        m = len(k)
+        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.vstack([pa, pb]))
+        G = -np.einsum("ki,kij->kj", n, J[m:] - J[:m])
+        # the distance may shrink to the margin; a pair inside it must move apart, by at
+        # most ``recovery`` per iteration (so that the QP stays feasible)
+        h = np.where(d >= self.margin, d - self.margin, -np.minimum(self.margin - d, self.recovery))
+        return mink.Constraint(G=G, h=h)

@@ -15,7 +15,12 @@ constraints (planted feet), then integrates :math:`q \\leftarrow q \\oplus
 \\Delta q` until the step is below ``tolerance`` or ``max_iterations`` is hit.
 The tasks :math:`k` are mink ``FrameTask``s, one per tracked site, with position
 cost per metre and orientation cost per radian; :math:`\\lambda` is the
-Levenberg-Marquardt damping.  QPs are solved with ``daqp``.
+Levenberg-Marquardt damping.  The QP is the one ``mink.build_ik`` would build,
+assembled by :mod:`physmocap.ik.qp` into preallocated arrays (the posture term
+as a diagonal; joint ranges, velocity and root steps and the trust region as
+simple bounds) and solved by ``daqp`` directly.  Forward kinematics run on
+every move; ``mj_comPos`` (needed by Jacobians only) once before each QP, so a
+line search's trial poses cost ``mj_kinematics`` alone.
 
 **Relaxation order** when a QP is infeasible or the backend fails (each level
 is tried in turn, and the frame is reported):
@@ -44,7 +49,8 @@ from ..errors import OptionError
 from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit, RootStepLimit, SelfCollisionLimit
-from .tasks import SitesPositionTask
+from .qp import QP, QPBuilder, WarmSolver
+from .tasks import SitePositionTask, SitesPositionTask
 from .targets import weight_of
 
 __all__ = ["SolverOptions", "ContactHolds", "FrameSolver", "RELAXATION_LEVELS"]
@@ -88,7 +94,8 @@ class SolverOptions:
             overshoot by about that much in one frame; 0 lets them touch).
         limit_gain: mink ConfigurationLimit gain in (0, 1].
         weights: Canonical joint -> (position cost, orientation cost) overrides.
-        solver: qpsolvers backend name.
+        solver: QP solver: ``daqp`` (called directly, warm-started) or any other
+            qpsolvers backend name (the same problem through qpsolvers).
     """
 
     max_iterations: int = 4
@@ -224,9 +231,13 @@ class FrameSolver:
         self._lim_qadr = model.jnt_qposadr[lim]
         self._lim_range = model.jnt_range[lim]
         self.q_prev: np.ndarray | None = None
+        self._builder = QPBuilder(model)
+        self._daqp = WarmSolver(model.nv)
+        self._com_stale = False  # kinematics current, mj_comPos (Jacobians) not yet
         self._residual: float | None = None
         self._res_cache: tuple[bytes, tuple[float, float]] | None = None
         self._constraints: list[mink.Task] = []
+        self._hold_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._extra_tasks: list[mink.Task] = []
 
     # -- targets ----------------------------------------------------------------
@@ -253,6 +264,13 @@ class FrameSolver:
     def _set_holds(self, holds: "ContactHolds") -> None:
         self._extra_tasks = list(holds.tasks)
         self._constraints = list(holds.constraints)
+        # the planted contacts' residual rows at once: site, world axis, target (metres)
+        self._hold_rows = None
+        if self._constraints and all(type(t) is SitePositionTask for t in self._constraints):
+            sites = np.concatenate([np.full(t.k, t.site_id) for t in self._constraints])
+            axes = np.concatenate([np.array(t.axes, dtype=int) for t in self._constraints])
+            target = np.concatenate([t.target[list(t.axes)] for t in self._constraints])
+            self._hold_rows = (sites, axes, target)
         self.floor_limit.clearance = dict(holds.clearance_sites)
         self.floor_limit.swing_bodies = dict(holds.clearance_bodies)
 
@@ -265,43 +283,89 @@ class FrameSolver:
         """Start over from ``q`` (default: the rest pose) with no previous frame."""
         q0 = self.character.rest_qpos if q is None else q
         self.configuration.update(np.array(q0, dtype=float))
+        self._com_stale = False
+        self._daqp.reset()
         self.q_prev = None
 
     # -- solving ----------------------------------------------------------------
-    def _limits(self, level: int) -> list[mink.Limit]:
-        limits: list[mink.Limit] = [self.config_limit, self.root_limit]
-        if level <= 2 and self.options.velocity_limits and self.q_prev is not None:
-            limits.append(self.step_limit)
-        if level <= 3 and self.options.floor:
-            limits.append(self.floor_limit)
+    def _limits(self, level: int) -> tuple[list, list[mink.Limit]]:
+        """``(boxes, general)`` limits at relaxation ``level``: those folded into the QP's
+        simple bounds (root step, frame-to-frame step; the joint ranges always are) and
+        those that are general rows (floor, self-collision)."""
+        opt = self.options
+        boxes: list = [self.root_limit]
+        if level <= 2 and opt.velocity_limits and self.q_prev is not None:
+            boxes.append(self.step_limit)
+        general: list[mink.Limit] = []
+        if level <= 3 and opt.floor:
+            general.append(self.floor_limit)
         if level <= 3 and self.self_limit is not None and not self._first:
-            limits.append(self.self_limit)
-        return limits
+            general.append(self.self_limit)
+        return boxes, general
+
+    # -- kinematics: mj_kinematics on every move, mj_comPos only before a QP ------------
+    def _set_q(self, q: np.ndarray) -> None:
+        """Move to ``q``: forward kinematics only (positions for the residuals)."""
+        self.configuration.data.qpos[:] = q
+        mujoco.mj_kinematics(self.model, self.configuration.data)
+        self._com_stale = True
+
+    def _integrate(self, v: np.ndarray, alpha: float) -> None:
+        r""":math:`q \leftarrow q \oplus \alpha v`, forward kinematics only."""
+        data = self.configuration.data
+        mujoco.mj_integratePos(self.model, data.qpos, v, alpha)
+        mujoco.mj_kinematics(self.model, data)
+        self._com_stale = True
+
+    def _sync(self) -> None:
+        """Complete the kinematics for Jacobians (``mj_comPos``) if a move left them stale."""
+        if self._com_stale:
+            mujoco.mj_comPos(self.model, self.configuration.data)
+            if self.model.neq > 0:
+                mujoco.mj_makeConstraint(self.model, self.configuration.data)
+            self._com_stale = False
+
+    def _solve(self, problem: QP) -> np.ndarray:
+        """Solve with daqp directly, or with another qpsolvers backend (``options.solver``)."""
+        if self.options.solver == "daqp":
+            return self._daqp.solve(problem)
+        G, A = (problem.G, problem.h), (problem.A, problem.b)
+        result = qpsolvers.solve_problem(
+            qpsolvers.Problem(
+                problem.H, problem.c,
+                G[0] if len(G[1]) else None, G[1] if len(G[1]) else None,
+                A[0] if len(A[1]) else None, A[1] if len(A[1]) else None,
+                problem.lb, problem.ub,
+            ),
+            solver=self.options.solver,
+        )
+        v = result.x
+        if not result.found or v is None or not np.all(np.isfinite(v)):
+            raise mink.NoSolutionFound(self.options.solver)
+        return v
 
     def _step(self, level: int) -> np.ndarray:
+        """One QP step at relaxation ``level`` (:data:`RELAXATION_LEVELS`), see :mod:`~physmocap.ik.qp`."""
         opt = self.options
-        tasks = [*self.tasks, self.posture, *self._extra_tasks]
+        self._sync()
+        tasks = [*self.tasks, *self._extra_tasks]
         constraints = self._constraints if level == 0 else []
         if level >= 1:  # equalities softened into high-cost tasks
             tasks += self._constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
-        # mink builds the QP; the trust region goes in as simple bounds, which daqp
-        # handles natively (cheaper than 2 nv inequality rows)
-        problem = mink.build_ik(
+        boxes, general = self._limits(level)
+        problem = self._builder.build(
             self.configuration,
             tasks,
-            1.0,
-            damping=damping,
-            limits=self._limits(level),
-            constraints=constraints or None,
+            damping,
+            posture=self.posture,
+            trust=self._trust,
+            config_limit=self.config_limit,
+            boxes=boxes,
+            limits=general,
+            constraints=constraints,
         )
-        problem.lb = -self._trust
-        problem.ub = self._trust
-        result = qpsolvers.solve_problem(problem, solver=opt.solver)
-        v = result.x
-        if not result.found or v is None or not np.all(np.isfinite(v)):
-            raise mink.NoSolutionFound(opt.solver)
-        return v
+        return self._solve(problem)
 
     def _settle_from_rest(self) -> None:
         """First stage of frame 0: converge with a strong pull towards the rest pose.
@@ -319,7 +383,7 @@ class FrameSolver:
                     v = self._step(1)
                 except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                     break
-                self.configuration.integrate_inplace(v, 1.0)
+                self._integrate(v, 1.0)
                 if np.max(np.abs(v)) < opt.tolerance:
                     break
         finally:
@@ -333,21 +397,23 @@ class FrameSolver:
         (same limits as ``level``), a few times, which converges quickly.
         """
         for _ in range(5):
+            self._sync()
+            boxes, general = self._limits(level)
             try:
-                v = mink.solve_ik(
-                    self.configuration,
-                    [],
-                    1.0,
-                    self.options.solver,
-                    damping=1e-6,
-                    limits=self._limits(level),
-                    constraints=(self._constraints if level == 0 and self._constraints else None),
+                v = self._solve(
+                    self._builder.build(
+                        self.configuration,
+                        [],
+                        1e-6,
+                        config_limit=self.config_limit,
+                        boxes=boxes,
+                        limits=general,
+                        constraints=self._constraints if level == 0 else (),
+                    )
                 )
             except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                 return
-            if not np.all(np.isfinite(v)):
-                return
-            self.configuration.integrate_inplace(v, 1.0)
+            self._integrate(v, 1.0)
             if self._floor_ok():
                 return
 
@@ -357,16 +423,25 @@ class FrameSolver:
         key = self.configuration.data.qpos.tobytes()
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
-        rc = 0.0
-        for task in self._constraints:
-            rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        rc = self._contact_residual()
         rf = 0.0
         if self.options.floor:
-            z, _, _ = self.floor_limit.heights(self.configuration.data)
+            z = self.floor_limit.z(self.configuration.data)
             if z.size:
                 rf = max(0.0, float(self.options.floor_height - z.min()))
         self._res_cache = (key, (rc, rf))
         return rc, rf
+
+    def _contact_residual(self) -> float:
+        """How far (metres, largest coordinate) the planted contacts are off their anchors."""
+        rc = 0.0
+        if self._hold_rows is not None:
+            sites, axes, target = self._hold_rows
+            rc = max(rc, float(np.max(np.abs(self.configuration.data.site_xpos[sites, axes] - target))))
+        else:
+            for task in self._constraints:
+                rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
+        return rc
 
     def _hard_residual(self) -> float:
         """Largest violation of the hard constraints that are linearised: planted
@@ -382,23 +457,28 @@ class FrameSolver:
         on the hard-constraint residual removes that oscillation.
         """
         if not self._constraints and not self.options.floor:
-            self.configuration.integrate_inplace(v, 1.0)
+            self._integrate(v, 1.0)
             return
         q0 = self.configuration.q.copy()
         r0 = self._residual if self._residual is not None else self._hard_residual()
+        bound = max(r0, tol)
+        qpos = self.configuration.data.qpos
         alpha = 1.0
         for _ in range(4):
-            self.configuration.integrate_inplace(v, alpha)
-            r1 = self._hard_residual()
-            if r1 <= max(r0, tol):
-                self._residual = r1
-                return
+            self._integrate(v, alpha)
+            # the contacts' residual first: when it alone is too large the step is refused
+            # without the floor's (the same decision as on their maximum)
+            if self._contact_residual() <= bound:
+                r1 = self._hard_residual()
+                if r1 <= bound:
+                    self._residual = r1
+                    return
             alpha *= 0.5
-            self.configuration.update(q0)
-        self.configuration.integrate_inplace(v, alpha)
+            qpos[:] = q0  # the next trial integrates from q0 (its kinematics are not needed)
+        self._integrate(v, alpha)
         r1 = self._hard_residual()
         if r1 > max(r0, tol) + 1e-3:  # still clearly worse: reject the step
-            self.configuration.update(q0)
+            self._set_q(q0)
             r1 = r0
         self._residual = r1
 
@@ -501,5 +581,6 @@ class FrameSolver:
             qa = self.step_limit.qposadr
             q[qa] = np.clip(q[qa], lo - self.step_limit.shrink, hi + self.step_limit.shrink)
         self.configuration.update(q)
+        self._com_stale = False
         self.q_prev = q.copy()
         return q, it, worst

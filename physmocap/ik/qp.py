@@ -1,0 +1,432 @@
+r"""The per-frame IK's quadratic program, assembled into preallocated arrays and solved by ``daqp``.
+
+One IK iteration solves, for the tangent-space step :math:`\Delta q \in \mathbb{R}^{n_v}`
+(radians for hinges, metres and radians for the free root),
+
+.. math::
+
+    \min_{\Delta q}\; \tfrac12 \Delta q^T H \Delta q + c^T \Delta q
+    \quad\text{s.t.}\quad l \le \Delta q \le u,\quad G \Delta q \le h,\quad A \Delta q = b
+
+with the same :math:`H, c, G, h, A, b` as ``mink.build_ik`` (the test
+``tests/test_qp.py`` checks it), built without its per-call allocations:
+
+* **Objective.**  Every task :math:`k` with error :math:`e_k` (its units),
+  Jacobian :math:`J_k`, cost vector :math:`w_k` (per unit of error), gain
+  :math:`\alpha_k` and LM damping :math:`\lambda_k` contributes the weighted rows
+  :math:`W_k = \mathrm{diag}(w_k) J_k` and :math:`\epsilon_k = -\alpha_k\,
+  w_k \odot e_k`, written in place into one stacked matrix :math:`W`; then
+
+  .. math::
+
+      H = W^T W + \Big(\mu + \sum_k \lambda_k \|\epsilon_k\|^2\Big) I + D_p,
+      \qquad c = -W^T \epsilon + d_p
+
+  where :math:`\mu` is the global Levenberg-Marquardt damping.  The posture
+  task (:math:`J = I` with the free joint's columns zeroed, error
+  :math:`q \ominus q_{rest}`, cost :math:`w_p`) is the diagonal
+  :math:`D_p = \mathrm{diag}(w_p^2)` and :math:`d_p = \alpha_p w_p^2 \odot e_p`
+  instead of :math:`n_v` dense rows.  Jacobians come from ``mj_jacSite`` /
+  ``mj_jacBody`` written into preallocated buffers; ``FrameTask`` SE(3) errors
+  and their Jacobians :math:`-J_{\log}(T_{tb})\,\mathrm{Ad}_{T_{fw}} J` use
+  mink's compiled Lie-group operations (the same ones ``FrameTask`` uses).
+* **Simple bounds.**  The limits whose rows are :math:`\pm` identity rows are
+  intersected into :math:`l \le \Delta q \le u`: the trust region
+  :math:`|\Delta q_i| \le \rho`, mink ``ConfigurationLimit`` (hinge/slide:
+  :math:`g (q_{min} \ominus q) \le \Delta q \le g (q_{max} \ominus q)`),
+  :class:`~physmocap.ik.limits.FrameStepLimit` and
+  :class:`~physmocap.ik.limits.RootStepLimit` (their :meth:`box`).  daqp takes
+  simple bounds natively, which is much cheaper than :math:`2 n_v` rows.
+* **General inequalities** :math:`G, h`: every other limit (floor,
+  self-collision, a ball joint's angle) through its ``compute_qp_inequalities``.
+* **Equalities** :math:`A = J_c`, :math:`b = -\alpha_c e_c` for the planted
+  contacts (daqp constraint sense 5).
+
+:func:`solve` calls ``daqp.solve`` directly (no qpsolvers conversion).
+"""
+
+from __future__ import annotations
+
+from ctypes import c_int
+from dataclasses import dataclass
+from typing import Sequence
+
+import daqp
+import mink
+import mujoco
+import numpy as np
+
+from .limits import FrameStepLimit, RootStepLimit
+from .tasks import SitePositionTask, SitesPositionTask
+
+try:  # mink's compiled SE(3) operations (what FrameTask uses when present)
+    from mink.lie import _lie_ops_c as _native
+except ImportError:  # pragma: no cover - pure-Python mink
+    _native = None
+
+__all__ = ["QP", "QPBuilder", "WarmSolver", "solve", "INFINITY"]
+
+#: What daqp reads as an absent bound.
+INFINITY = 1e30
+
+_JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
+_XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
+_XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
+
+
+@dataclass
+class QP:
+    r"""One QP: :math:`\min \frac12 x^T H x + c^T x` s.t. ``lb <= x <= ub``, ``G x <= h``, ``A x = b``.
+
+    ``H`` ``(nv, nv)``, ``c`` ``(nv,)``, ``lb``/``ub`` ``(nv,)`` (``±INFINITY`` when
+    unbounded), ``G`` ``(m, nv)``, ``h`` ``(m,)``, ``A`` ``(p, nv)``, ``b`` ``(p,)``.
+    The arrays may be views of the builder's buffers: valid until the next build.
+    """
+
+    H: np.ndarray
+    c: np.ndarray
+    lb: np.ndarray
+    ub: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+    A: np.ndarray
+    b: np.ndarray
+
+
+class QPBuilder:
+    """Assembles the IK QP of a model into preallocated arrays (see the module docstring).
+
+    Args:
+        model: The character's MuJoCo model.
+    """
+
+    def __init__(self, model: mujoco.MjModel) -> None:
+        self.model = model
+        nv = self.nv = int(model.nv)
+        self.H = np.zeros((nv, nv))
+        self.c = np.zeros(nv)
+        self.lb = np.zeros(nv)
+        self.ub = np.zeros(nv)
+        self._W = np.zeros((64, nv))  # stacked weighted Jacobians, grown on demand
+        self._eps = np.zeros(64)
+        self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
+        self._M = np.zeros((0, 6, 6))
+        self._E = np.zeros((0, 6))
+        self._C = np.zeros((0, 6))
+        self._g = np.zeros((0, 1))
+        self._jac3 = np.zeros((3, nv))
+        self._dq = np.zeros(nv)
+        self._dq2 = np.zeros(nv)
+        self._diag = np.arange(nv) * (nv + 1)
+        self._ids: dict[tuple, int] = {}
+        self._views: dict[tuple, tuple] = {}
+        self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
+
+    # -- objective ----------------------------------------------------------------
+    def _rows(self, m: int) -> None:
+        if m > len(self._eps):
+            size = max(m, 2 * len(self._eps))
+            self._W = np.zeros((size, self.nv))
+            self._eps = np.zeros(size)
+
+    def _frame_rows(self, tasks: Sequence[mink.FrameTask], data: mujoco.MjData, W: np.ndarray, eps: np.ndarray) -> None:
+        r"""Rows of consecutive ``FrameTask`` s, 6 each: :math:`W_k = -\mathrm{diag}(w_k)
+        J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J_k`, :math:`\epsilon_k = -\alpha_k\, w_k \odot
+        \log(T_{bt})` (metres, radians), :math:`J_k` the frame's ``(6, nv)`` Jacobian in world
+        axes (``mj_jacSite``/``mj_jacBody``); the products in one batched ``matmul``."""
+        n = len(tasks)
+        if n > len(self._jacF):
+            self._jacF = np.zeros((n, 6, self.nv))
+            self._M = np.zeros((n, 6, 6))
+            self._E = np.zeros((n, 6))
+            self._C = np.zeros((n, 6))
+            self._g = np.zeros((n, 1))
+        J, M, E, C, g = self._jacF, self._M, self._E, self._C, self._g
+        model, ids = self.model, self._ids
+        for i, task in enumerate(tasks):
+            kind = task.frame_type
+            key = (task.frame_name, kind)
+            fid = ids.get(key)
+            if fid is None:
+                fid = ids[key] = _resolve(model, task.frame_name, kind)
+            xmat = getattr(data, _XMAT[kind])[fid]
+            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, getattr(data, _XPOS[kind])[fid])
+            target = task.transform_target_to_world.wxyz_xyz
+            Ji = J[i]
+            _JAC[kind](model, data, Ji[:3], Ji[3:], fid)
+            np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)),
+                      _native.se3_rotation_adjoint_from_xmat(xmat), out=M[i])
+            E[i] = _native.se3_rminus(target, frame)
+            C[i] = task.cost
+            g[i] = task.gain
+        M[:n] *= -C[:n, :, None]
+        np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
+        np.multiply(C[:n], -g[:n] * E[:n], out=eps.reshape(n, 6))
+
+    def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
+        r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked
+        ``mj_jacSite`` rows, :math:`\epsilon = -\alpha\, w \odot (x - x^*)` (metres)."""
+        views = self._views.get((id(task), r))
+        if views is None or views[0] is not task.site_ids or views[1] is not self._W:
+            # the same rows of the same buffer from one call to the next: their views are kept
+            views = self._views[(id(task), r)] = (
+                task.site_ids, self._W, [(W[3 * i : 3 * i + 3], int(sid)) for i, sid in enumerate(task.site_ids)],
+            )
+        model = self.model
+        for view, sid in views[2]:
+            mujoco.mj_jacSite(model, data, view, None, sid)
+        W *= task.cost[:, None]
+        np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
+
+    def objective(
+        self,
+        configuration: mink.Configuration,
+        tasks: Sequence[mink.Task],
+        damping: float,
+        posture: mink.PostureTask | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""``(H, c)`` of ``tasks`` plus the diagonal posture term (see the module docstring).
+
+        ``H`` and ``c`` are the builder's buffers, overwritten by the next call.
+        """
+        data, model = configuration.data, self.model
+        m = 0
+        for t in tasks:
+            m += t.k if hasattr(t, "k") else len(t.cost)
+        self._rows(m)
+        W, eps = self._W, self._eps
+        r = 0
+        mu = 0.0
+        i, ntask = 0, len(tasks)
+        while i < ntask:
+            task = tasks[i]
+            kind = type(task)
+            if kind is mink.FrameTask and _native is not None and task.transform_target_to_world is not None:
+                j = i + 1  # the run of frame tasks from i, done at once
+                while (
+                    j < ntask
+                    and type(tasks[j]) is mink.FrameTask
+                    and tasks[j].transform_target_to_world is not None
+                ):
+                    j += 1
+                k = 6 * (j - i)
+                self._frame_rows(tasks[i:j], data, W[r : r + k], eps[r : r + k])
+                for t in tasks[i:j]:
+                    if t.lm_damping:
+                        mu += t.lm_damping * float(eps[r : r + 6] @ eps[r : r + 6])
+                    r += 6
+                i = j
+                continue
+            elif kind is SitesPositionTask:
+                k = task.k
+                self._sites_rows(task, data, W[r : r + k], eps[r : r + k], r)
+            elif kind is SitePositionTask:
+                k = task.k
+                mujoco.mj_jacSite(model, data, self._jac3, None, task.site_id)
+                np.multiply(task.cost[:, None], self._jac3[task.axes, :], out=W[r : r + k])
+                np.multiply(task.cost, -task.gain * task.compute_error(configuration), out=eps[r : r + k])
+            else:  # any other mink task: its own weighted residual
+                Wk, ek, _ = task.compute_qp_residual(configuration)
+                k = len(ek)
+                W[r : r + k] = Wk
+                eps[r : r + k] = ek
+            if task.lm_damping:
+                mu += task.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
+            r += k
+            i += 1
+        H, c = self.H, self.c
+        Wm = W[:r]
+        np.matmul(Wm.T, Wm, out=H)
+        np.matmul(eps[:r], Wm, out=c)
+        np.negative(c, out=c)
+        H.flat[self._diag] += damping + mu
+        if posture is not None:
+            self._posture(configuration, posture)
+        return H, c
+
+    def _posture(self, configuration: mink.Configuration, posture: mink.PostureTask) -> None:
+        r"""Adds the posture task: :math:`H \mathrel{+}= \mathrm{diag}(w^2)`,
+        :math:`c \mathrel{+}= \alpha w^2 \odot (q \ominus q^*)`, free-joint columns excluded."""
+        e = self._dq
+        mujoco.mj_differentiatePos(self.model, e, 1.0, posture.target_q, configuration.q)
+        w = posture.cost.copy()
+        if posture._v_ids is not None:
+            w[posture._v_ids] = 0.0
+            e[posture._v_ids] = 0.0
+        w2 = w * w
+        eps = w * (-posture.gain * e)
+        self.H.flat[self._diag] += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
+        self.c -= eps * w
+
+    # -- constraints --------------------------------------------------------------
+    def bounds(
+        self,
+        configuration: mink.Configuration,
+        trust: float | np.ndarray | None,
+        config_limit: mink.ConfigurationLimit | None,
+        boxes: Sequence[FrameStepLimit | RootStepLimit] = (),
+    ) -> tuple[np.ndarray, np.ndarray]:
+        r"""Simple bounds :math:`l \le \Delta q \le u`: the intersection of the trust region
+        :math:`\pm\rho` (None: none), the configuration limit (hinge and slide joints;
+        :math:`g (q_{min} \ominus q)` to :math:`g (q_{max} \ominus q)`) and each box limit's
+        :meth:`box`.  Unbounded coordinates get :data:`INFINITY`."""
+        lb, ub = self.lb, self.ub
+        if trust is None:
+            lb.fill(-INFINITY)
+            ub.fill(INFINITY)
+        else:
+            ub[:] = trust
+            np.negative(ub, out=lb)
+        if config_limit is not None and config_limit.projection_matrix is not None:
+            if self._box is None or self._box[0] is not config_limit:
+                idx = np.asarray(config_limit.indices, dtype=int)
+                qadr = self.model.jnt_qposadr[self.model.dof_jntid[idx]]
+                self._box = (config_limit, idx, qadr, config_limit.upper[qadr], config_limit.lower[qadr])
+            _, idx, qadr, upper, lower = self._box
+            # hinge and slide joints: q_max ⊖ q = q_max - q (what mj_differentiatePos computes)
+            q, g = configuration.data.qpos[qadr], config_limit.gain
+            ub[idx] = np.minimum(ub[idx], g * (upper - q))
+            lb[idx] = np.maximum(lb[idx], -(g * (q - lower)))
+        for box in boxes:
+            spec = box.box(configuration)
+            if spec is None:
+                continue
+            dofs, lo, hi = spec
+            ub[dofs] = np.minimum(ub[dofs], hi)
+            lb[dofs] = np.maximum(lb[dofs], lo)
+        return lb, ub
+
+    def build(
+        self,
+        configuration: mink.Configuration,
+        tasks: Sequence[mink.Task],
+        damping: float,
+        posture: mink.PostureTask | None = None,
+        trust: float | np.ndarray | None = None,
+        config_limit: mink.ConfigurationLimit | None = None,
+        boxes: Sequence[FrameStepLimit | RootStepLimit] = (),
+        limits: Sequence[mink.Limit] = (),
+        constraints: Sequence[mink.Task] = (),
+    ) -> QP:
+        r"""The whole QP of one iteration.
+
+        Args:
+            configuration: Current configuration :math:`q` (kinematics and ``mj_comPos`` done).
+            tasks: Cost terms (mink tasks), in order.
+            damping: Global Levenberg-Marquardt damping :math:`\mu`.
+            posture: The posture task, added as a diagonal (None: none).
+            trust: Trust region :math:`\rho` (rad or m), scalar or ``(nv,)``; None: none.
+            config_limit: Joint-range limit folded into the bounds (its ball-joint rows,
+                if any, become general rows).
+            boxes: Limits with a ``box`` method, folded into the bounds.
+            limits: Other limits: general rows :math:`G \Delta q \le h`.
+            constraints: Equality tasks: :math:`J \Delta q = -\alpha e`.
+        """
+        H, c = self.objective(configuration, tasks, damping, posture)
+        lb, ub = self.bounds(configuration, trust, config_limit, boxes)
+        Gs, hs = [], []
+        if config_limit is not None and len(config_limit._ball_qposadr):
+            con = config_limit.compute_qp_inequalities(configuration, 1.0)
+            n = 0 if config_limit.projection_matrix is None else 2 * len(config_limit.indices)
+            Gs.append(con.G[n:])
+            hs.append(con.h[n:])
+        for limit in limits:
+            con = limit.compute_qp_inequalities(configuration, 1.0)
+            if not con.inactive:
+                Gs.append(con.G)
+                hs.append(con.h)
+        G = np.vstack(Gs) if Gs else np.zeros((0, self.nv))
+        h = np.concatenate(hs) if hs else np.zeros(0)
+        As, bs = [], []
+        for task in constraints:
+            As.append(task.compute_jacobian(configuration))
+            bs.append(-task.gain * task.compute_error(configuration))
+        A = np.vstack(As) if As else np.zeros((0, self.nv))
+        b = np.concatenate(bs) if bs else np.zeros(0)
+        return QP(H, c, lb, ub, G, h, A, b)
+
+
+def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:
+    """Id of a body, geom or site given by name or id."""
+    if isinstance(name, (int, np.integer)):
+        return int(name)
+    obj = {"site": mujoco.mjtObj.mjOBJ_SITE, "body": mujoco.mjtObj.mjOBJ_BODY, "geom": mujoco.mjtObj.mjOBJ_GEOM}[kind]
+    fid = mujoco.mj_name2id(model, obj, name)
+    if fid < 0:
+        raise mink.InvalidFrame(frame_name=name, frame_type=kind, model=model)
+    return int(fid)
+
+
+def _stack(qp: QP) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """daqp's ``(A, bupper, blower, sense)``: simple bounds first, then :math:`G`, then :math:`A` (sense 5)."""
+    nv, m, p = qp.c.size, qp.h.size, qp.b.size
+    if m or p:
+        Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
+        bupper = np.concatenate([qp.ub, qp.h, qp.b])
+        blower = np.concatenate([qp.lb, np.full(m, -INFINITY), qp.b])
+    else:
+        Atot = np.zeros((0, nv))
+        bupper, blower = qp.ub, qp.lb
+    sense = np.zeros(nv + m + p, dtype=c_int)
+    sense[nv + m :] = 5
+    return Atot, bupper, blower, sense
+
+
+def solve(qp: QP, dual_start: np.ndarray | None = None) -> np.ndarray:
+    r"""Solve ``qp`` with ``daqp.solve`` (bounds first, then :math:`G`, then :math:`A` with sense 5).
+
+    ``dual_start``: a guess of the multipliers of every constraint (daqp's order), which
+    only sets daqp's initial active set.  Returns :math:`\Delta q` ``(nv,)``; raises
+    ``mink.NoSolutionFound`` if daqp reports no solution (infeasible, iteration limit) or a
+    non-finite one.
+    """
+    return _solve(qp, dual_start)[0]
+
+
+def _solve(qp: QP, dual_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    Atot, bupper, blower, sense = _stack(qp)
+    x, _, exitflag, info = daqp.solve(qp.H, qp.c, Atot, bupper, blower, sense, dual_start=dual_start)
+    if exitflag <= 0 or x is None or not np.all(np.isfinite(x)):
+        raise mink.NoSolutionFound("daqp")
+    return np.asarray(x), info["lam"]
+
+
+class WarmSolver:
+    r"""``daqp`` with the previous solution's active simple bounds as the next start.
+
+    The QP is strictly convex (:math:`H \succ 0` by the damping), so its minimiser is
+    unique and the starting active set changes only how quickly daqp reaches it (to
+    round-off, about 1e-15); consecutive IK iterations mostly keep the same joints at
+    their range or velocity bounds, which roughly halves daqp's time.  The general rows
+    (floor, self-collision) change from one iteration to the next and start inactive.
+    If a warm start ever fails, the QP is solved again from a cold start, so a warm start
+    never makes a feasible QP look infeasible.
+    """
+
+    def __init__(self, nv: int) -> None:
+        self.nv = int(nv)
+        self._lam: np.ndarray | None = None
+
+    def reset(self) -> None:
+        """Forget the previous active set (the next solve starts cold)."""
+        self._lam = None
+
+    def solve(self, qp: QP) -> np.ndarray:
+        """Solve ``qp`` (see :func:`solve`), warm-started from the previous solve's bounds."""
+        start = None
+        if self._lam is not None:
+            start = np.zeros(self.nv + qp.h.size + qp.b.size)
+            start[: self.nv] = self._lam
+        try:
+            x, lam = _solve(qp, start)
+        except mink.NoSolutionFound:
+            if start is None:
+                self._lam = None
+                raise
+            try:
+                x, lam = _solve(qp)
+            except mink.NoSolutionFound:
+                self._lam = None
+                raise
+        self._lam = lam[: self.nv].copy()
+        return x

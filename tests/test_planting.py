@@ -11,12 +11,10 @@ from physmocap import metrics
 
 pytestmark = RETARGET_DIAGNOSTICS
 
-#: Known shortfall of the offline foot plan (issue 9 is open): on the PyMO walk a few
-#: touchdown frames (a foot labelled flat while its toe is still landing) move fast enough to
-#: lift the mean flat-stance skating above 1 cm/s; its 95th percentile is 0.4 cm/s.
-KNOWN = {
-    ("pymo_walk.bvh", "humanoid"): "touchdown outliers lift mean flat-stance skating to 1.3 cm/s",
-}
+#: Known shortfalls of the offline foot plan, (clip, character) -> reason (strict xfail).  The
+#: PyMO humanoid (touchdown outliers lifted its mean flat-stance skating to 1.3 cm/s) passes
+#: since the feet are levelled from the actor's stance (physmocap.ik.footlevel).
+KNOWN: dict[tuple[str, str], str] = {}
 CASES = [
     pytest.param(clip, ch, marks=pytest.mark.xfail(reason=KNOWN[(clip, ch)], strict=True))
     if (clip, ch) in KNOWN

@@ -197,7 +197,7 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def heights(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
+    def surface_z(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
         """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
         metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
         if len(self.gid) == 0:
@@ -318,7 +318,7 @@ class FloorLimit(mink.Limit):
         key = data.qpos.tobytes()
         if self._zcache is not None and self._zcache[0] == key:
             return self._zcache[1]
-        z_g = self._cand.heights(data, below=self.floor + self.activation)
+        z_g = self._cand.surface_z(data, below=self.floor + self.activation)
         z = np.concatenate([z_g, data.site_xpos[self.sites, 2]]) if len(self.sites) else z_g
         self._zcache = (key, z)
         return z

@@ -87,14 +87,17 @@ def _frame_pos(ch, data, name):
 
 
 @pytest.mark.parametrize("name,seed", [("humanoid", 0), ("humanoid", 1), ("robot", 2), ("robot", 3)])
-@pytest.mark.parametrize("level", [0, 1, 2])
+@pytest.mark.parametrize("level", [0, 1, 2, 3, 4])
 def test_lean_qp_matches_mink_build_ik(name, seed, level):
     solver = _setup(name, seed)
     conf = solver.configuration
     nv = solver.model.nv
     solver._sync()
     boxes, general = solver._limits(level)
-    assert solver.self_limit is None or solver.self_limit in general or level > 3
+    # the ladder as FrameSolver._limits has it (unchanged by the lean path): the frame-to-frame
+    # bound is kept up to level 2, the floor and self-collision rows up to level 3
+    assert solver.self_limit is None or (solver.self_limit in general) == (level <= 3)
+    assert (solver.step_limit in boxes) == (level <= 2)
     # what the lean path builds
     tasks = [*solver.tasks, *solver._extra_tasks] + (list(solver._constraints) if level >= 1 else [])
     constraints = solver._constraints if level == 0 else []
@@ -117,7 +120,10 @@ def test_lean_qp_matches_mink_build_ik(name, seed, level):
     np.testing.assert_array_equal(ub, np.minimum(fub, solver._trust))
     np.testing.assert_allclose(G, ref.G[nbox:], rtol=0, atol=1e-12)
     np.testing.assert_allclose(h, ref.h[nbox:], rtol=0, atol=1e-15)
-    assert len(h) > 0  # floor rows active
+    if level <= 3:
+        assert len(h) > 0  # floor rows active
+    else:
+        assert len(h) == 0 and general == []
     if level == 0:
         np.testing.assert_array_equal(A, ref.A)
         np.testing.assert_array_equal(b, ref.b)

@@ -29,14 +29,13 @@ __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "
 
 class PointJacobians:
     r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
-    of points fixed to bodies, written into preallocated buffers (the floor and
-    self-collision rows need a few dozen per iteration, on a few bodies)."""
+    of points fixed to bodies, by ``mj_jac`` (point by point, as the rows were first
+    written: the same round-off), into one preallocated buffer (the floor and
+    self-collision rows need a few dozen per iteration)."""
 
     def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
         self._buf = np.zeros((capacity, 3, model.nv))
-        self._jp: np.ndarray | None = None
-        self._jr: np.ndarray | None = None
 
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
@@ -48,22 +47,6 @@ class PointJacobians:
         for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
             mujoco.mj_jac(model, data, buf[i], None, p, b)
         return buf[:k]
-
-    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
-        r"""``(k, nv)`` vertical rows :math:`J_z(p)` of points ``(k, 3)`` on ``bodies`` ``(k,)``,
-        one ``mj_jacBody`` per distinct body: with :math:`J_p, J_r` the body origin's
-        translational and rotational Jacobians and :math:`d = p - x_b`,
-        :math:`J_z(p) = J_{p,z} + J_{r,x} d_y - J_{r,y} d_x` (the z row of
-        :math:`J_p + J_r \times d`, what ``mj_jac`` gives up to round-off)."""
-        uniq, inv = np.unique(bodies, return_inverse=True)
-        if self._jp is None:
-            self._jp = np.zeros((self.model.nbody, 3, self.model.nv))
-            self._jr = np.zeros((self.model.nbody, 3, self.model.nv))
-        jp, jr, model = self._jp, self._jr, self.model
-        for j, b in enumerate(uniq.tolist()):
-            mujoco.mj_jacBody(model, data, jp[j], jr[j], b)
-        d = points - data.xpos[bodies]
-        return jp[inv, 2] + jr[inv, 0] * d[:, 1:2] - jr[inv, 1] * d[:, 0:1]
 
 
 class FrameStepLimit(mink.Limit):
@@ -197,7 +180,7 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def heights(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
+    def surface_z(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
         """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
         metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
         if len(self.gid) == 0:
@@ -318,7 +301,7 @@ class FloorLimit(mink.Limit):
         key = data.qpos.tobytes()
         if self._zcache is not None and self._zcache[0] == key:
             return self._zcache[1]
-        z_g = self._cand.heights(data, below=self.floor + self.activation)
+        z_g = self._cand.surface_z(data, below=self.floor + self.activation)
         z = np.concatenate([z_g, data.site_xpos[self.sites, 2]]) if len(self.sites) else z_g
         self._zcache = (key, z)
         return z
@@ -342,7 +325,7 @@ class FloorLimit(mink.Limit):
         anchor = np.empty((n_act, 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
-        np.negative(self._pj.vertical(data, b, anchor), out=G[:n_act])
+        np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
         za = z[active]
         h[:n_act] = za - self.floor - self.margin
         if self.swing_bodies:

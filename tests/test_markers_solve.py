@@ -205,3 +205,32 @@ def test_cmu_take_solved_end_to_end(tmp_path, capsys):
     c = compare(A, B)
     assert c["all"] < 0.09
     assert c["angles"]["left_knee"] < 6.0 and c["angles"]["right_knee"] < 6.0
+
+
+def test_a_marker_rigid_on_several_segments_is_not_attached():
+    """Before: on a take where the trunk hardly moves against the pelvis (vicon_upperbody.trc),
+    the box's markers and the arm's were attached to the pelvis, rigid on it within 2 cm.  A
+    marker is attached by rigidity only to the one segment it is rigid on."""
+    from pathlib import Path
+
+    from scipy.spatial.transform import Rotation
+
+    from physmocap.markers.functional import SegmentFrames, attach_by_rigidity
+    from physmocap.markers.recording import MarkerRecording
+
+    F = 100
+    t = np.linspace(0.0, 1.0, F)
+
+    def frames(angle: np.ndarray) -> SegmentFrames:
+        R = Rotation.from_euler("z", angle[:, None]).as_matrix()
+        return SegmentFrames(R, np.zeros((F, 3)), np.ones(F, bool), np.zeros((1, 3)), ("o",), np.zeros(F))
+
+    still = frames(np.zeros(F))
+    turning = frames(1.2 * t)  # a second segment turning 70 degrees about the first's origin
+    on_turning = turning.to_world(np.array([0.3, 0.0, 0.0]))
+    fixed = np.broadcast_to([0.0, 0.4, 0.0], (F, 3))
+    rec = MarkerRecording(("A", "B"), np.stack([on_turning, fixed], axis=1), 100.0, Path("synthetic.c3d"))
+    assert attach_by_rigidity(rec, {"pelvis": still, "thorax": turning}, {}) == {0: "thorax", 1: "pelvis"}
+    # nothing moves: every marker is rigid on both segments, none can be attached
+    rec = MarkerRecording(("A", "B"), np.stack([fixed, fixed], axis=1), 100.0, Path("synthetic.c3d"))
+    assert attach_by_rigidity(rec, {"pelvis": still, "thorax": frames(np.zeros(F))}, {}) == {}

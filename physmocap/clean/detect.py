@@ -362,27 +362,34 @@ def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
     return set().union(*chains) - set.intersection(*chains)
 
 
+def canonical_joints(motion: Motion) -> dict[str, int]:
+    """Canonical joint -> source joint index of ``motion`` (the retargeter's name mapping),
+    without its warnings; empty when the skeleton cannot be mapped (the anatomical checks
+    are then skipped and said so, the other detectors still run)."""
+    import warnings
+
+    from ..errors import MappingError
+    from ..ik.retarget import map_motion
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return map_motion(motion)
+    except MappingError:
+        return {}
+
+
 def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: Motion | None = None) -> list[Glitch]:
     """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
     a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
     shoulder line the trunk angles are read from), is that glitch's anatomical
     movement, not a second glitch: name the movement on it instead."""
     import dataclasses
-    import warnings
 
-    from ..errors import MappingError
-    from ..ik.retarget import map_motion
     from .anatomy import MOVEMENTS
 
     names = motion.skeleton.names if motion is not None else []
-    ji: dict[str, int] = {}
-    if motion is not None:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                ji = map_motion(motion)
-        except MappingError:
-            ji = {}
+    ji = canonical_joints(motion) if motion is not None else {}
     by_name = {m.joint.replace("_", " ") if m.joint != "spine" else "trunk": m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
@@ -448,19 +455,11 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
 
     A skeleton whose limbs cannot be mapped to the canonical joints gets one warning
     naming the joints whose ranges cannot be checked; the other detectors still run."""
-    import warnings
-
-    from ..errors import MappingError, warn
-    from ..ik.retarget import map_motion
+    from ..errors import warn
     from .anatomy import MOVEMENTS, beyond_range, motion_angles, movement_range
 
     opt = options or CleanOptions()
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ji = map_motion(motion)
-    except MappingError:
-        ji = {}
+    ji = canonical_joints(motion)
     angles, _ = motion_angles(motion, ji)
     unchecked = sorted({m.joint for m in MOVEMENTS if m.key not in angles})
     if unchecked:

@@ -376,23 +376,30 @@ def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
 def attach_by_rigidity(rec: MarkerRecording, frames: dict[str, SegmentFrames], taken: dict[int, str],
                        limit: float = 0.02) -> dict[int, str]:
     """Markers not yet attached, each to the segment in whose frame it moves least (RMS
-    scatter below ``limit`` metres over at least half the clip); others stay unattached."""
+    scatter below ``limit`` metres over at least half the clip), provided that segment is
+    the only one it is rigid on: its scatter in every other segment's frame must be at
+    least ``limit`` and twice the best.  A marker rigid on several segments (a take where
+    those segments hardly move relative to each other, a prop held still) cannot be told
+    apart and stays unattached, and so listed as ignored."""
     out = dict(taken)
     P = rec.positions
     for i in range(P.shape[1]):
         if i in out:
             continue
-        best = (limit, None)
+        scatter = []
         for seg, fr in frames.items():
             v = fr.to_local(P[:, i])
             ok = np.all(np.isfinite(v), 1)
             if ok.sum() < max(30, 0.5 * rec.num_frames):
                 continue
-            s = float(np.sqrt(np.mean(np.sum((v[ok] - np.median(v[ok], 0)) ** 2, 1))))
-            if s < best[0]:
-                best = (s, seg)
-        if best[1] is not None:
-            out[i] = best[1]
+            scatter.append((float(np.sqrt(np.mean(np.sum((v[ok] - np.median(v[ok], 0)) ** 2, 1)))), seg))
+        if not scatter:
+            continue
+        scatter.sort()
+        best, seg = scatter[0]
+        second = scatter[1][0] if len(scatter) > 1 else np.inf
+        if best < limit and second >= max(limit, 2.0 * best):
+            out[i] = seg
     return out
 
 
@@ -408,7 +415,6 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
     clip's fixed segment lengths (see the module docstring)."""
     reg = regression if regression is not None else joint_centres(rec, ms)
     P = rec.positions
-    F = rec.num_frames
     positions = {k: v.copy() for k, v in reg.positions.items()}
     method = {k: f"regression ({v})" for k, v in reg.method.items()}
     seg_of = segment_markers(rec, ms)

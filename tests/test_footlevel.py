@@ -86,3 +86,23 @@ def test_a_straight_actor_leg_bends_forward_not_sideways():
     assert knee[0, 1] < -0.1 and abs(knee[0, 0]) < 0.4 * abs(knee[0, 1])
     # both lengths kept
     assert np.linalg.norm(knee[0] - hip[0]) == pytest.approx(0.42, abs=1e-6)
+
+
+def test_feet_are_levelled_without_planting_too():
+    """Pure tracking (--no-plant) levels the feet like planting does; contacts=False does not."""
+    import warnings
+
+    from physmocap.ik.retarget import retarget
+    from physmocap.resources import example_clip
+    from physmocap.sources import load_motion
+
+    motion = load_motion(example_clip())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        free = retarget(motion, None, progress=False, plant=False, end=200)
+        planted = retarget(motion, None, progress=False, end=200)
+        bare = retarget(motion, None, progress=False, contacts=False, end=200)
+    sides = {lv.side: lv.correction_deg for lv in free.targets.info["foot_levels"]}
+    assert set(sides) == {"left", "right"} and min(sides.values()) > 10.0  # CMU's feet: about 24 degrees
+    assert [lv.side for lv in planted.targets.info["foot_levels"]] == ["left", "right"]
+    assert "foot_levels" not in bare.targets.info

@@ -12,11 +12,12 @@ retargeter runs) over every frame.  It returns a
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from typing import Any
 
 import numpy as np
 
-from ..errors import MappingError, OptionError, warn
+from ..errors import InputError, MappingError, OptionError, warn
 from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
@@ -179,6 +180,11 @@ def retarget(
     if targets is None:
         floor = found.floor if found is not None else None
         targets = build_targets(motion, joint_indices, character, config.targets, floor=floor)
+        if found is None and contacts is not False:
+            # no planting, but the feet are still levelled where the actor stands flat
+            stance = _stance_labels(motion, joint_indices, config)
+            if stance is not None:
+                targets = level_targets(targets, character, stance)
     traj = solve_targets(
         targets,
         character,
@@ -199,6 +205,17 @@ def retarget(
     return traj
 
 
+def _stance_labels(motion: Motion, joint_indices: dict[str, int], config: RetargetConfig) -> dict[str, np.ndarray] | None:
+    """The actor's foot contact labels for levelling the feet when nothing is planted (None
+    where the source's feet cannot be labelled: no foot joints, no floor)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # said again, if it matters, by the planting
+            return detect_contacts(motion, joint_indices, config.contacts).labels
+    except (InputError, MappingError):
+        return None
+
+
 def plan_targets(
     targets: Targets,
     character,
@@ -214,16 +231,24 @@ def plan_targets(
     The unplanned positions are kept in ``info["raw_positions"]``, the feet's
     horizontal offsets in ``info["foot_offsets"]``."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
-    levelled, orientations, levels = level_feet(
-        targets.positions, targets.orientations, targets.has_orientation, targets.names, labels,
-        character_rest_frames(character), targets.fps,
-    )
+    levelled = level_targets(targets, character, labels)
     positions, offsets = planted_positions(
-        levelled, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
+        levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
     )
     if body_labels:
         positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
-    info = {**targets.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets, "foot_levels": levels}
+    info = {**levelled.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets}
+    return dataclasses.replace(levelled, positions=positions, info=info)
+
+
+def level_targets(targets: Targets, character, labels: dict[str, np.ndarray]) -> Targets:
+    """A copy of ``targets`` with the feet levelled on the actor's flat-stance frames
+    (:func:`~physmocap.ik.footlevel.level_feet`); what was done is in ``info["foot_levels"]``."""
+    positions, orientations, levels = level_feet(
+        targets.positions, targets.orientations, targets.has_orientation, targets.names, labels,
+        character_rest_frames(character), targets.fps,
+    )
+    info = {**targets.info, "foot_levels": levels}
     return dataclasses.replace(targets, positions=positions, orientations=orientations, info=info)
 
 

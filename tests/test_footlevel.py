@@ -106,3 +106,25 @@ def test_feet_are_levelled_without_planting_too():
     assert set(sides) == {"left", "right"} and min(sides.values()) > 10.0  # CMU's feet: about 24 degrees
     assert [lv.side for lv in planted.targets.info["foot_levels"]] == ["left", "right"]
     assert "foot_levels" not in bare.targets.info
+
+
+def test_undefined_frames_are_left_as_they_are():
+    """A positional source may leave a lost joint's target undefined (NaN) on some frames:
+    those frames are skipped, never turned into an error or spread."""
+    F = 60
+    rest = _rest()
+    ori = np.zeros((F, 3, 4))
+    ori[..., 3] = 1.0
+    ori[:, 0] = Rotation.from_euler("y", 20, degrees=True).as_quat()
+    ori[10:13, 0] = np.nan
+    pos = np.zeros((F, 3, 3))
+    pos[:, 1] = [0.13, 0.0, 0.0]
+    pos[:, 2] = [0.2, 0.0, 0.0]
+    pos[30, 1] = np.nan
+    labels = {"left_heel": np.ones(F, bool), "left_toe": np.ones(F, bool)}
+    new_pos, new_ori, levels = level_feet(pos, ori, np.array([True, False, False]), NAMES, labels, rest, 30.0)
+    assert len(levels) == 1 and levels[0].stance_frames == F - 4
+    assert np.isnan(new_ori[10:13, 0]).all() and np.isnan(new_pos[30, 1]).all()
+    ok = np.ones(F, bool)
+    ok[[10, 11, 12, 30]] = False
+    assert np.isfinite(new_ori[ok]).all() and np.isfinite(new_pos[ok]).all()

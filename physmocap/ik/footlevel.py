@@ -108,10 +108,15 @@ def level_feet(
         heel_l, toe_l = labels.get(f"{side}_heel"), labels.get(f"{side}_toe")
         if heel_l is None or toe_l is None:
             continue
-        stance = np.asarray(heel_l, dtype=bool)[:F] & np.asarray(toe_l, dtype=bool)[:F]
+        ia = col[ankle]
+        # frames with a usable target (a positional source may leave lost joints undefined)
+        good = np.all(np.isfinite(ori[:, ia]), axis=1) & (np.linalg.norm(ori[:, ia], axis=1) > 0.5)
+        good &= np.all(np.isfinite(pos[:, ia]), axis=1)
+        if toe in col:
+            good &= np.all(np.isfinite(pos[:, col[toe]]), axis=1)
+        stance = np.asarray(heel_l, dtype=bool)[:F] & np.asarray(toe_l, dtype=bool)[:F] & good
         if int(stance.sum()) < need:
             continue
-        ia = col[ankle]
         q_c0 = Rotation.from_quat(rest[ankle][1])
         # the foot's rest forward direction on the floor (towards the toe, else the site's x axis)
         fwd = rest[toe][0] - rest[ankle][0] if toe in rest else q_c0.apply([1.0, 0.0, 0.0])
@@ -128,20 +133,20 @@ def level_feet(
         psi = heading - np.arctan2(fwd[1], fwd[0])
         flat = Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])) * q_c0
         C = (Q.inv() * flat).mean()
-        old_ankle_q = ori[:, ia].copy()
-        new = Rotation.from_quat(ori[:, ia]) * C
+        old_ankle_q = ori[good, ia].copy()
+        new = Rotation.from_quat(old_ankle_q) * C
         q_new = new.as_quat()
         # keep the quaternion sign continuous with the old track (nicer for users)
         q_new[np.sum(q_new * old_ankle_q, axis=-1) < 0] *= -1.0
-        ori[:, ia] = q_new
+        ori[good, ia] = q_new
         levels.append(FootLevel(side, float(np.degrees(C.magnitude())), int(stance.sum())))
         if toe not in col or toe not in rest:
             continue
         it = col[toe]
-        old_dir = positions[:, it] - positions[:, ia]
-        pos[:, it] = pos[:, ia] + (new * q_c0.inv()).apply(rest[toe][0] - rest[ankle][0])
+        old_dir = positions[good, it] - positions[good, ia]
+        pos[good, it] = pos[good, ia] + (new * q_c0.inv()).apply(rest[toe][0] - rest[ankle][0])
         if tip in col:
             ie = col[tip]
-            turn = quat_between(old_dir, pos[:, it] - pos[:, ia])
-            pos[:, ie] = pos[:, it] + quat_apply(turn, positions[:, ie] - positions[:, it])
+            turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
+            pos[good, ie] = pos[good, it] + quat_apply(turn, positions[good, ie] - positions[good, it])
     return pos, ori, levels

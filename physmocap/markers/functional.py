@@ -21,6 +21,10 @@ the pairwise angles) reaches :data:`MIN_SPREAD_DEG`.  A hinge (knee, elbow) dete
 centre only across the axis (SCoRE's known weakness): the direction(s) the data leave
 undetermined take the regression estimate's component (:mod:`.joints`, Harrington 2007 for
 hips), so a knee centre lies on the functional axis at the depth of the anatomical one.
+A hinge's centre along its axis is never taken from the motion (:data:`HINGE_JOINTS`), and a
+ball joint (hip, shoulder) or the wrist is fitted only when its motion spans two planes
+(:data:`TWO_PLANE_JOINTS`, Piazza et al. 2004, Camomilla et al. 2006): a jumping or walking
+clip flexes the hip in one plane, which places its centre worse than the regression.
 Frames whose fit residual exceeds three times the median are dropped and the fit repeated
 once (marker glitches).  Where a joint is not exercised enough, its segments lack markers,
 or the fit's residual is implausible, the regression centre is kept; every joint records its
@@ -65,6 +69,20 @@ MAX_SHIFT = 0.12
 BIN = 0.05
 #: Most frames one fit uses (evenly drawn from the bins when more).
 MAX_FRAMES = 800
+#: Joints whose centre a single plane of motion cannot place (ball joints, and the wrist's two
+#: axes): fitted only when the motion also spans :data:`MIN_SECOND_PLANE_DEG` across its main
+#: plane.  Piazza et al. (2004, J. Biomech. 37:349) found functional hip centres degrade
+#: sharply when the range of motion drops below about 20-30 degrees, and Camomilla et al.
+#: (2006, J. Biomech. 39:1096) that planar (flexion-only) motion places the hip worst; with
+#: mostly one-plane motion (walking, jumping) the regression is the better estimate.
+TWO_PLANE_JOINTS = ("hip", "shoulder", "wrist")
+#: Smallest extent (degrees) across the main plane of motion for :data:`TWO_PLANE_JOINTS`.
+MIN_SECOND_PLANE_DEG = 20.0
+#: Hinges: the centre along the flexion axis is never determined by the motion (any point of
+#: the axis fits a pure hinge equally; soft-tissue wobble only pretends to fix it), so it
+#: always keeps the regression's component: the functional axis at the anatomical depth
+#: (the projection of the anatomical centre onto the functional axis).
+HINGE_JOINTS = ("knee", "elbow", "ankle")
 
 #: Segment -> marker roles on it (``{s}`` the side letter).  Cluster markers without a role
 #: are attached by :data:`LABEL_HINTS` or by rigidity (:func:`segment_markers`).
@@ -231,12 +249,15 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
 
 # -- centre-of-rotation fits -----------------------------------------------------------
 def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: float = 0.02,
-                       min_eig: float = 0.0) -> tuple[np.ndarray, int]:
+                       min_eig: float = 0.0, max_rank: int | None = None) -> tuple[np.ndarray, int]:
     """Least-squares solution of ``A x = b`` (A symmetric PSD) closest to ``prior`` along the
     directions ``A`` barely determines (eigenvalues below ``rel`` times the largest, or below
-    ``min_eig``); returns ``(x, number of determined directions)``."""
-    lam, V = np.linalg.eigh(A)
+    ``min_eig``, and all but the ``max_rank`` best determined); returns ``(x, number of
+    determined directions)``."""
+    lam, V = np.linalg.eigh(A)  # ascending
     good = (lam > rel * max(lam.max(), 1e-300)) & (lam > min_eig)
+    if max_rank is not None:
+        good[: max(len(lam) - max_rank, 0)] = False
     x = prior.copy()
     r = b - A @ prior
     for i in np.flatnonzero(good):
@@ -249,12 +270,13 @@ def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: flo
 MAX_STD = 0.002
 
 
-def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, float, int]:
+def sphere_fit(V: list[np.ndarray], prior: np.ndarray, max_rank: int = 3) -> tuple[np.ndarray, float, int]:
     """Common centre of several markers each moving on a sphere (Gamage & Lasenby 2002).
 
     Args:
         V: Per marker, ``(N_k, 3)`` positions in the parent's frame (finite rows only).
         prior: Centre used along the directions the data leave undetermined.
+        max_rank: Most directions the motion may determine (2 for a hinge: its axis never is).
     Returns:
         ``(centre, RMS radial residual in metres, determined directions)``.
 
@@ -283,22 +305,24 @@ def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, floa
             rad.append(d.mean())
         return float(np.sqrt(np.mean(np.concatenate(res) ** 2))), float(np.mean(rad))
 
-    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01)
+    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01, 0.0, max_rank)
     r, radius = residual(c)
     # per-marker equations are averaged over N_k samples: sigma_b ~ 2 radius sigma_r / sqrt(N_k)
     sigma_y = 2.0 * radius * max(r, 2e-4)
     min_eig = len(V) * sigma_y**2 / (MAX_STD**2 * max(n / len(V), 1.0))
-    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig)
+    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig, max_rank)
     r, _ = residual(c)
     return c, r, rank
 
 
-def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray, float, int]:
+def score_fit(Rp, tp, Rc, tc, prior_p, prior_c, max_rank: int = 6) -> tuple[np.ndarray, np.ndarray, float, int]:
     """SCoRE (Ehrig et al. 2006): the point fixed in both frames.
 
     Args:
         Rp, tp, Rc, tc: ``(N, 3, 3)`` and ``(N, 3)`` parent and child frames.
         prior_p, prior_c: The prior centre in each frame (for undetermined directions).
+        max_rank: Most of the 6 directions the motion may determine (5 for a hinge: sliding
+            the point along the axis in both frames at once never changes the fit).
     Returns:
         ``(c_parent, c_child, RMS distance in metres between the two world estimates / 2,
         determined directions of 6)``.
@@ -310,7 +334,7 @@ def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray,
     prior = np.concatenate([prior_p, prior_c])
 
     def solve(min_eig):
-        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig)
+        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig, max_rank)
         gap = np.einsum("nij,j->ni", Rp, x[:3]) + tp - np.einsum("nij,j->ni", Rc, x[3:]) - tc
         return x, rank, float(np.sqrt(np.mean(np.sum(gap**2, 1)) / 3.0))
 
@@ -321,12 +345,14 @@ def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray,
     return x[:3], x[3:], sigma * np.sqrt(3.0) / 2.0, rank
 
 
-def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
+def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Frames spread over the poses: one per bin of the pose descriptor ``dirs`` ``(F, D)``
-    (unit-vector components, radians-ish), and the angular spread in degrees."""
+    (unit-vector components, radians-ish); the angular spread in degrees (98th percentile of
+    the pairwise angles of the first direction) and the motion's extent across its main
+    plane (:func:`_minor_extent`)."""
     idx = np.flatnonzero(usable)
     if len(idx) < MIN_FRAMES:
-        return idx, 0.0
+        return idx, 0.0, 0.0
     keys = np.floor(dirs[idx] / BIN).astype(np.int64)
     _, first = np.unique(keys, axis=0, return_index=True)
     chosen = idx[np.sort(first)]
@@ -337,7 +363,22 @@ def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, floa
     u = u / np.linalg.norm(u, axis=1, keepdims=True)
     ang = np.degrees(np.arccos(np.clip(u @ u.T, -1, 1)))
     spread = float(np.percentile(ang, 98)) if len(sub) > 1 else 0.0
-    return chosen, spread
+    return chosen, spread, _minor_extent(dirs[chosen, :3])
+
+
+def _minor_extent(u: np.ndarray) -> float:
+    """Extent (degrees, 2nd to 98th percentile) of unit directions ``u`` ``(N, 3)`` across the
+    plane they mostly sweep: the directions are seen from their mean as angles along the two
+    principal tangent axes, and the smaller extent is returned (near 0 for a hinge)."""
+    if len(u) < 3:
+        return 0.0
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    m = u.mean(0)
+    m = m / max(np.linalg.norm(m), 1e-12)
+    T = u - np.outer(u @ m, m)
+    _, _, Vt = np.linalg.svd(T - T.mean(0), full_matrices=False)
+    ang = np.degrees(np.arctan2(T @ Vt[1], u @ m))
+    return float(np.percentile(ang, 98) - np.percentile(ang, 2))
 
 
 # -- marker attachment -----------------------------------------------------------------
@@ -514,24 +555,30 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
     usable = parent.ok & np.all(np.isfinite(D), 1)
     if use_score:
         usable &= child.ok
-    chosen, spread = _pick_frames(np.nan_to_num(D), usable)
+    chosen, spread, minor = _pick_frames(np.nan_to_num(D), usable)
     if len(chosen) < MIN_FRAMES:
         return f"the parent and child are seen together in only {len(chosen)} distinct poses", None
     if len(child_markers) == 1 and len(chosen) < 100:
         return f"one marker on the child segment, seen in only {len(chosen)} distinct poses (100 needed)", None
     if spread < MIN_SPREAD_DEG:
         return f"the joint moves only {spread:.0f} degrees (a functional fit needs {MIN_SPREAD_DEG:.0f})", None
+    jkind = joint.split("_", 1)[1]
+    if jkind in TWO_PLANE_JOINTS and minor < MIN_SECOND_PLANE_DEG:
+        return (f"the motion stays in one plane ({minor:.0f} degrees across it; a {jkind} centre needs "
+                f"{MIN_SECOND_PLANE_DEG:.0f})"), None
+    hinge = jkind in HINGE_JOINTS
     sel = chosen
     for _ in range(2):  # fit, drop glitch frames, refit
         if use_score:
             prior_c = _nanmedian_rows(child.to_local(parent.to_world(prior))[sel])
             if prior_c is None:
                 return "no child frame", None
-            cp, cc, res, rank = score_fit(parent.R[sel], parent.t[sel], child.R[sel], child.t[sel], prior, prior_c)
+            cp, cc, res, rank = score_fit(parent.R[sel], parent.t[sel], child.R[sel], child.t[sel], prior, prior_c,
+                                          5 if hinge else 6)
             gap = np.linalg.norm(parent.to_world(cp)[sel] - child.to_world(cc)[sel], axis=1)
         else:
             vs = [v[sel][np.all(np.isfinite(v[sel]), 1)] for v in V]
-            cp, res, rank = sphere_fit(vs, prior)
+            cp, res, rank = sphere_fit(vs, prior, 2 if hinge else 3)
             gap = np.zeros(len(sel))
             for v in V:
                 d = np.linalg.norm(v[sel] - cp, axis=1)

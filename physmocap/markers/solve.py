@@ -292,12 +292,16 @@ def solve_markers(
             char, site_names = _with_marker_sites(spec, Path(tmp), rec.labels, attached, seg_of, local)
             scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local, body_id, M)
             weights = _weights(scatter, attached, opt.min_weight_scatter)
-            solver = _marker_solver(char, rec, attached, site_names, weights, opt, use_floor, max_iterations=10)
+            # the calibrated centres stay targets: markers alone would let the skeleton drift
+            # inside the marker cloud from one refinement to the next (sites follow poses)
+            solver = _marker_solver(char, rec, attached, site_names, weights, opt, use_floor, max_iterations=10,
+                                    centres=tuple(names))
             Q0, Q = Q, []
             for k, t in enumerate(calib):
                 solver.reset(np.array(Q0[k]))
-                q, _, _ = solver.solve_frame(np.nan_to_num(Pz[t, attached]), np.tile([0.0, 0, 0, 1], (len(attached), 1)),
-                                             valid[t, attached])
+                q, _, _ = solver.solve_frame(np.concatenate([np.nan_to_num(Pz[t, attached]), np.nan_to_num(C[t])]),
+                                             np.tile([0.0, 0, 0, 1], (len(attached) + len(names), 1)),
+                                             np.concatenate([valid[t, attached], seen[t]]))
                 Q.append(q)
             local = _marker_locals(char.model, mujoco.MjData(char.model), np.array(Q), Pz[calib], attached, seg_of,
                                    {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()})
@@ -402,17 +406,24 @@ def _with_marker_sites(spec: mujoco.MjSpec, folder: Path, labels, attached, seg_
     return char, names
 
 
-def _marker_solver(char, rec, attached, site_names, weights, opt: MarkerSolveOptions, use_floor: bool, max_iterations: int):
+def _marker_solver(char, rec, attached, site_names, weights, opt: MarkerSolveOptions, use_floor: bool,
+                   max_iterations: int, centres: tuple[str, ...] = ()):
+    """A :class:`~physmocap.ik.solver.FrameSolver` on the marker sites (keys ``m0, m1...``,
+    targets in ``attached`` order) and then the canonical joint sites ``centres`` (weight 0.3)."""
     from ..ik.solver import FrameSolver, SolverOptions
 
     keys = [f"m{k}" for k in range(len(attached))]
+    w = {k: (float(x), 0.0) for k, x in zip(keys, weights)}
+    w.update({n: (0.3, 0.0) for n in centres})
     sopt = SolverOptions(
         max_iterations=max_iterations, first_frame_iterations=150, self_collision=False,
         velocity_limits=opt.velocity_limits, floor=use_floor, floor_iterations=2 if use_floor else 0,
-        weights={k: (float(w), 0.0) for k, w in zip(keys, weights)},
+        weights=w,
     )
-    ch = _solver_character(char, {k: site_names[i] for k, i in zip(keys, attached)})
-    return FrameSolver(ch, keys, np.zeros(len(keys), bool), rec.fps, sopt)
+    sites = {k: site_names[i] for k, i in zip(keys, attached)}
+    sites.update({n: char.tracked[n].name for n in centres})
+    ch = _solver_character(char, sites)
+    return FrameSolver(ch, keys + list(centres), np.zeros(len(keys) + len(centres), bool), rec.fps, sopt)
 
 
 # -- report --------------------------------------------------------------------------

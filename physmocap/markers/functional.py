@@ -21,7 +21,10 @@ the pairwise angles) reaches :data:`MIN_SPREAD_DEG`.  A hinge (knee, elbow) dete
 centre only across the axis (SCoRE's known weakness): the direction(s) the data leave
 undetermined take the regression estimate's component (:mod:`.joints`, Harrington 2007 for
 hips), so a knee centre lies on the functional axis at the depth of the anatomical one.
-A hinge's centre along its axis is never taken from the motion (:data:`HINGE_JOINTS`), and a
+A fit needs a parent frame whose rotation is determined: points spread off a line enough
+that soft-tissue motion cannot turn it noticeably about its long axis (:data:`MAX_FRAME_ERROR`;
+two skin markers and a joint centre nearly in a row, as on the CMU set's thigh, shank and
+upper arm, do not).  A hinge's centre along its axis is never taken from the motion (:data:`HINGE_JOINTS`), and a
 ball joint (hip, shoulder) or the wrist is fitted only when its motion spans two planes
 (:data:`TWO_PLANE_JOINTS`, Piazza et al. 2004, Camomilla et al. 2006): a jumping or walking
 clip flexes the hip in one plane, which places its centre worse than the regression.
@@ -78,6 +81,15 @@ MAX_FRAMES = 800
 TWO_PLANE_JOINTS = ("hip", "shoulder", "wrist")
 #: Smallest extent (degrees) across the main plane of motion for :data:`TWO_PLANE_JOINTS`.
 MIN_SECOND_PLANE_DEG = 20.0
+#: Soft-tissue motion (metres, RMS) of a skin marker relative to its bone: 5 mm is at the low
+#: end of what Leardini et al. (2005, Gait Posture 21:212) review (up to 2-3 cm on the thigh).
+STA_SIGMA = 0.005
+#: Largest displacement (metres) of the child's markers, in the parent's frame, that the
+#: parent frame's own uncertainty may cause: the rotation about the parent's long axis is
+#: uncertain by about ``STA_SIGMA / spread`` radians (:attr:`SegmentFrames.spread`;
+#: Cappozzo et al. 1997, Gait Posture 5:1, on cluster size), which moves a child marker at
+#: distance ``lever`` from that axis by ``lever * STA_SIGMA / spread`` (:func:`_lever`).
+MAX_FRAME_ERROR = 0.02
 #: Hinges: the centre along the flexion axis is never determined by the motion (any point of
 #: the axis fits a pure hinge equally; soft-tissue wobble only pretends to fix it), so it
 #: always keeps the regression's component: the functional axis at the anatomical depth
@@ -135,6 +147,8 @@ class SegmentFrames:
         local: ``(K, 3)`` the points' positions in the frame (Procrustes mean).
         points: Names of the K points (marker labels or joint names).
         rms: ``(F,)`` RMS distance (metres) of the seen points from the fitted constellation.
+        borrowed_spread: The :attr:`spread` of the frame whose rotation this one borrows
+            (the clavicle's, from the thorax), else None.
     """
 
     R: np.ndarray
@@ -143,6 +157,22 @@ class SegmentFrames:
     local: np.ndarray
     points: tuple[str, ...]
     rms: np.ndarray
+    borrowed_spread: float | None = None
+
+    @property
+    def spread(self) -> float:
+        """How far (metres) the points spread off their principal line: the root sum of
+        squares of their distances from it (the 2nd and 3rd singular values of the centred
+        constellation).  A rotation about that line moves the points by this much per radian,
+        so skin-marker noise ``sigma`` leaves it uncertain by about ``sigma / spread``
+        radians (near 0: two markers and a joint centre in a row)."""
+        if self.borrowed_spread is not None:
+            return self.borrowed_spread
+        L = self.local - self.local.mean(0)
+        if len(L) < 3:
+            return 0.0
+        sv = np.linalg.svd(L, compute_uv=False)
+        return float(np.hypot(sv[1], sv[2]))
 
     def to_local(self, X: np.ndarray) -> np.ndarray:
         """``(F, 3)`` world points into this frame (NaN where either is undefined)."""
@@ -485,7 +515,8 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
             ok = th.ok & np.all(np.isfinite(sho), 1)
             t = np.where(ok[:, None], sho, np.nan)
             frames[f"{side}_clavicle"] = SegmentFrames(R=th.R, t=t, ok=ok, local=np.zeros((1, 3)),
-                                                       points=(rec.labels[ms.roles[f"{s}SHO"]],), rms=th.rms)
+                                                       points=(rec.labels[ms.roles[f"{s}SHO"]],), rms=th.rms,
+                                                       borrowed_spread=th.spread)
 
     order = ("hip", "knee", "ankle", "shoulder", "elbow", "wrist")
     for j in order:
@@ -529,6 +560,22 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
                        segment_of=seg_of, local_centres=local_centres)
 
 
+def _lever(parent: SegmentFrames, V: list[np.ndarray], prior: np.ndarray) -> float:
+    """Typical distance (metres, median over the child's markers and frames) of the child's
+    markers ``V`` (parent frame) from the parent's long axis (its constellation's principal
+    line), the arm by which a turn of the parent frame about that axis moves them; from the
+    ``prior`` centre for a frame that borrows its rotation."""
+    if parent.borrowed_spread is not None or len(parent.local) < 3:
+        d = [np.linalg.norm(v - prior, axis=1) for v in V]
+    else:
+        c0 = parent.local.mean(0)
+        a = np.linalg.svd(parent.local - c0)[2][0]
+        d = [np.linalg.norm((v - c0) - np.outer((v - c0) @ a, a), axis=1) for v in V]
+    d = np.concatenate(d)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else float("nan")
+
+
 def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | None, child_markers: list[int],
                regression: np.ndarray | None):
     """``(why not, None)`` or ``("", (world centres (F, 3), centre in the parent frame, method))``."""
@@ -545,6 +592,11 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
         if not len(allv):
             return "the child's markers are never seen with the parent's", None
         prior = allv.mean(0)
+    lever = _lever(parent, V, prior)
+    if np.isfinite(lever) and lever * STA_SIGMA > MAX_FRAME_ERROR * parent.spread:
+        return (f"the {FUNCTIONAL_JOINTS[joint][0]} frame is too narrow ({', '.join(parent.points)} spread "
+                f"{100 * parent.spread:.1f} cm off a line: 5 mm of skin motion would turn it about its long axis "
+                f"and move the child's markers about {100 * lever * STA_SIGMA / max(parent.spread, 1e-9):.0f} cm)"), None
     # pose descriptor: directions of the child's markers from the prior centre, parent frame
     dirs = []
     for v in V:

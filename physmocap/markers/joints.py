@@ -14,7 +14,9 @@ where a marker it needs is invalid):
   the proximal segment, towards the body's midline.  Half-widths scale with the pelvis
   width (or the shoulder width for elbows): knee :math:`0.20 W`, ankle :math:`0.14 W`,
   elbow :math:`0.11 S` (about 50, 35 and 40 mm on an adult; Plug-in Gait asks for the
-  measured widths, which a marker file does not carry).
+  measured widths, which a marker file does not carry), plus the marker's radius as in
+  Plug-in Gait's offset :math:`(\text{width} + \text{marker diameter}) / 2` (the marker's
+  centre sits a radius off the skin; :data:`MARKER_DIAMETER`, Vicon's standard 14 mm).
 * **Shoulders** (Rab et al. 2002, Gait Posture 15:113): the glenohumeral centre lies
   :math:`0.17 S` below the acromion marker (:math:`S` the distance between the two acromion
   markers) along the thorax's long axis (from mid T10-sternum to mid C7-clavicle, else the
@@ -38,7 +40,11 @@ from ..errors import InputError, warn
 from .markerset import MarkerSet
 from .recording import MarkerRecording
 
-__all__ = ["JointCentres", "joint_centres", "up_axis"]
+__all__ = ["JointCentres", "joint_centres", "up_axis", "MARKER_DIAMETER"]
+
+#: Diameter (metres) of the markers: their centre sits a radius off the skin (Plug-in Gait's
+#: joint offsets add it to the joint width).  Vicon's standard full-body marker is 14 mm.
+MARKER_DIAMETER = 0.014
 
 
 @dataclass(frozen=True)
@@ -168,8 +174,9 @@ def joint_centres(rec: MarkerRecording, ms: MarkerSet) -> JointCentres:
 
     for s, side in (("L", "left"), ("R", "right")):
         hip = out.get(f"{side}_hip")
-        medial_joint(f"{side}_knee", f"{s}KNE", f"{s}KNEM", hip, 0.20 * W, mid_hip)
-        medial_joint(f"{side}_ankle", f"{s}ANK", f"{s}ANKM", out.get(f"{side}_knee"), 0.14 * W, mid_hip)
+        r = MARKER_DIAMETER / 2
+        medial_joint(f"{side}_knee", f"{s}KNE", f"{s}KNEM", hip, 0.20 * W + r, mid_hip)
+        medial_joint(f"{side}_ankle", f"{s}ANK", f"{s}ANKM", out.get(f"{side}_knee"), 0.14 * W + r, mid_hip)
         if m(f"{s}TOE") is not None:
             out[f"{side}_toe"] = m(f"{s}TOE")
             how[f"{side}_toe"] = f"{s}TOE"
@@ -177,7 +184,7 @@ def joint_centres(rec: MarkerRecording, ms: MarkerSet) -> JointCentres:
         if sho is not None:
             out[f"{side}_shoulder"] = sho - 0.17 * S * thorax_up
             how[f"{side}_shoulder"] = f"{s}SHO moved {170 * S:.0f} mm down the thorax (Rab 2002)"
-        medial_joint(f"{side}_elbow", f"{s}ELB", f"{s}ELBM", out.get(f"{side}_shoulder"), 0.11 * S, trunk)
+        medial_joint(f"{side}_elbow", f"{s}ELB", f"{s}ELBM", out.get(f"{side}_shoulder"), 0.11 * S + r, trunk)
         wra, wrb = m(f"{s}WRA"), m(f"{s}WRB")
         if wra is not None and wrb is not None:
             out[f"{side}_wrist"] = 0.5 * (wra + wrb)

@@ -260,3 +260,17 @@ def test_a_hip_flexing_in_one_plane_keeps_the_regression():
     V = [np.einsum("fij,j->fi", R, v) + hip for v in ([0, 0.05, -THIGH], [0.03, 0.06, -0.22])]
     got, _, rank = sphere_fit(V, prior=hip + [0.0, 0.04, 0.0], max_rank=2)
     assert rank == 2 and abs(got[1] - (hip[1] + 0.04)) < 1e-9 and np.linalg.norm(got[[0, 2]] - hip[[0, 2]]) < 1e-6
+
+
+def test_a_narrow_parent_frame_leaves_the_joint_to_the_regression():
+    """Two markers and a joint centre nearly in a row (the CMU thigh: hip, LTHI, LKNE) do not fix
+    the segment's turn about its long axis: the child's fit would follow skin motion."""
+    labels, P, _ = synthetic_legs(F=400)
+    idx = {lab: k for k, lab in enumerate(labels)}
+    keep = [k for k, lab in enumerate(labels) if lab != "LKNEM"]
+    # LTHI moved onto the hip-knee line (5 mm off it): the left thigh's points lie in a row
+    P[:, idx["LTHI"]] = 0.5 * (P[:, idx["LKNE"]] + (P[:, idx["LASI"]] + P[:, idx["LPSI"]]) / 2) + 0.005
+    labels = [labels[k] for k in keep]
+    cal = functional_joint_centres(_rec(labels, P[:, keep]), detect_marker_set(labels))
+    assert "the left_thigh frame is too narrow" in cal.method["left_knee"], cal.method["left_knee"]
+    assert cal.method["right_knee"].startswith("functional")

@@ -75,3 +75,22 @@ def test_load_motion_solves_a_marker_file_on_request():
     assert m.meta["marker_residual_rms_mm"] < 15.0
     with pytest.raises(Exception, match="do not apply to a solved marker recording"):
         solved_motion(rec, max_gap=3)
+
+
+def test_single_limb_markers_take_the_side_they_are_on():
+    """vicon_upperbody: ISB-style labels without a side (EPICl = lateral epicondyle, not left)
+    on the subject's right arm: the arm's roles go to the right side, nothing to the left."""
+    from physmocap.markers.functional import segment_markers
+    from physmocap.markers.markerset import recording_marker_set
+    from physmocap.sources.trc import read_trc_markers
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = read_trc_markers(shared_file("vicon_upperbody.trc"))
+    ms = recording_marker_set(rec)
+    lab = {role: rec.labels[i] for role, i in ms.roles.items()}
+    assert lab["RELB"] == "EPICl" and lab["RELBM"] == "EPICm" and lab["RWRA"] == "STYLr" and lab["RSHO"] == "ACRO_tip"
+    assert not any(r.startswith("L") and r not in ("LASI", "LPSI") for r in ms.roles)
+    segs = segment_markers(rec, ms)
+    assert not any(s.startswith("left_") for s in segs.values())
+    assert segs[rec.labels.index("ARMl")] == "right_upper_arm"

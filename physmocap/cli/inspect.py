@@ -202,7 +202,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..markers.joints import up_axis
-    from ..markers.markerset import detect_marker_set, load_marker_set, marker_set_toml
+    from ..markers.markerset import marker_set_toml, recording_marker_set
 
     path = Path(args.input)
     if path.suffix.lower() == ".c3d":
@@ -210,7 +210,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
     else:
         from ..sources.trc import read_trc_markers as read
     rec = read(path, args.units)
-    ms = detect_marker_set(rec.labels, load_marker_set(args.marker_set) if args.marker_set else None)
+    ms = recording_marker_set(rec, args.marker_set)
     if args.emit_markerset:
         sys.stdout.write(marker_set_toml(rec.labels, ms))
         return 0

@@ -39,6 +39,7 @@ distance between consecutive centres.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -413,23 +414,33 @@ def _minor_extent(u: np.ndarray) -> float:
 
 # -- marker attachment -----------------------------------------------------------------
 def _side_stem(label: str) -> tuple[str | None, str]:
+    """``(side or None, stem)`` of a label: a leading ``L``/``R`` (``LUPA``), or a trailing
+    capital ``L``/``R`` (``ThighL``); a trailing lowercase ``l m r u`` (``ARMl``) qualifies the
+    landmark (lateral, medial, radial, ulnar), is not a side, and is dropped from the stem."""
     p = plain_label(label)
+    raw = re.sub(r"[^A-Za-z0-9]", "", label.rsplit(":", 1)[-1])
     if len(p) > 1 and p[0] in "LR":
         return ("left" if p[0] == "L" else "right"), p[1:]
-    if len(p) > 1 and p[-1] in "LR" and p[:-1].isalpha():
+    if len(p) > 1 and raw[-1:] in ("L", "R") and p[:-1].isalpha():
         return ("left" if p[-1] == "L" else "right"), p[:-1]
+    if len(p) > 2 and raw[-1:] in ("l", "m", "r", "u") and raw[-2:-1].isupper():
+        return None, p[:-1]
     return None, p
 
 
 def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
     """Marker index -> segment for the markers playing a role, and cluster markers named
-    in :data:`LABEL_HINTS` (``LUPA`` -> ``left_upper_arm``, ``RBAC`` -> ``thorax``)."""
+    in :data:`LABEL_HINTS` (``LUPA`` -> ``left_upper_arm``, ``RBAC`` -> ``thorax``); a
+    hinted marker whose label has no side takes the side it is on (:mod:`.sides`)."""
+    from .sides import lateral_offsets, side_of
+
     out: dict[int, str] = {}
     for seg, roles in SEGMENT_ROLES.items():
         for r in roles:
             if r in ms.roles:
                 out[ms.roles[r]] = seg
     used = set(ms.roles.values())
+    offsets: np.ndarray | None = None
     for i, lab in enumerate(rec.labels):
         if i in used:
             continue
@@ -439,7 +450,11 @@ def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
             continue
         if seg in SEGMENT_ROLES:
             out[i] = seg
-        elif side is not None:
+            continue
+        if side is None:
+            offsets = lateral_offsets(rec, ms) if offsets is None else offsets
+            side = None if offsets is None else side_of(offsets[i])
+        if side is not None:
             out[i] = f"{side}_{seg}"
     return out
 

@@ -10,7 +10,7 @@ import numpy as np
 from ..motion import Motion
 from .functional import functional_joint_centres, warn_fallbacks
 from .joints import up_axis, warn_unused
-from .markerset import detect_marker_set, load_marker_set
+from .markerset import recording_marker_set
 from .recording import MarkerRecording
 
 __all__ = ["marker_motion"]
@@ -48,8 +48,7 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
 
     if solve:
         return solved_motion(rec, marker_set, **options)
-    overrides = load_marker_set(marker_set) if marker_set is not None else None
-    ms = detect_marker_set(rec.labels, overrides)
+    ms = recording_marker_set(rec, marker_set)
     warn_unused(rec, ms)
     centres = functional_joint_centres(rec, ms)
     warn_fallbacks(centres, rec.source)

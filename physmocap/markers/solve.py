@@ -37,7 +37,7 @@ import numpy as np
 from ..errors import InputError, warn
 from .functional import Calibration, attach_by_rigidity, functional_joint_centres, warn_fallbacks
 from .joints import up_axis
-from .markerset import MarkerSet, detect_marker_set, load_marker_set
+from .markerset import MarkerSet, recording_marker_set
 from .motion import _to_z_up
 from .recording import MarkerRecording
 
@@ -329,10 +329,7 @@ def calibrate_actor(
     from ..models.scaling import scaled_humanoid_spec
 
     opt = options or MarkerSolveOptions()
-    if isinstance(marker_set, MarkerSet):
-        ms = marker_set
-    else:
-        ms = detect_marker_set(rec.labels, load_marker_set(marker_set) if marker_set is not None else None)
+    ms = recording_marker_set(rec, marker_set)
     valid = rec.valid
     if not valid.any():
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual): nothing to solve", path=rec.source)

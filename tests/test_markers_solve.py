@@ -274,3 +274,29 @@ def test_a_narrow_parent_frame_leaves_the_joint_to_the_regression():
     cal = functional_joint_centres(_rec(labels, P[:, keep]), detect_marker_set(labels))
     assert "the left_thigh frame is too narrow" in cal.method["left_knee"], cal.method["left_knee"]
     assert cal.method["right_knee"].startswith("functional")
+
+
+def test_a_hinge_axis_far_from_the_medio_lateral_line_is_not_believed():
+    """A knee whose shank markers turn about an axis 50 degrees off the line between the knee
+    markers (skin motion, not a knee) keeps the regression, with the reason."""
+    from physmocap.markers.functional import _axis_deviation
+
+    F = 200
+    ang = np.radians(np.linspace(0, 90, F))
+    axis = np.array([np.sin(np.radians(50)), np.cos(np.radians(50)), 0.0])  # 50 deg from y (medio-lateral)
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec(ang[:, None] * axis).as_matrix()
+    V = [np.einsum("fij,j->fi", R, [0.0, 0.0, -0.3])]
+    parent = SegmentFramesStub()
+    dev = _axis_deviation(parent, V, np.tile([0.0, 0.05, 0.0], (F, 1)), np.zeros((F, 3)))
+    assert abs(dev - 50.0) < 1.0
+    assert _axis_deviation(parent, [np.einsum("fij,j->fi", Rotation.from_rotvec(ang[:, None] * [0, 1.0, 0]).as_matrix(),
+                                              [0.0, 0.0, -0.3])], np.tile([0.0, 0.05, 0.0], (F, 1)), np.zeros((F, 3))) < 1.0
+
+
+class SegmentFramesStub:
+    """The identity frame, for :func:`_axis_deviation`."""
+
+    def to_local(self, X):
+        return X

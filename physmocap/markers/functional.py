@@ -96,6 +96,14 @@ MAX_FRAME_ERROR = 0.02
 #: always keeps the regression's component: the functional axis at the anatomical depth
 #: (the projection of the anatomical centre onto the functional axis).
 HINGE_JOINTS = ("knee", "elbow", "ankle")
+#: The lateral marker role of each hinge (``{s}`` prefix added per side).
+LATERAL_ROLE = {"knee": "KNE", "ankle": "ANK", "elbow": "ELB"}
+#: Largest angle (degrees) between a fitted hinge axis and the anatomical medio-lateral line
+#: (lateral marker to the anatomical centre): the knee's flexion axis lies close to the
+#: transepicondylar axis (Churchill et al. 1998, Clin. Orthop. 356:111), the ankle's
+#: talocrural axis close to the line through the malleoli tips (Inman 1976), the elbow's
+#: through the epicondyles; an axis far off is a fit to skin motion, not the joint.
+MAX_HINGE_AXIS_DEG = 30.0
 
 #: Segment -> marker roles on it (``{s}`` the side letter).  Cluster markers without a role
 #: are attached by :data:`LABEL_HINTS` or by rigidity (:func:`segment_markers`).
@@ -544,7 +552,9 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
                 fr = own_frame(parent, (proximal,))
                 if fr is not None:
                     frames[parent] = fr
-            why, fit = _fit_joint(rec, joint, frames.get(parent), own_frame(child), members.get(child, []), positions.get(joint))
+            lat = ms.roles.get(f"{side[0].upper()}{LATERAL_ROLE.get(j, '')}")
+            why, fit = _fit_joint(rec, joint, frames.get(parent), own_frame(child), members.get(child, []), positions.get(joint),
+                                  None if lat is None else P[:, lat])
             if fit is None:
                 if why:
                     method[joint] = (method[joint] + f"; not functional: {why}") if joint in method else f"none ({why})"
@@ -591,8 +601,28 @@ def _lever(parent: SegmentFrames, V: list[np.ndarray], prior: np.ndarray) -> flo
     return float(np.median(d)) if d.size else float("nan")
 
 
+def _axis_deviation(parent: SegmentFrames, V: list[np.ndarray], lateral: np.ndarray | None,
+                    prior_world: np.ndarray | None) -> float | None:
+    """Angle (degrees, 0-90) between a hinge's axis, seen from the parent, and the anatomical
+    medio-lateral line from the lateral marker to the anatomical centre (both in the parent's
+    frame, medians over the frames); None without them.  The axis is the normal of the planes
+    the child's markers sweep about it: the least direction of their pooled covariance."""
+    if lateral is None or prior_world is None:
+        return None
+    ml = _nanmedian_rows(parent.to_local(prior_world) - parent.to_local(lateral))
+    C = np.zeros((3, 3))
+    for v in V:
+        v = v[np.all(np.isfinite(v), 1)]
+        if len(v) >= 4:
+            C += np.cov(v.T, bias=True)
+    if ml is None or not np.any(C) or np.linalg.norm(ml) < 1e-3:
+        return None
+    axis = np.linalg.eigh(C)[1][:, 0]
+    return float(np.degrees(np.arccos(min(1.0, abs(float(axis @ ml)) / np.linalg.norm(ml)))))
+
+
 def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | None, child_markers: list[int],
-               regression: np.ndarray | None):
+               regression: np.ndarray | None, lateral: np.ndarray | None = None):
     """``(why not, None)`` or ``("", (world centres (F, 3), centre in the parent frame, method))``."""
     if parent is None:
         return f"too few markers on {FUNCTIONAL_JOINTS[joint][0]} for a rigid frame (3 points needed)", None
@@ -657,6 +687,11 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
             break
         sel = sel[keep]
     kind = "SCoRE" if use_score else "sphere fit"
+    if hinge:
+        dev = _axis_deviation(parent, [v[sel] for v in V], lateral, regression)
+        if dev is not None and dev > MAX_HINGE_AXIS_DEG:
+            return (f"the fitted hinge axis is {dev:.0f} degrees off the line from the lateral marker to the "
+                    f"anatomical centre (at most {MAX_HINGE_AXIS_DEG:.0f}): a fit to skin motion"), None
     if res > MAX_RESIDUAL:
         return f"{kind} residual {1000 * res:.0f} mm is too large", None
     if regression is not None and np.linalg.norm(cp - prior) > MAX_SHIFT:

@@ -151,14 +151,20 @@ def run(args: argparse.Namespace) -> int:
     if args.compare:
         c = stats["offline_difference_cm"]
         print(f"streaming vs offline body positions: mean {c['mean']:.2f} cm, p95 {c['p95']:.2f} cm, max {c['max']:.2f} cm")
-    with OutputSet():  # the result and the figures renamed into place together, or none
+    write_results(traj, out, stats, args.stats)
+    return 0
+
+
+def write_results(traj, out: Path | None, stats: dict, stats_path: str | None) -> None:
+    """The streamed result (``out``, any retarget output) and the latency figures (JSON),
+    renamed into place together, or none."""
+    with OutputSet():
         if out is not None:
             from .retarget import write_outputs
 
             write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
-        if args.stats:
-            with atomic_open(args.stats, "w") as fh:
+        if stats_path:
+            with atomic_open(stats_path, "w") as fh:
                 json.dump(stats, fh, indent=2, sort_keys=True)
                 fh.write("\n")
-            announce(f"wrote {args.stats}")
-    return 0
+            announce(f"wrote {stats_path}")

@@ -188,20 +188,15 @@ JOINT_POSITIONS_SCHEMA: dict = {
 }
 
 
-#: physmocap's schema for optical markers: labelled points (metres, the recording's axes).
+#: physmocap's schema for optical markers: labelled points (metres, the recording's axes);
+#: the frame fields of :data:`JOINT_POSITIONS_SCHEMA`, points by marker label.
 LABELLED_POINTS_SCHEMA: dict = {
     "title": "physmocap.LabelledPoints",
     "description": "Labelled marker positions of one frame, in metres; a marker not seen on the frame is absent",
     "type": "object",
     "properties": {
-        "timestamp": _time_schema("Timestamp of the frame"),
-        "frame": {"type": "integer", "minimum": 0, "description": "0-based frame index"},
-        "frame_id": {"type": "string", "description": "Frame the points are expressed in"},
-        "points": {
-            "type": "object",
-            "additionalProperties": _POINT,
-            "description": "Marker label -> position",
-        },
+        **{k: JOINT_POSITIONS_SCHEMA["properties"][k] for k in ("timestamp", "frame", "frame_id")},
+        "points": {"type": "object", "additionalProperties": _POINT, "description": "Marker label -> position"},
     },
     "required": ["timestamp", "frame", "frame_id", "points"],
 }

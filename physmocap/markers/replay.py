@@ -12,14 +12,12 @@ time includes the waits for a core.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import OptionError
-from ..fileio import OutputSet, announce, atomic_open
 from .recording import MarkerRecording
 
 __all__ = ["replay_markers", "read_marker_recording"]
@@ -101,16 +99,9 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
           f"{lat['median']:.2f} ms, p99 {lat['p99']:.2f} ms (CPU p99 {cp['p99']:.2f} ms), first frame "
           f"{lat['first_frame']:.0f} ms; marker residual RMS {stats['marker_residual_rms_mm']:.1f} mm; "
           f"{stats['throughput_fps']:.0f} frames/s")
-    with OutputSet():
-        if out is not None:
-            from ..cli.retarget import write_outputs
+    from ..cli.replay import write_results
 
-            traj = Trajectory(character or stream.actor.character, qc if character is not None else qa, rec.fps,
-                              source=str(rec.source))
-            write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
-        if args.stats:
-            with atomic_open(args.stats, "w") as fh:
-                json.dump(stats, fh, indent=2, sort_keys=True)
-                fh.write("\n")
-            announce(f"wrote {args.stats}")
+    traj = Trajectory(character or stream.actor.character, qc if character is not None else qa, rec.fps,
+                      source=str(rec.source))
+    write_results(traj, out, stats, args.stats)
     return 0

@@ -275,7 +275,6 @@ def solve_markers(
     from ..trajectory import SolverStats, Trajectory
 
     actor = calibrate_actor(rec, marker_set, options)
-    opt = actor.options
     F, M = rec.num_frames, len(rec.labels)
     char, attached, cal, R = actor.character, actor.attached, actor.calibration, actor.to_z_up
     valid = rec.valid
@@ -338,7 +337,7 @@ def calibrate_actor(
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)
     seg_of = {i: s for i, s in seg_of.items() if s in SEGMENT_BODY}
     # segments with too few markers for a frame still take their markers (the IK needs no frame)
-    F, M = rec.num_frames, len(rec.labels)
+    M = len(rec.labels)
     R = _to_z_up(up_axis(rec, ms))
     Pz = rec.positions @ R.T
     centres = {k: v @ R.T for k, v in cal.positions.items()}

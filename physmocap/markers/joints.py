@@ -26,8 +26,8 @@ where a marker it needs is invalid):
   T10 and the sternum marker; **head**: centroid of the head markers.
 * **Toes**: the toe (second metatarsal) marker.
 
-This is the anatomical-regression half of issue 11's calibration; functional joint
-centres (sphere fits over a range-of-motion stretch) and marker-driven IK are not done yet.
+This is the anatomical-regression half of issue 11's calibration; :mod:`.functional` uses the
+motion where it can place a centre and keeps these elsewhere.
 """
 
 from __future__ import annotations

@@ -14,7 +14,24 @@ physmocap joint centres with the vendor's joints:
 For each, it finds the time offset between the files (the lag minimising the distance, +-1 s),
 fits one rigid transform (rotation, translation) of the vendor's joints onto physmocap's over
 the whole take (Kabsch), and prints the mean distance per joint and the knee/elbow flexion
-angle differences.
+angle differences (the issue's measure).
+
+The vendor's BVH is not a sound reference above the pelvis: the AMC-to-BVH conversion drops
+the length of every ASF bone with several children (``Neck``, ``LeftShoulder``,
+``RightShoulder``, ``LeftFingerBase``, ``LThumb``... have zero offsets), so the neck and both
+arms hang from the *base* of CMU's ``thorax`` bone, about one back segment (11 cm) too low;
+the reference checks printed last show it (the vendor's head top below the head markers, its
+shoulder joints far below the acromion markers).  Two more tables therefore follow:
+
+* ``legs-aligned``: the rigid transform fitted on the hips, knees and ankles only;
+* ``thorax restored``: the vendor's shoulders, elbows and wrists moved by the vendor's own
+  upper-back vector (``Spine`` to ``Spine1``, the ASF back bones being near-equal), an
+  assumption about the missing bone, not a fit to physmocap; then one rigid transform over
+  all joints.
+
+The wrist cannot be repaired that way: the BVH's ``LeftHand`` is the start of CMU's
+``lwrist`` bone (forearm twist), the anatomical wrist (``lhand``'s start) lies ``lwrist``'s
+length further, a length the conversion lost.
 
 Usage:  python scripts/markers_vs_vendor.py [--frames N] [--only regression,functional,solved]
 """
@@ -52,15 +69,17 @@ def angle(a, b, c) -> np.ndarray:
     return np.degrees(np.arccos(np.clip(cos, -1, 1)))
 
 
-def compare(A: np.ndarray, B: np.ndarray) -> dict:
+def compare(A: np.ndarray, B: np.ndarray, fit: list[int] | None = None) -> dict:
     """Distances (m) per joint and flexion differences (deg) of ``A`` (F, 12, 3) against the
-    vendor's ``B`` after the best lag and one rigid transform."""
+    vendor's ``B`` after the best lag and one rigid transform fitted on the joints ``fit``
+    (all by default)."""
     best = None
+    cols = list(range(A.shape[1])) if fit is None else fit
     for lag in range(-120, 121):
         a = A[max(0, lag):]
         b = B[max(0, -lag):]
         n = min(len(a), len(b))
-        a, b = a[:n:10].reshape(-1, 3), b[:n:10].reshape(-1, 3)
+        a, b = a[:n:10, cols].reshape(-1, 3), b[:n:10, cols].reshape(-1, 3)
         ok = np.all(np.isfinite(a), 1) & np.all(np.isfinite(b), 1)
         R, t = kabsch(b[ok], a[ok])
         err = np.mean(np.linalg.norm(b[ok] @ R.T + t - a[ok], axis=1))
@@ -81,6 +100,51 @@ def compare(A: np.ndarray, B: np.ndarray) -> dict:
     return {"lag": lag, "mean": {j: float(np.nanmean(d[:, k])) for k, j in enumerate(JOINTS)},
             "p95": {j: float(np.nanpercentile(d[:, k], 95)) for k, j in enumerate(JOINTS)},
             "all": float(np.nanmean(d)), "angles": angles}
+
+
+def restore_thorax(vendor, B: np.ndarray) -> np.ndarray:
+    """The vendor's joints with the arms moved by its upper-back vector (Spine -> Spine1, world)."""
+    names = list(vendor.skeleton.names)
+    W = vendor.world_positions()
+    back = W[:, names.index("Spine1")] - W[:, names.index("Spine")]
+    out = B.copy()
+    for k, j in enumerate(JOINTS):
+        if j.split("_", 1)[1] in ("shoulder", "elbow", "wrist"):
+            out[:, k] += back
+    return out
+
+
+def reference_checks(vendor, rec, ms, lag: int) -> list[str]:
+    """Where the vendor's upper body sits relative to the markers (cm along the lab's up
+    axis, the file frames matched by ``lag``, the skeleton in the lab frame as recorded)."""
+    names = list(vendor.skeleton.names)
+    a0, b0 = max(0, lag), max(0, -lag)
+    n = min(rec.num_frames - a0, vendor.num_frames - b0)
+    W = vendor.world_positions()[b0:b0 + n]
+    P = rec.positions[a0:a0 + n]
+    up = np.argmax(np.abs(np.nanmedian(P[:, ms.roles["LFHD"]] - P[:, ms.roles["LANK"]], 0)))
+    vup = np.argmax(np.abs(np.median(W[:, names.index("Head")] - W[:, names.index("LeftFoot")], 0)))
+    head = np.nanmean(P[:, [ms.roles[r] for r in ("LFHD", "RFHD", "LBHD", "RBHD")], up], 1)
+
+    def dz(joint: str, z: np.ndarray) -> float:
+        return 100 * float(np.nanmedian(W[:, names.index(joint), vup] - z))
+
+    return [f"vendor head top (Head_End) {dz('Head_End', head):+.1f} cm above the head markers' centroid",
+            f"vendor neck base (Neck) {dz('Neck', P[:, ms.roles['C7'], up]):+.1f} cm above C7",
+            f"vendor shoulder joints {dz('LeftArm', P[:, ms.roles['LSHO'], up]):+.1f} / "
+            f"{dz('RightArm', P[:, ms.roles['RSHO'], up]):+.1f} cm above the acromion markers LSHO / RSHO"]
+
+
+def print_table(title: str, out: dict, results: dict, label: str = "all") -> None:
+    """One table: mean distance per joint and method, then the flexion differences."""
+    names = list(out)
+    print(f"{title:17s}" + "".join(f"{n:>12s}" for n in names))
+    for j in JOINTS:
+        print(f"{j:17s}" + "".join(f"{100 * out[n]['mean'][j]:12.1f}" for n in names))
+    print(f"{label:17s}" + "".join(f"{100 * out[n]['all']:12.1f}" for n in names))
+    print("flexion difference (deg, mean)" if label == "all" else "flexion (deg, mean)")
+    for a in out[names[0]]["angles"]:
+        print(f"{a:17s}" + "".join(f"{out[n]['angles'][a]:12.1f}" for n in names))
 
 
 def main(argv=None) -> int:
@@ -129,16 +193,19 @@ def main(argv=None) -> int:
                              f"{rep['solver']['frames_per_second_wall']:.0f} wall; marker residual RMS "
                              f"{rep['overall']['rms_mm']:.1f} mm, max {rep['overall']['max_mm']:.0f} mm")
     out = {k: compare(A, B) for k, (A, _) in results.items()}
-    names = list(out)
-    print(f"{'joint (cm, mean)':17s}" + "".join(f"{n:>12s}" for n in names))
-    for j in JOINTS:
-        print(f"{j:17s}" + "".join(f"{100 * out[n]['mean'][j]:12.1f}" for n in names))
-    print(f"{'all':17s}" + "".join(f"{100 * out[n]['all']:12.1f}" for n in names))
-    print("flexion difference (deg, mean)")
-    for a in out[names[0]]["angles"]:
-        print(f"{a:17s}" + "".join(f"{out[n]['angles'][a]:12.1f}" for n in names))
-    for n in names:
+    print_table("joint (cm, mean)", out, results)
+    for n in out:
         print(f"{n}: time offset {out[n]['lag']} frames; {results[n][1]}")
+    legs = [k for k, j in enumerate(JOINTS) if j.split("_", 1)[1] in ("hip", "knee", "ankle")]
+    print()
+    print_table("legs-aligned (cm)", {k: compare(A, B, legs) for k, (A, _) in results.items()}, results, "mean")
+    print()
+    B2 = restore_thorax(vendor, B)
+    print_table("thorax restored", {k: compare(A, B2) for k, (A, _) in results.items()}, results, "mean")
+    print()
+    print("reference checks (the vendor's upper body against the markers):")
+    for line in reference_checks(vendor, rec, ms, out[next(iter(out))]["lag"]):
+        print("  " + line)
     return 0
 
 

@@ -185,7 +185,9 @@ def test_cmu_take_solved_end_to_end(tmp_path, capsys):
     assert report["overall"]["rms_mm"] < 12.0
     assert all(e["rms_mm"] < 25.0 for e in report["segments"].values() if e["rms_mm"] is not None)
     assert report["markers"]["RBAC-1"]["segment"] is None and report["markers"]["LUPA"]["segment"] == "left_upper_arm"
-    assert report["joint_centres"]["left_hip"].startswith("functional")
+    # the jumps flex the hips in one plane: a hip centre needs two (Piazza 2004), the regression stays
+    assert "the motion stays in one plane" in report["joint_centres"]["left_hip"]
+    assert report["joint_centres"]["left_knee"].startswith("functional") and "axis depth" in report["joint_centres"]["left_knee"]
     from physmocap.ik.retarget import map_motion
     from physmocap.sources import load_motion
 
@@ -234,3 +236,67 @@ def test_a_marker_rigid_on_several_segments_is_not_attached():
     # nothing moves: every marker is rigid on both segments, none can be attached
     rec = MarkerRecording(("A", "B"), np.stack([fixed, fixed], axis=1), 100.0, Path("synthetic.c3d"))
     assert attach_by_rigidity(rec, {"pelvis": still, "thorax": frames(np.zeros(F))}, {}) == {}
+
+
+def test_a_hip_flexing_in_one_plane_keeps_the_regression():
+    """A ball joint's centre needs motion in two planes (Piazza 2004): thighs that only flex
+    (jumping, walking) leave the hip to the regression, with the reason; a hinge's centre
+    along its axis always comes from the regression (rank at most 2 of 3)."""
+    labels, P, _ = synthetic_legs(F=400)
+    F = P.shape[0]
+    t = np.arange(F) / 100.0
+    # a still pelvis, and the left thigh's markers turning about the true hip in flexion only
+    idx = {lab: k for k, lab in enumerate(labels)}
+    hip = TRUE_HIP["L"]
+    R = _rot("y", -40 * np.sin(1.7 * t))
+    for k, v in {"LTHI": [0.03, 0.06, -0.22], "LKNE": [0, 0.05, -THIGH], "LKNEM": [0, -0.05, -THIGH]}.items():
+        P[:, idx[k]] = np.einsum("fij,j->fi", R, v) + hip
+    pel = {"LASI": [0, 0.125, 0], "RASI": [0, -0.125, 0], "LPSI": [-0.15, 0.05, 0.0], "RPSI": [-0.15, -0.05, 0.0]}
+    for k, v in pel.items():
+        P[:, idx[k]] = v
+    cal = functional_joint_centres(_rec(labels, P), detect_marker_set(labels))
+    assert "the motion stays in one plane" in cal.method["left_hip"], cal.method["left_hip"]
+    assert cal.method["right_hip"].startswith("regression")  # its pelvis was frozen too: not a test of it
+    V = [np.einsum("fij,j->fi", R, v) + hip for v in ([0, 0.05, -THIGH], [0.03, 0.06, -0.22])]
+    got, _, rank = sphere_fit(V, prior=hip + [0.0, 0.04, 0.0], max_rank=2)
+    assert rank == 2 and abs(got[1] - (hip[1] + 0.04)) < 1e-9 and np.linalg.norm(got[[0, 2]] - hip[[0, 2]]) < 1e-6
+
+
+def test_a_narrow_parent_frame_leaves_the_joint_to_the_regression():
+    """Two markers and a joint centre nearly in a row (the CMU thigh: hip, LTHI, LKNE) do not fix
+    the segment's turn about its long axis: the child's fit would follow skin motion."""
+    labels, P, _ = synthetic_legs(F=400)
+    idx = {lab: k for k, lab in enumerate(labels)}
+    keep = [k for k, lab in enumerate(labels) if lab != "LKNEM"]
+    # LTHI moved onto the hip-knee line (5 mm off it): the left thigh's points lie in a row
+    P[:, idx["LTHI"]] = 0.5 * (P[:, idx["LKNE"]] + (P[:, idx["LASI"]] + P[:, idx["LPSI"]]) / 2) + 0.005
+    labels = [labels[k] for k in keep]
+    cal = functional_joint_centres(_rec(labels, P[:, keep]), detect_marker_set(labels))
+    assert "the left_thigh frame is too narrow" in cal.method["left_knee"], cal.method["left_knee"]
+    assert cal.method["right_knee"].startswith("functional")
+
+
+def test_a_hinge_axis_far_from_the_medio_lateral_line_is_not_believed():
+    """A knee whose shank markers turn about an axis 50 degrees off the line between the knee
+    markers (skin motion, not a knee) keeps the regression, with the reason."""
+    from physmocap.markers.functional import _axis_deviation
+
+    F = 200
+    ang = np.radians(np.linspace(0, 90, F))
+    axis = np.array([np.sin(np.radians(50)), np.cos(np.radians(50)), 0.0])  # 50 deg from y (medio-lateral)
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec(ang[:, None] * axis).as_matrix()
+    V = [np.einsum("fij,j->fi", R, [0.0, 0.0, -0.3])]
+    parent = SegmentFramesStub()
+    dev = _axis_deviation(parent, V, np.tile([0.0, 0.05, 0.0], (F, 1)), np.zeros((F, 3)))
+    assert abs(dev - 50.0) < 1.0
+    assert _axis_deviation(parent, [np.einsum("fij,j->fi", Rotation.from_rotvec(ang[:, None] * [0, 1.0, 0]).as_matrix(),
+                                              [0.0, 0.0, -0.3])], np.tile([0.0, 0.05, 0.0], (F, 1)), np.zeros((F, 3))) < 1.0
+
+
+class SegmentFramesStub:
+    """The identity frame, for :func:`_axis_deviation`."""
+
+    def to_local(self, X):
+        return X

@@ -29,7 +29,7 @@ def register(subparsers) -> None:  # noqa: ANN001
     )
     p.add_argument("input", metavar="IN", help="input motion file, or 'example' for the bundled walk")
     p.add_argument("output", metavar="OUT", help="output file, by suffix: .bvh (rotational sources) or .mcap "
-                   "(Foxglove FrameTransforms; any source)")
+                   "(Foxglove FrameTransforms; any source; marker files (.c3d, .trc) as labelled points)")
     p.add_argument("--rotation-order", metavar="ORDER",
                    help="Euler order for every joint, e.g. ZXY, ZYX, XYZ (default: keep the input's)")
     p.add_argument("--units", metavar="UNIT",
@@ -98,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError(f"--fps must be a positive frame rate, got {args.fps:g}")
 
     _check_output(args.output, out_opts)
+    if _is_markers(args.input) and args.output.lower().endswith(".mcap"):
+        return _convert_markers(args, out_opts)
     motion = load_motion(args.input, **in_opts)
     F = motion.num_frames
     ends = int(motion.skeleton.end_site.sum())
@@ -121,4 +123,33 @@ def run(args: argparse.Namespace) -> int:
         motion = motion.resample(args.fps)
     out = write_motion(motion, args.output, **out_opts)
     print(f"physmocap: wrote {out}: {motion.num_frames} frames at {motion.fps:.6g} fps", file=sys.stderr)
+    return 0
+
+
+def _is_markers(path: str) -> bool:
+    from pathlib import Path
+
+    return Path(path).suffix.lower() in (".c3d", ".trc")
+
+
+def _convert_markers(args: argparse.Namespace, out_opts: dict) -> int:
+    """A marker file (.c3d, .trc) to an MCAP marker recording (labelled points, metres, the
+    file's axes: :func:`physmocap.export.mcap.write_markers_mcap`), cut to [--start, --end)."""
+    from ..export.mcap import write_markers_mcap
+    from ..markers.recording import MarkerRecording
+    from .solve import read_markers
+
+    if out_opts or args.fps is not None or args.in_up is not None:
+        raise OptionError("a marker recording is written to MCAP as it is (metres, the file's axes): "
+                          "--rotation-order, --units, --up, --precision, --fps and --in-up do not apply")
+    rec = read_markers(args.input, args.in_units)
+    F = rec.num_frames
+    start = 0 if args.start is None else args.start
+    end = F if args.end is None else args.end
+    if not (0 <= start < end <= F):
+        raise OptionError(f"--start {start} --end {end}: the frame range must satisfy 0 <= start < end <= {F}")
+    rec = MarkerRecording(rec.labels, rec.positions[start:end], rec.fps, rec.source, rec.first_frame + start)
+    print(f"physmocap: read {rec.source}: {F} frames at {rec.fps:.6g} fps, {len(rec.labels)} markers", file=sys.stderr)
+    out = write_markers_mcap(rec, args.output)
+    print(f"physmocap: wrote {out}: {rec.num_frames} frames of labelled markers at {rec.fps:.6g} fps", file=sys.stderr)
     return 0

@@ -18,6 +18,7 @@ import argparse
 import json
 import math
 import sys
+import warnings
 from typing import Any
 
 import numpy as np
@@ -201,25 +202,32 @@ def _inspect_markers(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..markers.joints import up_axis
-    from ..markers.markerset import detect_marker_set, load_marker_set, marker_set_toml
+    from ..markers.markerset import marker_set_toml, recording_marker_set
 
     path = Path(args.input)
     if path.suffix.lower() == ".c3d":
         from ..sources.c3d import read_c3d_markers as read
     else:
         from ..sources.trc import read_trc_markers as read
-    rec = read(path)
-    ms = detect_marker_set(rec.labels, load_marker_set(args.marker_set) if args.marker_set else None)
+    rec = read(path, args.units)
+    ms = recording_marker_set(rec, args.marker_set)
     if args.emit_markerset:
         sys.stdout.write(marker_set_toml(rec.labels, ms))
         return 0
     gaps = rec.gaps()
-    up = "XYZ"[int(np.argmax(np.abs(up_axis(rec, ms))))]
+    k = int(np.argmax(np.abs(up_axis(rec, ms))))
+    up = "XYZ"[k]
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-gap frames
+        span = np.nanmax(rec.positions[..., k], axis=1) - np.nanmin(rec.positions[..., k], axis=1)
+        height = float(np.nanmedian(span)) if np.isfinite(span).any() else None
     rep = {
         "file": str(path),
         "frames": rec.num_frames,
         "fps": rec.fps,
         "markers": len(rec.labels),
+        "units": args.units if args.units is not None else "from the file",
+        "marker_height_m": height,
         "up_axis": up,
         "roles": {role: rec.labels[i] for role, i in sorted(ms.roles.items())},
         "unused": list(ms.unused),
@@ -231,6 +239,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
     out = [
         f"file:      {path} (markers)",
         f"frames:    {rec.num_frames} at {rec.fps:.6g} fps; {len(rec.labels)} markers; up axis {up} (from the markers)",
+        f"units:     {rep['units']}; the markers span {_fmt(height, '.3g')} m vertically (median over frames)",
         f"roles:     {len(ms.roles)} found: " + ", ".join(f"{r}={rec.labels[i]}" for r, i in sorted(ms.roles.items())),
         f"unused:    {', '.join(ms.unused) if ms.unused else '(none)'}",
         "gaps:      " + (", ".join(f"{lab} {n} frames" for lab, n in sorted(gaps.items())) if gaps else "(none)"),

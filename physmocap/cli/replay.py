@@ -32,7 +32,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", help="write the streamed result (.bvh, .npz, .csv, .mcap)")
     p.add_argument("--stats", metavar="STATS.json", help="write the latency figures as JSON")
     p.add_argument("--compare", action="store_true", help="also retarget offline and report the difference")
+    p.add_argument("--calibrate", metavar="ROM", help="marker recordings: calibrate the actor on this range-of-motion "
+                   "clip (.c3d, .trc, .mcap) instead of the recording's first seconds")
+    p.add_argument("--calibration-seconds", type=float, default=10.0,
+                   help="marker recordings: seconds at the start used to calibrate the actor (default 10)")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker recordings: marker roles overriding the aliases")
     p.set_defaults(func=run)
+
+
+def _is_marker_recording(path: str) -> bool:
+    """A .c3d / .trc file, or an MCAP file holding a marker channel."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".c3d", ".trc"):
+        return True
+    if suffix == ".mcap" and Path(path).is_file():
+        from ..sources.mcap import has_markers
+
+        return has_markers(path)
+    return False
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +69,10 @@ def run(args: argparse.Namespace) -> int:
     if args.stats:
         check_writable(args.stats)
     check_distinct([out, args.stats])
+    if _is_marker_recording(args.input):
+        from ..markers.replay import replay_markers
+
+        return replay_markers(args, out)
     motion = load_motion(args.input, min_frames=1)
     character = load_character(args.character, args.map)
     floor = args.floor if args.floor is not None else motion.meta.get("floor_z")
@@ -130,14 +151,20 @@ def run(args: argparse.Namespace) -> int:
     if args.compare:
         c = stats["offline_difference_cm"]
         print(f"streaming vs offline body positions: mean {c['mean']:.2f} cm, p95 {c['p95']:.2f} cm, max {c['max']:.2f} cm")
-    with OutputSet():  # the result and the figures renamed into place together, or none
+    write_results(traj, out, stats, args.stats)
+    return 0
+
+
+def write_results(traj, out: Path | None, stats: dict, stats_path: str | None) -> None:
+    """The streamed result (``out``, any retarget output) and the latency figures (JSON),
+    renamed into place together, or none."""
+    with OutputSet():
         if out is not None:
             from .retarget import write_outputs
 
             write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
-        if args.stats:
-            with atomic_open(args.stats, "w") as fh:
+        if stats_path:
+            with atomic_open(stats_path, "w") as fh:
                 json.dump(stats, fh, indent=2, sort_keys=True)
                 fh.write("\n")
-            announce(f"wrote {args.stats}")
-    return 0
+            announce(f"wrote {stats_path}")

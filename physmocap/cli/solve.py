@@ -21,7 +21,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     p.add_argument("input", metavar="INPUT", help="marker file (.c3d or .trc)")
-    p.add_argument("-o", "--output", required=True, help="output .bvh")
+    p.add_argument("-o", "--output", required=True,
+                   help="output .bvh (the actor); with --character, the character's motion: .bvh, .npz, .csv or .mcap")
+    p.add_argument("--character", metavar="PATH",
+                   help="also retarget the solved actor onto this character (MJCF file or bundled name: humanoid, "
+                   "robot) with the retargeter; -o is then the character's motion")
+    p.add_argument("--map", metavar="MAP.toml", help="the character's mapping file (TOML), with --character")
+    p.add_argument("--actor", metavar="ACTOR.bvh", help="with --character, also write the solved actor as BVH")
+    p.add_argument("--in-units", metavar="UNIT",
+                   help="override the marker file's length unit: mm, cm, m, in, ft or metres per unit (default: the file's)")
     p.add_argument("--report", metavar="REPORT.json", help="write the residual and gap report as JSON")
     p.add_argument("--marker-set", metavar="SET.toml", help="marker roles overriding the built-in aliases")
     p.add_argument("--start", type=int, help="first frame (inclusive)")
@@ -34,17 +42,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def read_markers(path: str):
-    """The :class:`~physmocap.markers.recording.MarkerRecording` of a .c3d or .trc file."""
+def read_markers(path: str, units: str | float | None = None):
+    """The :class:`~physmocap.markers.recording.MarkerRecording` of a .c3d or .trc file
+    (``units`` overriding the file's length unit)."""
     suffix = Path(path).suffix.lower()
     if suffix == ".c3d":
         from ..sources.c3d import read_c3d_markers
 
-        return read_c3d_markers(path)
+        return read_c3d_markers(path, units)
     if suffix == ".trc":
         from ..sources.trc import read_trc_markers
 
-        return read_trc_markers(path)
+        return read_trc_markers(path, units)
     raise InputError(f"physmocap solve reads marker files (.c3d, .trc), not {suffix or 'files without a suffix'!r}", path=path)
 
 
@@ -52,19 +61,29 @@ def run(args: argparse.Namespace) -> int:
     from ..markers.recording import MarkerRecording
     from ..markers.solve import MarkerSolveOptions, print_report, solve_markers, write_actor_bvh
     from ..options import check_frame_range
+    from .retarget import WRITERS
 
     out = Path(args.output)
-    if out.suffix.lower() != ".bvh":
-        raise OptionError("physmocap solve writes a .bvh file", path=out)
-    check_writable(out)
-    if args.report:
-        check_writable(args.report, "report")
-    check_not_input([out, args.report], [args.input, args.marker_set])
-    check_distinct([out, args.report])
+    actor_out = Path(args.actor) if args.actor else None
+    if args.character is None:
+        if out.suffix.lower() != ".bvh":
+            raise OptionError("physmocap solve writes a .bvh file (or, with --character, .bvh/.npz/.csv/.mcap)", path=out)
+        if args.actor or args.map:
+            raise OptionError("--actor and --map go with --character")
+        actor_out, out = out, None
+    elif out.suffix.lower() not in WRITERS:
+        raise OptionError(f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}", path=out)
+    if actor_out is not None and actor_out.suffix.lower() != ".bvh":
+        raise OptionError("the actor is written as .bvh", path=actor_out)
+    outputs = [x for x in (out, actor_out, Path(args.report) if args.report else None) if x is not None]
+    for x in outputs:
+        check_writable(x)
+    check_not_input(outputs, [args.input, args.marker_set, args.map])
+    check_distinct(outputs)
     check_frame_range(args.start, args.end)
     if args.max_iterations < 1:
         raise OptionError("--max-iterations must be at least 1")
-    rec = read_markers(args.input)
+    rec = read_markers(args.input, args.in_units)
     if args.start is not None or args.end is not None:
         F = rec.num_frames
         s = 0 if args.start is None else args.start
@@ -72,13 +91,30 @@ def run(args: argparse.Namespace) -> int:
         if not 0 <= s < F:
             raise OptionError(f"--start {s} is outside the recording (frames 0-{F - 1})", path=args.input)
         rec = MarkerRecording(rec.labels, rec.positions[s:e], rec.fps, rec.source, rec.first_frame + s)
+    character = None
+    if args.character is not None:
+        from ..models import load_character
+
+        character = load_character(args.character, args.map)  # a bad character fails before the solve
     opts = MarkerSolveOptions(max_iterations=args.max_iterations, floor=not args.no_floor)
     sol = solve_markers(rec, args.marker_set, opts)
     rep = sol.report()
+    traj = None
+    if character is not None:
+        from ..ik.retarget import retarget
+        from ..markers.solve import actor_motion
+
+        traj = retarget(actor_motion(sol), character, progress=False if args.quiet else None,
+                        floor=not args.no_floor)
     with OutputSet():
-        write_actor_bvh(sol, out, up=args.up.upper(), units=args.units)
-        if not args.quiet:
-            announce(f"wrote {out}")
+        if actor_out is not None:
+            write_actor_bvh(sol, actor_out, up=args.up.upper(), units=args.units)
+            if not args.quiet:
+                announce(f"wrote {actor_out}")
+        if traj is not None:
+            from .retarget import write_outputs
+
+            write_outputs(traj, [out], args, quiet=args.quiet)
         if args.report:
             with atomic_open(args.report) as fh:
                 json.dump(rep, fh, indent=1)

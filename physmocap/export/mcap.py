@@ -52,6 +52,9 @@ __all__ = [
     "write_trajectory_mcap",
     "frame_time_ns",
     "FRAME_TRANSFORMS_SCHEMA",
+    "LABELLED_POINTS_SCHEMA",
+    "MARKERS_METADATA",
+    "write_markers_mcap",
     "POSES_IN_FRAME_SCHEMA",
     "JOINT_POSITIONS_SCHEMA",
     "SKELETON_METADATA",
@@ -183,6 +186,22 @@ JOINT_POSITIONS_SCHEMA: dict = {
     },
     "required": ["timestamp", "frame", "frame_id", "positions"],
 }
+
+
+#: physmocap's schema for optical markers: labelled points (metres, the recording's axes);
+#: the frame fields of :data:`JOINT_POSITIONS_SCHEMA`, points by marker label.
+LABELLED_POINTS_SCHEMA: dict = {
+    "title": "physmocap.LabelledPoints",
+    "description": "Labelled marker positions of one frame, in metres; a marker not seen on the frame is absent",
+    "type": "object",
+    "properties": {
+        **{k: JOINT_POSITIONS_SCHEMA["properties"][k] for k in ("timestamp", "frame", "frame_id")},
+        "points": {"type": "object", "additionalProperties": _POINT, "description": "Marker label -> position"},
+    },
+    "required": ["timestamp", "frame", "frame_id", "points"],
+}
+#: Metadata record naming a marker recording's labels, rate and source.
+MARKERS_METADATA = "physmocap.markers"
 
 
 def _schema_bytes(schema: dict) -> bytes:
@@ -684,3 +703,41 @@ def write_trajectory_mcap(
         if st is not None and st.num_frames == traj.num_frames:
             tracks.insert(0, st)
     return write_transforms_mcap(path, tracks, traj.fps, poses=poses, compression=compression)
+
+
+def write_markers_mcap(rec: Any, path: str | os.PathLike, *, topic: str = "/markers", start_time_ns: int = 0,
+                       compression: str = "zstd") -> Path:
+    """Write a marker recording (:class:`~physmocap.markers.recording.MarkerRecording`) as
+    MCAP, atomically: one ``physmocap.LabelledPoints`` message per frame on ``topic`` (the
+    valid markers only, metres, the recording's own axes) and a ``physmocap.markers``
+    metadata record (labels in order, fps, first frame, source).  Timestamps and bytes are a
+    function of the input (:func:`frame_time_ns`); :func:`physmocap.sources.mcap.read_mcap_markers`
+    reads it back exactly."""
+    from mcap.writer import CompressionType, Writer
+
+    from ..resources import portable_path
+
+    p = Path(path)
+    fps = float(rec.fps)
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}.get(compression)
+    if comp is None:
+        raise OutputError(f"compression must be zstd, lz4 or none, got {compression!r}", path=p)
+    P = rec.positions
+    ok = np.all(np.isfinite(P), axis=2)
+    with atomic_open(p, "wb") as fh:
+        writer = Writer(fh, compression=comp, enable_data_crcs=True)
+        writer.start(profile="", library=LIBRARY)
+        schema = writer.register_schema("physmocap.LabelledPoints", "jsonschema", _schema_bytes(LABELLED_POINTS_SCHEMA))
+        ch = writer.register_channel(topic, "json", schema)
+        writer.add_metadata(MARKERS_METADATA, {
+            "labels": json.dumps(list(rec.labels)), "fps": repr(fps), "first_frame": str(int(rec.first_frame)),
+            "topic": topic, "units": "m", "axes": "as recorded", "source": portable_path(str(rec.source), p.parent),
+        })
+        for i in range(rec.num_frames):
+            t_ns = frame_time_ns(i, fps, start_time_ns)
+            row = P[i].tolist()
+            msg = {"timestamp": _stamp(t_ns), "frame": i, "frame_id": WORLD_FRAME,
+                   "points": {lab: {"x": q[0], "y": q[1], "z": q[2]} for lab, q, v in zip(rec.labels, row, ok[i]) if v}}
+            writer.add_message(ch, log_time=t_ns, data=_json(msg), publish_time=t_ns, sequence=i)
+        writer.finish()
+    return p

@@ -9,5 +9,14 @@
   lateral markers offset medially by a joint half-width, wrist and head centroids), then a
   positional :class:`~physmocap.motion.Motion` the retargeter consumes unchanged.
 
-Readers: :mod:`physmocap.sources.c3d` (ezc3d) and :mod:`physmocap.sources.trc`.
+* :mod:`.sides`: the side of markers whose labels do not say it, from where they are.
+* :mod:`.functional`: segment frames (Kabsch), functional joint centres (SCoRE, sphere fit)
+  where the motion can place them, fixed segment lengths.
+* :mod:`.solve`: the actor calibration (:func:`~.solve.calibrate_actor`) and marker-driven IK
+  (:func:`~.solve.solve_markers`, ``physmocap solve``).
+* :mod:`.stream`: the streaming solve (calibrate once, one frame at a time); :mod:`.replay`:
+  ``physmocap replay`` on marker recordings.
+
+Readers: :mod:`physmocap.sources.c3d` (ezc3d), :mod:`physmocap.sources.trc`, and marker MCAP
+(:func:`physmocap.sources.mcap.read_mcap_markers`).
 """

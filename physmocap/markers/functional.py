@@ -21,6 +21,13 @@ the pairwise angles) reaches :data:`MIN_SPREAD_DEG`.  A hinge (knee, elbow) dete
 centre only across the axis (SCoRE's known weakness): the direction(s) the data leave
 undetermined take the regression estimate's component (:mod:`.joints`, Harrington 2007 for
 hips), so a knee centre lies on the functional axis at the depth of the anatomical one.
+A fit needs a parent frame whose rotation is determined: points spread off a line enough
+that soft-tissue motion cannot turn it noticeably about its long axis (:data:`MAX_FRAME_ERROR`;
+two skin markers and a joint centre nearly in a row, as on the CMU set's thigh, shank and
+upper arm, do not).  A hinge's centre along its axis is never taken from the motion (:data:`HINGE_JOINTS`), and a
+ball joint (hip, shoulder) or the wrist is fitted only when its motion spans two planes
+(:data:`TWO_PLANE_JOINTS`, Piazza et al. 2004, Camomilla et al. 2006): a jumping or walking
+clip flexes the hip in one plane, which places its centre worse than the regression.
 Frames whose fit residual exceeds three times the median are dropped and the fit repeated
 once (marker glitches).  Where a joint is not exercised enough, its segments lack markers,
 or the fit's residual is implausible, the regression centre is kept; every joint records its
@@ -32,6 +39,7 @@ distance between consecutive centres.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +73,37 @@ MAX_SHIFT = 0.12
 BIN = 0.05
 #: Most frames one fit uses (evenly drawn from the bins when more).
 MAX_FRAMES = 800
+#: Joints whose centre a single plane of motion cannot place (ball joints, and the wrist's two
+#: axes): fitted only when the motion also spans :data:`MIN_SECOND_PLANE_DEG` across its main
+#: plane.  Piazza et al. (2004, J. Biomech. 37:349) found functional hip centres degrade
+#: sharply when the range of motion drops below about 20-30 degrees, and Camomilla et al.
+#: (2006, J. Biomech. 39:1096) that planar (flexion-only) motion places the hip worst; with
+#: mostly one-plane motion (walking, jumping) the regression is the better estimate.
+TWO_PLANE_JOINTS = ("hip", "shoulder", "wrist")
+#: Smallest extent (degrees) across the main plane of motion for :data:`TWO_PLANE_JOINTS`.
+MIN_SECOND_PLANE_DEG = 20.0
+#: Soft-tissue motion (metres, RMS) of a skin marker relative to its bone: 5 mm is at the low
+#: end of what Leardini et al. (2005, Gait Posture 21:212) review (up to 2-3 cm on the thigh).
+STA_SIGMA = 0.005
+#: Largest displacement (metres) of the child's markers, in the parent's frame, that the
+#: parent frame's own uncertainty may cause: the rotation about the parent's long axis is
+#: uncertain by about ``STA_SIGMA / spread`` radians (:attr:`SegmentFrames.spread`;
+#: Cappozzo et al. 1997, Gait Posture 5:1, on cluster size), which moves a child marker at
+#: distance ``lever`` from that axis by ``lever * STA_SIGMA / spread`` (:func:`_lever`).
+MAX_FRAME_ERROR = 0.02
+#: Hinges: the centre along the flexion axis is never determined by the motion (any point of
+#: the axis fits a pure hinge equally; soft-tissue wobble only pretends to fix it), so it
+#: always keeps the regression's component: the functional axis at the anatomical depth
+#: (the projection of the anatomical centre onto the functional axis).
+HINGE_JOINTS = ("knee", "elbow", "ankle")
+#: The lateral marker role of each hinge (``{s}`` prefix added per side).
+LATERAL_ROLE = {"knee": "KNE", "ankle": "ANK", "elbow": "ELB"}
+#: Largest angle (degrees) between a fitted hinge axis and the anatomical medio-lateral line
+#: (lateral marker to the anatomical centre): the knee's flexion axis lies close to the
+#: transepicondylar axis (Churchill et al. 1998, Clin. Orthop. 356:111), the ankle's
+#: talocrural axis close to the line through the malleoli tips (Inman 1976), the elbow's
+#: through the epicondyles; an axis far off is a fit to skin motion, not the joint.
+MAX_HINGE_AXIS_DEG = 30.0
 
 #: Segment -> marker roles on it (``{s}`` the side letter).  Cluster markers without a role
 #: are attached by :data:`LABEL_HINTS` or by rigidity (:func:`segment_markers`).
@@ -117,6 +156,8 @@ class SegmentFrames:
         local: ``(K, 3)`` the points' positions in the frame (Procrustes mean).
         points: Names of the K points (marker labels or joint names).
         rms: ``(F,)`` RMS distance (metres) of the seen points from the fitted constellation.
+        borrowed_spread: The :attr:`spread` of the frame whose rotation this one borrows
+            (the clavicle's, from the thorax), else None.
     """
 
     R: np.ndarray
@@ -125,6 +166,22 @@ class SegmentFrames:
     local: np.ndarray
     points: tuple[str, ...]
     rms: np.ndarray
+    borrowed_spread: float | None = None
+
+    @property
+    def spread(self) -> float:
+        """How far (metres) the points spread off their principal line: the root sum of
+        squares of their distances from it (the 2nd and 3rd singular values of the centred
+        constellation).  A rotation about that line moves the points by this much per radian,
+        so skin-marker noise ``sigma`` leaves it uncertain by about ``sigma / spread``
+        radians (near 0: two markers and a joint centre in a row)."""
+        if self.borrowed_spread is not None:
+            return self.borrowed_spread
+        L = self.local - self.local.mean(0)
+        if len(L) < 3:
+            return 0.0
+        sv = np.linalg.svd(L, compute_uv=False)
+        return float(np.hypot(sv[1], sv[2]))
 
     def to_local(self, X: np.ndarray) -> np.ndarray:
         """``(F, 3)`` world points into this frame (NaN where either is undefined)."""
@@ -231,12 +288,15 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
 
 # -- centre-of-rotation fits -----------------------------------------------------------
 def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: float = 0.02,
-                       min_eig: float = 0.0) -> tuple[np.ndarray, int]:
+                       min_eig: float = 0.0, max_rank: int | None = None) -> tuple[np.ndarray, int]:
     """Least-squares solution of ``A x = b`` (A symmetric PSD) closest to ``prior`` along the
     directions ``A`` barely determines (eigenvalues below ``rel`` times the largest, or below
-    ``min_eig``); returns ``(x, number of determined directions)``."""
-    lam, V = np.linalg.eigh(A)
+    ``min_eig``, and all but the ``max_rank`` best determined); returns ``(x, number of
+    determined directions)``."""
+    lam, V = np.linalg.eigh(A)  # ascending
     good = (lam > rel * max(lam.max(), 1e-300)) & (lam > min_eig)
+    if max_rank is not None:
+        good[: max(len(lam) - max_rank, 0)] = False
     x = prior.copy()
     r = b - A @ prior
     for i in np.flatnonzero(good):
@@ -249,12 +309,13 @@ def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: flo
 MAX_STD = 0.002
 
 
-def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, float, int]:
+def sphere_fit(V: list[np.ndarray], prior: np.ndarray, max_rank: int = 3) -> tuple[np.ndarray, float, int]:
     """Common centre of several markers each moving on a sphere (Gamage & Lasenby 2002).
 
     Args:
         V: Per marker, ``(N_k, 3)`` positions in the parent's frame (finite rows only).
         prior: Centre used along the directions the data leave undetermined.
+        max_rank: Most directions the motion may determine (2 for a hinge: its axis never is).
     Returns:
         ``(centre, RMS radial residual in metres, determined directions)``.
 
@@ -283,22 +344,24 @@ def sphere_fit(V: list[np.ndarray], prior: np.ndarray) -> tuple[np.ndarray, floa
             rad.append(d.mean())
         return float(np.sqrt(np.mean(np.concatenate(res) ** 2))), float(np.mean(rad))
 
-    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01)
+    c, _ = _regularised_solve(A, b, np.asarray(prior, float), 0.01, 0.0, max_rank)
     r, radius = residual(c)
     # per-marker equations are averaged over N_k samples: sigma_b ~ 2 radius sigma_r / sqrt(N_k)
     sigma_y = 2.0 * radius * max(r, 2e-4)
     min_eig = len(V) * sigma_y**2 / (MAX_STD**2 * max(n / len(V), 1.0))
-    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig)
+    c, rank = _regularised_solve(A, b, np.asarray(prior, float), 0.01, min_eig, max_rank)
     r, _ = residual(c)
     return c, r, rank
 
 
-def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray, float, int]:
+def score_fit(Rp, tp, Rc, tc, prior_p, prior_c, max_rank: int = 6) -> tuple[np.ndarray, np.ndarray, float, int]:
     """SCoRE (Ehrig et al. 2006): the point fixed in both frames.
 
     Args:
         Rp, tp, Rc, tc: ``(N, 3, 3)`` and ``(N, 3)`` parent and child frames.
         prior_p, prior_c: The prior centre in each frame (for undetermined directions).
+        max_rank: Most of the 6 directions the motion may determine (5 for a hinge: sliding
+            the point along the axis in both frames at once never changes the fit).
     Returns:
         ``(c_parent, c_child, RMS distance in metres between the two world estimates / 2,
         determined directions of 6)``.
@@ -310,7 +373,7 @@ def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray,
     prior = np.concatenate([prior_p, prior_c])
 
     def solve(min_eig):
-        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig)
+        x, rank = _regularised_solve(A, b, prior, 0.01, min_eig, max_rank)
         gap = np.einsum("nij,j->ni", Rp, x[:3]) + tp - np.einsum("nij,j->ni", Rc, x[3:]) - tc
         return x, rank, float(np.sqrt(np.mean(np.sum(gap**2, 1)) / 3.0))
 
@@ -321,12 +384,14 @@ def score_fit(Rp, tp, Rc, tc, prior_p, prior_c) -> tuple[np.ndarray, np.ndarray,
     return x[:3], x[3:], sigma * np.sqrt(3.0) / 2.0, rank
 
 
-def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float]:
+def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, float, float]:
     """Frames spread over the poses: one per bin of the pose descriptor ``dirs`` ``(F, D)``
-    (unit-vector components, radians-ish), and the angular spread in degrees."""
+    (unit-vector components, radians-ish); the angular spread in degrees (98th percentile of
+    the pairwise angles of the first direction) and the motion's extent across its main
+    plane (:func:`_minor_extent`)."""
     idx = np.flatnonzero(usable)
     if len(idx) < MIN_FRAMES:
-        return idx, 0.0
+        return idx, 0.0, 0.0
     keys = np.floor(dirs[idx] / BIN).astype(np.int64)
     _, first = np.unique(keys, axis=0, return_index=True)
     chosen = idx[np.sort(first)]
@@ -337,28 +402,53 @@ def _pick_frames(dirs: np.ndarray, usable: np.ndarray) -> tuple[np.ndarray, floa
     u = u / np.linalg.norm(u, axis=1, keepdims=True)
     ang = np.degrees(np.arccos(np.clip(u @ u.T, -1, 1)))
     spread = float(np.percentile(ang, 98)) if len(sub) > 1 else 0.0
-    return chosen, spread
+    return chosen, spread, _minor_extent(dirs[chosen, :3])
+
+
+def _minor_extent(u: np.ndarray) -> float:
+    """Extent (degrees, 2nd to 98th percentile) of unit directions ``u`` ``(N, 3)`` across the
+    plane they mostly sweep: the directions are seen from their mean as angles along the two
+    principal tangent axes, and the smaller extent is returned (near 0 for a hinge)."""
+    if len(u) < 3:
+        return 0.0
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    m = u.mean(0)
+    m = m / max(np.linalg.norm(m), 1e-12)
+    T = u - np.outer(u @ m, m)
+    _, _, Vt = np.linalg.svd(T - T.mean(0), full_matrices=False)
+    ang = np.degrees(np.arctan2(T @ Vt[1], u @ m))
+    return float(np.percentile(ang, 98) - np.percentile(ang, 2))
 
 
 # -- marker attachment -----------------------------------------------------------------
 def _side_stem(label: str) -> tuple[str | None, str]:
+    """``(side or None, stem)`` of a label: a leading ``L``/``R`` (``LUPA``), or a trailing
+    capital ``L``/``R`` (``ThighL``); a trailing lowercase ``l m r u`` (``ARMl``) qualifies the
+    landmark (lateral, medial, radial, ulnar), is not a side, and is dropped from the stem."""
     p = plain_label(label)
+    raw = re.sub(r"[^A-Za-z0-9]", "", label.rsplit(":", 1)[-1])
     if len(p) > 1 and p[0] in "LR":
         return ("left" if p[0] == "L" else "right"), p[1:]
-    if len(p) > 1 and p[-1] in "LR" and p[:-1].isalpha():
+    if len(p) > 1 and raw[-1:] in ("L", "R") and p[:-1].isalpha():
         return ("left" if p[-1] == "L" else "right"), p[:-1]
+    if len(p) > 2 and raw[-1:] in ("l", "m", "r", "u") and raw[-2:-1].isupper():
+        return None, p[:-1]
     return None, p
 
 
 def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
     """Marker index -> segment for the markers playing a role, and cluster markers named
-    in :data:`LABEL_HINTS` (``LUPA`` -> ``left_upper_arm``, ``RBAC`` -> ``thorax``)."""
+    in :data:`LABEL_HINTS` (``LUPA`` -> ``left_upper_arm``, ``RBAC`` -> ``thorax``); a
+    hinted marker whose label has no side takes the side it is on (:mod:`.sides`)."""
+    from .sides import lateral_offsets, side_of
+
     out: dict[int, str] = {}
     for seg, roles in SEGMENT_ROLES.items():
         for r in roles:
             if r in ms.roles:
                 out[ms.roles[r]] = seg
     used = set(ms.roles.values())
+    offsets: np.ndarray | None = None
     for i, lab in enumerate(rec.labels):
         if i in used:
             continue
@@ -368,7 +458,11 @@ def segment_markers(rec: MarkerRecording, ms: MarkerSet) -> dict[int, str]:
             continue
         if seg in SEGMENT_ROLES:
             out[i] = seg
-        elif side is not None:
+            continue
+        if side is None:
+            offsets = lateral_offsets(rec, ms) if offsets is None else offsets
+            side = None if offsets is None else side_of(offsets[i])
+        if side is not None:
             out[i] = f"{side}_{seg}"
     return out
 
@@ -444,7 +538,8 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
             ok = th.ok & np.all(np.isfinite(sho), 1)
             t = np.where(ok[:, None], sho, np.nan)
             frames[f"{side}_clavicle"] = SegmentFrames(R=th.R, t=t, ok=ok, local=np.zeros((1, 3)),
-                                                       points=(rec.labels[ms.roles[f"{s}SHO"]],), rms=th.rms)
+                                                       points=(rec.labels[ms.roles[f"{s}SHO"]],), rms=th.rms,
+                                                       borrowed_spread=th.spread)
 
     order = ("hip", "knee", "ankle", "shoulder", "elbow", "wrist")
     for j in order:
@@ -457,7 +552,9 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
                 fr = own_frame(parent, (proximal,))
                 if fr is not None:
                     frames[parent] = fr
-            why, fit = _fit_joint(rec, joint, frames.get(parent), own_frame(child), members.get(child, []), positions.get(joint))
+            lat = ms.roles.get(f"{side[0].upper()}{LATERAL_ROLE.get(j, '')}")
+            why, fit = _fit_joint(rec, joint, frames.get(parent), own_frame(child), members.get(child, []), positions.get(joint),
+                                  None if lat is None else P[:, lat])
             if fit is None:
                 if why:
                     method[joint] = (method[joint] + f"; not functional: {why}") if joint in method else f"none ({why})"
@@ -488,8 +585,44 @@ def functional_joint_centres(rec: MarkerRecording, ms: MarkerSet, regression: Jo
                        segment_of=seg_of, local_centres=local_centres)
 
 
+def _lever(parent: SegmentFrames, V: list[np.ndarray], prior: np.ndarray) -> float:
+    """Typical distance (metres, median over the child's markers and frames) of the child's
+    markers ``V`` (parent frame) from the parent's long axis (its constellation's principal
+    line), the arm by which a turn of the parent frame about that axis moves them; from the
+    ``prior`` centre for a frame that borrows its rotation."""
+    if parent.borrowed_spread is not None or len(parent.local) < 3:
+        d = [np.linalg.norm(v - prior, axis=1) for v in V]
+    else:
+        c0 = parent.local.mean(0)
+        a = np.linalg.svd(parent.local - c0)[2][0]
+        d = [np.linalg.norm((v - c0) - np.outer((v - c0) @ a, a), axis=1) for v in V]
+    d = np.concatenate(d)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else float("nan")
+
+
+def _axis_deviation(parent: SegmentFrames, V: list[np.ndarray], lateral: np.ndarray | None,
+                    prior_world: np.ndarray | None) -> float | None:
+    """Angle (degrees, 0-90) between a hinge's axis, seen from the parent, and the anatomical
+    medio-lateral line from the lateral marker to the anatomical centre (both in the parent's
+    frame, medians over the frames); None without them.  The axis is the normal of the planes
+    the child's markers sweep about it: the least direction of their pooled covariance."""
+    if lateral is None or prior_world is None:
+        return None
+    ml = _nanmedian_rows(parent.to_local(prior_world) - parent.to_local(lateral))
+    C = np.zeros((3, 3))
+    for v in V:
+        v = v[np.all(np.isfinite(v), 1)]
+        if len(v) >= 4:
+            C += np.cov(v.T, bias=True)
+    if ml is None or not np.any(C) or np.linalg.norm(ml) < 1e-3:
+        return None
+    axis = np.linalg.eigh(C)[1][:, 0]
+    return float(np.degrees(np.arccos(min(1.0, abs(float(axis @ ml)) / np.linalg.norm(ml)))))
+
+
 def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | None, child_markers: list[int],
-               regression: np.ndarray | None):
+               regression: np.ndarray | None, lateral: np.ndarray | None = None):
     """``(why not, None)`` or ``("", (world centres (F, 3), centre in the parent frame, method))``."""
     if parent is None:
         return f"too few markers on {FUNCTIONAL_JOINTS[joint][0]} for a rigid frame (3 points needed)", None
@@ -504,6 +637,11 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
         if not len(allv):
             return "the child's markers are never seen with the parent's", None
         prior = allv.mean(0)
+    lever = _lever(parent, V, prior)
+    if np.isfinite(lever) and lever * STA_SIGMA > MAX_FRAME_ERROR * parent.spread:
+        return (f"the {FUNCTIONAL_JOINTS[joint][0]} frame is too narrow ({', '.join(parent.points)} spread "
+                f"{100 * parent.spread:.1f} cm off a line: 5 mm of skin motion would turn it about its long axis "
+                f"and move the child's markers about {100 * lever * STA_SIGMA / max(parent.spread, 1e-9):.0f} cm)"), None
     # pose descriptor: directions of the child's markers from the prior centre, parent frame
     dirs = []
     for v in V:
@@ -514,24 +652,30 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
     usable = parent.ok & np.all(np.isfinite(D), 1)
     if use_score:
         usable &= child.ok
-    chosen, spread = _pick_frames(np.nan_to_num(D), usable)
+    chosen, spread, minor = _pick_frames(np.nan_to_num(D), usable)
     if len(chosen) < MIN_FRAMES:
         return f"the parent and child are seen together in only {len(chosen)} distinct poses", None
     if len(child_markers) == 1 and len(chosen) < 100:
         return f"one marker on the child segment, seen in only {len(chosen)} distinct poses (100 needed)", None
     if spread < MIN_SPREAD_DEG:
         return f"the joint moves only {spread:.0f} degrees (a functional fit needs {MIN_SPREAD_DEG:.0f})", None
+    jkind = joint.split("_", 1)[1]
+    if jkind in TWO_PLANE_JOINTS and minor < MIN_SECOND_PLANE_DEG:
+        return (f"the motion stays in one plane ({minor:.0f} degrees across it; a {jkind} centre needs "
+                f"{MIN_SECOND_PLANE_DEG:.0f})"), None
+    hinge = jkind in HINGE_JOINTS
     sel = chosen
     for _ in range(2):  # fit, drop glitch frames, refit
         if use_score:
             prior_c = _nanmedian_rows(child.to_local(parent.to_world(prior))[sel])
             if prior_c is None:
                 return "no child frame", None
-            cp, cc, res, rank = score_fit(parent.R[sel], parent.t[sel], child.R[sel], child.t[sel], prior, prior_c)
+            cp, cc, res, rank = score_fit(parent.R[sel], parent.t[sel], child.R[sel], child.t[sel], prior, prior_c,
+                                          5 if hinge else 6)
             gap = np.linalg.norm(parent.to_world(cp)[sel] - child.to_world(cc)[sel], axis=1)
         else:
             vs = [v[sel][np.all(np.isfinite(v[sel]), 1)] for v in V]
-            cp, res, rank = sphere_fit(vs, prior)
+            cp, res, rank = sphere_fit(vs, prior, 2 if hinge else 3)
             gap = np.zeros(len(sel))
             for v in V:
                 d = np.linalg.norm(v[sel] - cp, axis=1)
@@ -543,6 +687,11 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
             break
         sel = sel[keep]
     kind = "SCoRE" if use_score else "sphere fit"
+    if hinge:
+        dev = _axis_deviation(parent, [v[sel] for v in V], lateral, regression)
+        if dev is not None and dev > MAX_HINGE_AXIS_DEG:
+            return (f"the fitted hinge axis is {dev:.0f} degrees off the line from the lateral marker to the "
+                    f"anatomical centre (at most {MAX_HINGE_AXIS_DEG:.0f}): a fit to skin motion"), None
     if res > MAX_RESIDUAL:
         return f"{kind} residual {1000 * res:.0f} mm is too large", None
     if regression is not None and np.linalg.norm(cp - prior) > MAX_SHIFT:

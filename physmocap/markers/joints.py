@@ -14,15 +14,20 @@ where a marker it needs is invalid):
   the proximal segment, towards the body's midline.  Half-widths scale with the pelvis
   width (or the shoulder width for elbows): knee :math:`0.20 W`, ankle :math:`0.14 W`,
   elbow :math:`0.11 S` (about 50, 35 and 40 mm on an adult; Plug-in Gait asks for the
-  measured widths, which a marker file does not carry).
-* **Shoulders**: the acromion marker moved :math:`0.13 S` along the upper arm.
+  measured widths, which a marker file does not carry), plus the marker's radius as in
+  Plug-in Gait's offset :math:`(\text{width} + \text{marker diameter}) / 2` (the marker's
+  centre sits a radius off the skin; :data:`MARKER_DIAMETER`, Vicon's standard 14 mm).
+* **Shoulders** (Rab et al. 2002, Gait Posture 15:113): the glenohumeral centre lies
+  :math:`0.17 S` below the acromion marker (:math:`S` the distance between the two acromion
+  markers) along the thorax's long axis (from mid T10-sternum to mid C7-clavicle, else the
+  lab's up axis), whatever the arm does.
 * **Wrists**: midpoint of the two wrist markers; **hand end**: the finger marker.
 * **Neck**: midpoint of C7 and the clavicle (jugular notch) marker; **chest**: midpoint of
   T10 and the sternum marker; **head**: centroid of the head markers.
 * **Toes**: the toe (second metatarsal) marker.
 
-This is the anatomical-regression half of issue 11's calibration; functional joint
-centres (sphere fits over a range-of-motion stretch) and marker-driven IK are not done yet.
+This is the anatomical-regression half of issue 11's calibration; :mod:`.functional` uses the
+motion where it can place a centre and keeps these elsewhere.
 """
 
 from __future__ import annotations
@@ -35,7 +40,11 @@ from ..errors import InputError, warn
 from .markerset import MarkerSet
 from .recording import MarkerRecording
 
-__all__ = ["JointCentres", "joint_centres", "up_axis"]
+__all__ = ["JointCentres", "joint_centres", "up_axis", "MARKER_DIAMETER"]
+
+#: Diameter (metres) of the markers: their centre sits a radius off the skin (Plug-in Gait's
+#: joint offsets add it to the joint width).  Vicon's standard full-body marker is 14 mm.
+MARKER_DIAMETER = 0.014
 
 
 @dataclass(frozen=True)
@@ -136,9 +145,13 @@ def joint_centres(rec: MarkerRecording, ms: MarkerSet) -> JointCentres:
         trunk = 0.5 * (m("CLAV") + m("C7"))
         out["neck"] = trunk
         how["neck"] = "midpoint of C7 and CLAV"
+    thorax_up = np.broadcast_to(up, P[:, 0].shape)
     if m("T10") is not None and m("STRN") is not None:
         out["chest"] = 0.5 * (m("T10") + m("STRN"))
         how["chest"] = "midpoint of T10 and STRN"
+        if trunk is not None:  # ISB thorax long axis; the lab's up where a marker is missing
+            axis = _unit(trunk - out["chest"])
+            thorax_up = np.where(np.isfinite(axis), axis, up)
     head = [m(r) for r in ("LFHD", "RFHD", "LBHD", "RBHD") if m(r) is not None]
     if len(head) >= 2:
         out["head"] = np.mean(head, axis=0)
@@ -161,16 +174,17 @@ def joint_centres(rec: MarkerRecording, ms: MarkerSet) -> JointCentres:
 
     for s, side in (("L", "left"), ("R", "right")):
         hip = out.get(f"{side}_hip")
-        medial_joint(f"{side}_knee", f"{s}KNE", f"{s}KNEM", hip, 0.20 * W, mid_hip)
-        medial_joint(f"{side}_ankle", f"{s}ANK", f"{s}ANKM", out.get(f"{side}_knee"), 0.14 * W, mid_hip)
+        r = MARKER_DIAMETER / 2
+        medial_joint(f"{side}_knee", f"{s}KNE", f"{s}KNEM", hip, 0.20 * W + r, mid_hip)
+        medial_joint(f"{side}_ankle", f"{s}ANK", f"{s}ANKM", out.get(f"{side}_knee"), 0.14 * W + r, mid_hip)
         if m(f"{s}TOE") is not None:
             out[f"{side}_toe"] = m(f"{s}TOE")
             how[f"{side}_toe"] = f"{s}TOE"
-        sho, elb = m(f"{s}SHO"), m(f"{s}ELB")
-        if sho is not None and elb is not None:
-            out[f"{side}_shoulder"] = sho + 0.13 * S * _unit(elb - sho)
-            how[f"{side}_shoulder"] = f"{s}SHO moved {130 * S:.0f} mm along the upper arm"
-        medial_joint(f"{side}_elbow", f"{s}ELB", f"{s}ELBM", out.get(f"{side}_shoulder"), 0.11 * S, trunk)
+        sho = m(f"{s}SHO")
+        if sho is not None:
+            out[f"{side}_shoulder"] = sho - 0.17 * S * thorax_up
+            how[f"{side}_shoulder"] = f"{s}SHO moved {170 * S:.0f} mm down the thorax (Rab 2002)"
+        medial_joint(f"{side}_elbow", f"{s}ELB", f"{s}ELBM", out.get(f"{side}_shoulder"), 0.11 * S + r, trunk)
         wra, wrb = m(f"{s}WRA"), m(f"{s}WRB")
         if wra is not None and wrb is not None:
             out[f"{side}_wrist"] = 0.5 * (wra + wrb)
@@ -188,7 +202,7 @@ def joint_centres(rec: MarkerRecording, ms: MarkerSet) -> JointCentres:
             "give a marker set file with --marker-set",
             path=rec.source,
         )
-    del up, F
+    del F
     return JointCentres(positions=out, method=how)
 
 

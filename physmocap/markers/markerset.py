@@ -21,7 +21,7 @@ from ..errors import InputError, MappingError
 from ..fileio import read_toml
 from .recording import plain_label
 
-__all__ = ["ROLES", "ALIASES", "MarkerSet", "detect_marker_set", "load_marker_set"]
+__all__ = ["ROLES", "ALIASES", "MarkerSet", "detect_marker_set", "load_marker_set", "recording_marker_set"]
 
 _SIDED = ("SHO", "ELB", "ELBM", "WRA", "WRB", "FIN", "THI", "KNE", "KNEM", "TIB", "ANK", "ANKM", "HEE", "TOE")
 #: Every role, in a stable order.
@@ -119,6 +119,18 @@ def detect_marker_set(labels: tuple[str, ...] | list[str], overrides: dict[str, 
         origin = "aliases + file"
     used = set(roles.values())
     return MarkerSet(roles=roles, unused=tuple(lab for i, lab in enumerate(labels) if i not in used), origin=origin)
+
+
+def recording_marker_set(rec, marker_set: "str | os.PathLike | MarkerSet | None" = None) -> MarkerSet:
+    """The roles of a recording's markers: the aliases, the user's TOML file ``marker_set``
+    (or a ready :class:`MarkerSet`), then single-limb markers placed on their side by where
+    they are (:func:`.sides.with_sides`)."""
+    from .sides import with_sides
+
+    if isinstance(marker_set, MarkerSet):
+        return marker_set
+    ms = detect_marker_set(rec.labels, load_marker_set(marker_set) if marker_set is not None else None)
+    return with_sides(rec, ms)
 
 
 def load_marker_set(path: str | os.PathLike) -> dict[str, str]:

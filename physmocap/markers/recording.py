@@ -16,10 +16,27 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["MarkerRecording", "plain_label", "UNITS"]
+__all__ = ["MarkerRecording", "plain_label", "UNITS", "unit_scale"]
 
 #: Length unit name -> metres.
-UNITS = {"mm": 1e-3, "cm": 1e-2, "dm": 0.1, "m": 1.0, "in": 0.0254, "inch": 0.0254, "inches": 0.0254}
+UNITS = {"mm": 1e-3, "cm": 1e-2, "dm": 0.1, "m": 1.0, "in": 0.0254, "inch": 0.0254, "inches": 0.0254, "ft": 0.3048}
+
+
+def unit_scale(units: str | float, path: str | Path | None = None) -> float:
+    """Metres per file unit for a unit given by the user: a name of :data:`UNITS` or a
+    positive number (metres per unit)."""
+    from ..errors import OptionError
+
+    if isinstance(units, str) and units.strip().lower() in UNITS:
+        return UNITS[units.strip().lower()]
+    try:
+        v = float(units)
+    except (TypeError, ValueError):
+        v = float("nan")
+    if not (np.isfinite(v) and v > 0):
+        raise OptionError(f"unknown marker unit {units!r}; use one of {', '.join(UNITS)} or metres per unit as a number",
+                          path=path)
+    return v
 
 
 def plain_label(label: str) -> str:

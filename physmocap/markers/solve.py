@@ -37,11 +37,11 @@ import numpy as np
 from ..errors import InputError, warn
 from .functional import Calibration, attach_by_rigidity, functional_joint_centres, warn_fallbacks
 from .joints import up_axis
-from .markerset import MarkerSet, detect_marker_set, load_marker_set
+from .markerset import MarkerSet, recording_marker_set
 from .motion import _to_z_up
 from .recording import MarkerRecording
 
-__all__ = ["MarkerSolveOptions", "MarkerSolution", "solve_markers", "frame_ranges"]
+__all__ = ["MarkerSolveOptions", "MarkerSolution", "ActorModel", "calibrate_actor", "solve_markers", "frame_ranges"]
 
 #: Model body of each marker segment (default humanoid body names).
 SEGMENT_BODY = {
@@ -199,22 +199,136 @@ def _solver_character(char, tracked_sites: dict[str, str]):
     return dataclasses.replace(char, tracked={k: TrackedFrame("site", v) for k, v in tracked_sites.items()})
 
 
+@dataclass
+class ActorModel:
+    """The calibrated actor: what every frame's marker-driven IK needs (steps 1-3 of the
+    module docstring), from :func:`calibrate_actor`.
+
+    Attributes:
+        character: The actor humanoid with one site per attached marker.
+        calibration: The :class:`~.functional.Calibration` (file axes).
+        labels: The recording's marker labels (frames to solve use the same order).
+        attached: Indices of the markers with a site, in target order.
+        site_names: Marker index -> site name.
+        segment_of: Attached marker index -> segment.
+        weights: ``(len(attached),)`` cost per metre of each marker.
+        ignored: Labels of the markers no segment explains.
+        to_z_up: ``(3, 3)`` rotation from the file's axes to Z-up.
+        floor: Height (file's up axis, metres) taken as the floor.
+        use_floor: Whether the floor is a constraint.
+        rest_pose: A calibrated ``qpos`` to start from (its root is replaced per start).
+        fps: The recording's frame rate.
+        options: The :class:`MarkerSolveOptions`.
+        marker_set: The roles of the markers.
+    """
+
+    character: Any
+    calibration: Calibration
+    labels: tuple[str, ...]
+    attached: list[int]
+    site_names: dict[int, str]
+    segment_of: dict[int, str]
+    weights: np.ndarray
+    ignored: list[str]
+    to_z_up: np.ndarray
+    floor: float
+    use_floor: bool
+    rest_pose: np.ndarray
+    fps: float
+    options: MarkerSolveOptions
+    marker_set: MarkerSet
+
+    def frame_solver(self, max_iterations: int | None = None):
+        """A warm-started :class:`~physmocap.ik.solver.FrameSolver` on the marker sites."""
+        it = self.options.max_iterations if max_iterations is None else max_iterations
+        return _marker_solver(self.character, self.fps, self.attached, self.site_names, self.weights, self.options,
+                              self.use_floor, it)
+
+    def to_solver_frame(self, points: np.ndarray) -> np.ndarray:
+        """``(..., M, 3)`` markers (metres, file axes) to the solver's Z-up frame, floor at 0."""
+        P = np.asarray(points, dtype=float) @ self.to_z_up.T
+        P[..., 2] -= self.floor
+        return P
+
+    def start_pose(self, points: np.ndarray) -> np.ndarray:
+        """``rest_pose`` with the root placed on one frame of markers ``(M, 3)`` (file axes):
+        the hips of the regression (:mod:`.joints`) and the neck, else kept."""
+        from .joints import joint_centres
+
+        q = np.array(self.rest_pose, float)
+        rec = MarkerRecording(self.labels, np.asarray(points, float)[None], self.fps, Path("<frame>"))
+        try:
+            jc = joint_centres(rec, self.marker_set)
+        except InputError:
+            return q
+        centres = {k: self.to_solver_frame(v) for k, v in jc.positions.items()}
+        q[:7] = _root_pose(centres, 0, q[:7])
+        return q
+
+
 def solve_markers(
     rec: MarkerRecording,
     marker_set: str | os.PathLike | MarkerSet | None = None,
     options: MarkerSolveOptions | None = None,
 ) -> MarkerSolution:
     """Solve a marker recording onto an actor-fitted humanoid (see the module docstring)."""
+    from ..trajectory import SolverStats, Trajectory
+
+    actor = calibrate_actor(rec, marker_set, options)
+    F, M = rec.num_frames, len(rec.labels)
+    char, attached, cal, R = actor.character, actor.attached, actor.calibration, actor.to_z_up
+    valid = rec.valid
+    Pz = actor.to_solver_frame(rec.positions)
+    # -- every frame
+    solver = actor.frame_solver()
+    model = char.model
+    sids = np.array([model.site(actor.site_names[i]).id for i in attached])
+    canon = [n for n in char.tracked]  # canonical joints of the actor model (sites)
+    canon_ids = np.array([model.site(char.tracked[n].name).id for n in canon])
+    qpos = np.zeros((F, model.nq))
+    residuals = np.full((F, M), np.nan)
+    J = np.zeros((F, len(canon), 3))
+    relaxed = np.zeros(F, dtype=np.int8)
+    iters = np.zeros(F, dtype=np.int16)
+    latency = np.zeros(F)
+    orient = np.tile([0.0, 0, 0, 1], (len(attached), 1))
+    solver.reset(actor.start_pose(rec.positions[0]))
+    data = solver.configuration.data
+    c0, w0 = time.process_time(), time.perf_counter()
+    for t in range(F):
+        ts = time.perf_counter()
+        on = valid[t, attached]
+        q, it, level = solver.solve_frame(np.nan_to_num(Pz[t, attached]), orient, on, first=(t == 0))
+        latency[t] = time.perf_counter() - ts
+        qpos[t] = q
+        iters[t], relaxed[t] = it, level
+        d = np.linalg.norm(data.site_xpos[sids] - Pz[t, attached], axis=1)
+        residuals[t, attached] = np.where(on, d, np.nan)
+        J[t] = data.site_xpos[canon_ids]
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    traj = Trajectory(character=char, qpos=qpos, fps=rec.fps, source=str(rec.source),
+                      solver=SolverStats(iterations=iters, relaxation=relaxed, latency=latency))
+    return MarkerSolution(
+        trajectory=traj, calibration=cal, residuals=residuals, segment_of=dict(actor.segment_of),
+        ignored=actor.ignored, joint_positions={n: J[:, k] for k, n in enumerate(canon)}, to_z_up=R, floor=actor.floor,
+        cpu_seconds=cpu, wall_seconds=wall, relaxed=relaxed, recording=rec,
+    )
+
+
+def calibrate_actor(
+    rec: MarkerRecording,
+    marker_set: str | os.PathLike | MarkerSet | None = None,
+    options: MarkerSolveOptions | None = None,
+) -> ActorModel:
+    """Calibrate the actor on a recording (a range-of-motion clip, the first seconds of a take,
+    or the whole take): joint centres, the scaled humanoid and its marker sites (steps 1-3 of
+    the module docstring)."""
     from ..ik.solver import FrameSolver, SolverOptions
     from ..models.character import load_character
     from ..models.scaling import scaled_humanoid_spec
-    from ..trajectory import SolverStats, Trajectory
 
     opt = options or MarkerSolveOptions()
-    if isinstance(marker_set, MarkerSet):
-        ms = marker_set
-    else:
-        ms = detect_marker_set(rec.labels, load_marker_set(marker_set) if marker_set is not None else None)
+    ms = recording_marker_set(rec, marker_set)
     valid = rec.valid
     if not valid.any():
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual): nothing to solve", path=rec.source)
@@ -223,7 +337,7 @@ def solve_markers(
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)
     seg_of = {i: s for i, s in seg_of.items() if s in SEGMENT_BODY}
     # segments with too few markers for a frame still take their markers (the IK needs no frame)
-    F, M = rec.num_frames, len(rec.labels)
+    M = len(rec.labels)
     R = _to_z_up(up_axis(rec, ms))
     Pz = rec.positions @ R.T
     centres = {k: v @ R.T for k, v in cal.positions.items()}
@@ -292,12 +406,16 @@ def solve_markers(
             char, site_names = _with_marker_sites(spec, Path(tmp), rec.labels, attached, seg_of, local)
             scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local, body_id, M)
             weights = _weights(scatter, attached, opt.min_weight_scatter)
-            solver = _marker_solver(char, rec, attached, site_names, weights, opt, use_floor, max_iterations=10)
+            # the calibrated centres stay targets: markers alone would let the skeleton drift
+            # inside the marker cloud from one refinement to the next (sites follow poses)
+            solver = _marker_solver(char, rec.fps, attached, site_names, weights, opt, use_floor, max_iterations=10,
+                                    centres=tuple(names))
             Q0, Q = Q, []
             for k, t in enumerate(calib):
                 solver.reset(np.array(Q0[k]))
-                q, _, _ = solver.solve_frame(np.nan_to_num(Pz[t, attached]), np.tile([0.0, 0, 0, 1], (len(attached), 1)),
-                                             valid[t, attached])
+                q, _, _ = solver.solve_frame(np.concatenate([np.nan_to_num(Pz[t, attached]), np.nan_to_num(C[t])]),
+                                             np.tile([0.0, 0, 0, 1], (len(attached) + len(names), 1)),
+                                             np.concatenate([valid[t, attached], seen[t]]))
                 Q.append(q)
             local = _marker_locals(char.model, mujoco.MjData(char.model), np.array(Q), Pz[calib], attached, seg_of,
                                    {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()})
@@ -305,42 +423,12 @@ def solve_markers(
         scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local,
                            {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()}, M)
         weights = _weights(scatter, attached, opt.min_weight_scatter)
-    # -- every frame
-    solver = _marker_solver(char, rec, attached, site_names, weights, opt, use_floor, opt.max_iterations)
-    model = char.model
-    sids = np.array([model.site(site_names[i]).id for i in attached])
-    canon = [n for n in char.tracked]  # canonical joints of the actor model (sites)
-    canon_ids = np.array([model.site(char.tracked[n].name).id for n in canon])
-    qpos = np.zeros((F, model.nq))
-    residuals = np.full((F, M), np.nan)
-    J = np.zeros((F, len(canon), 3))
-    relaxed = np.zeros(F, dtype=np.int8)
-    iters = np.zeros(F, dtype=np.int16)
-    latency = np.zeros(F)
-    orient = np.tile([0.0, 0, 0, 1], (len(attached), 1))
-    q0 = np.array(Q[0])
-    q0[:7] = _root_pose(centres, 0, q0[:7])
-    solver.reset(q0)
-    data = solver.configuration.data
-    c0, w0 = time.process_time(), time.perf_counter()
-    for t in range(F):
-        ts = time.perf_counter()
-        on = valid[t, attached]
-        q, it, level = solver.solve_frame(np.nan_to_num(Pz[t, attached]), orient, on, first=(t == 0))
-        latency[t] = time.perf_counter() - ts
-        qpos[t] = q
-        iters[t], relaxed[t] = it, level
-        d = np.linalg.norm(data.site_xpos[sids] - Pz[t, attached], axis=1)
-        residuals[t, attached] = np.where(on, d, np.nan)
-        J[t] = data.site_xpos[canon_ids]
-    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    traj = Trajectory(character=char, qpos=qpos, fps=rec.fps, source=str(rec.source),
-                      solver=SolverStats(iterations=iters, relaxation=relaxed, latency=latency))
-    return MarkerSolution(
-        trajectory=traj, calibration=cal, residuals=residuals, segment_of={i: seg_of[i] for i in attached},
-        ignored=ignored, joint_positions={n: J[:, k] for k, n in enumerate(canon)}, to_z_up=R, floor=floor,
-        cpu_seconds=cpu, wall_seconds=wall, relaxed=relaxed, recording=rec,
+    actor = ActorModel(
+        character=char, calibration=cal, labels=tuple(rec.labels), attached=attached, site_names=site_names,
+        segment_of={i: seg_of[i] for i in attached}, weights=weights, ignored=ignored, to_z_up=R, floor=floor,
+        use_floor=use_floor, rest_pose=np.array(Q[0]), fps=float(rec.fps), options=opt, marker_set=ms,
     )
+    return actor
 
 
 def _marker_locals(model, data, Q, P, attached, seg_of, body_id) -> dict[int, np.ndarray]:
@@ -402,17 +490,24 @@ def _with_marker_sites(spec: mujoco.MjSpec, folder: Path, labels, attached, seg_
     return char, names
 
 
-def _marker_solver(char, rec, attached, site_names, weights, opt: MarkerSolveOptions, use_floor: bool, max_iterations: int):
+def _marker_solver(char, fps: float, attached, site_names, weights, opt: MarkerSolveOptions, use_floor: bool,
+                   max_iterations: int, centres: tuple[str, ...] = ()):
+    """A :class:`~physmocap.ik.solver.FrameSolver` on the marker sites (keys ``m0, m1...``,
+    targets in ``attached`` order) and then the canonical joint sites ``centres`` (weight 0.3)."""
     from ..ik.solver import FrameSolver, SolverOptions
 
     keys = [f"m{k}" for k in range(len(attached))]
+    w = {k: (float(x), 0.0) for k, x in zip(keys, weights)}
+    w.update({n: (0.3, 0.0) for n in centres})
     sopt = SolverOptions(
         max_iterations=max_iterations, first_frame_iterations=150, self_collision=False,
         velocity_limits=opt.velocity_limits, floor=use_floor, floor_iterations=2 if use_floor else 0,
-        weights={k: (float(w), 0.0) for k, w in zip(keys, weights)},
+        weights=w,
     )
-    ch = _solver_character(char, {k: site_names[i] for k, i in zip(keys, attached)})
-    return FrameSolver(ch, keys, np.zeros(len(keys), bool), rec.fps, sopt)
+    sites = {k: site_names[i] for k, i in zip(keys, attached)}
+    sites.update({n: char.tracked[n].name for n in centres})
+    ch = _solver_character(char, sites)
+    return FrameSolver(ch, keys + list(centres), np.zeros(len(keys) + len(centres), bool), fps, sopt)
 
 
 # -- report --------------------------------------------------------------------------

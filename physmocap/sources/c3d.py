@@ -15,14 +15,17 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..markers.recording import UNITS, MarkerRecording
+from ..markers.recording import UNITS, MarkerRecording, unit_scale
 from ..motion import Motion
 
 __all__ = ["read_c3d_markers", "read_c3d"]
 
 
-def read_c3d_markers(path: str | os.PathLike) -> MarkerRecording:
-    """The labelled markers of a C3D file (metres, the file's axes)."""
+def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) -> MarkerRecording:
+    """The labelled markers of a C3D file (metres, the file's axes).
+
+    ``units`` overrides the file's ``POINT:UNITS`` (a unit name of
+    :data:`~physmocap.markers.recording.UNITS` or metres per file unit)."""
     p = Path(path)
     try:
         import ezc3d
@@ -51,10 +54,14 @@ def read_c3d_markers(path: str | os.PathLike) -> MarkerRecording:
         raise InputError("C3D file holds no marker samples", path=p)
     M = data.shape[1]
     labels = (labels + [f"marker{k}" for k in range(len(labels), M)])[:M]
-    if unit not in UNITS:
-        warn(f"{p}: unknown point unit {unit!r}; assuming millimetres")
-        unit = "mm"
-    pos = np.transpose(data[:3], (2, 1, 0)) * UNITS[unit]  # (F, M, 3)
+    if units is not None:
+        scale = unit_scale(units, p)
+    elif unit not in UNITS:
+        warn(f"{p}: unknown point unit {unit!r}; assuming millimetres (give the unit with --in-units)")
+        scale = UNITS["mm"]
+    else:
+        scale = UNITS[unit]
+    pos = np.transpose(data[:3], (2, 1, 0)) * scale  # (F, M, 3)
     bad = ~np.all(np.isfinite(pos), axis=2) | np.all(pos == 0.0, axis=2)
     if residuals.shape == (1, M, data.shape[2]):
         bad |= residuals[0].T < 0.0
@@ -64,8 +71,10 @@ def read_c3d_markers(path: str | os.PathLike) -> MarkerRecording:
     return MarkerRecording(labels=tuple(str(x) for x in labels), positions=pos, fps=rate, source=p, first_frame=first)
 
 
-def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
-    """A C3D file as the actor's canonical joint centres (:func:`physmocap.markers.motion.marker_motion`)."""
+def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
+             solve: bool = False, **options: Any) -> Motion:
+    """A C3D file as the actor's canonical joint centres, or with ``solve`` the solved actor
+    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
-    return marker_motion(read_c3d_markers(path), marker_set, **options)
+    return marker_motion(read_c3d_markers(path, units), marker_set, solve=solve, **options)

@@ -44,12 +44,14 @@ from ..motion import MAX_JOINTS, Motion, Skeleton, forward_kinematics
 from ..rotations import Rotation, quat_mul, up_axis_matrix
 from . import check_grid
 
-__all__ = ["read_mcap", "list_skeletons"]
+__all__ = ["read_mcap", "read_mcap_markers", "list_skeletons", "has_markers"]
 
 MAGIC = b"\x89MCAP0\r\n"
 TF_SCHEMAS = ("foxglove.FrameTransforms", "foxglove.FrameTransform")
 POSES_SCHEMA = "foxglove.PosesInFrame"
 SKELETON_METADATA = "physmocap.skeleton"
+MARKERS_SCHEMA = "physmocap.LabelledPoints"
+MARKERS_METADATA = "physmocap.markers"
 #: Latest timestamp accepted (ns since the clock's epoch, about 146 years): later ones are
 #: corruption and would overflow 64-bit arithmetic.
 MAX_STAMP_NS = 2**62
@@ -733,6 +735,10 @@ def read_mcap(
     p = Path(path)
     raw = _load(p)
     tracks = [m for name, m in raw.metadata if name == SKELETON_METADATA]
+    if not tracks and topic is None and _marker_channel(raw) is not None:
+        from ..markers.motion import marker_motion
+
+        return marker_motion(_markers(p, raw, units), **options)
     if tracks and topic is None:
         if (units is not None and str(units).lower() not in ("m", "auto")) or (up is not None and up.upper() != "Z"):
             raise OptionError(
@@ -788,3 +794,77 @@ def read_mcap(
         f"foxglove.PosesInFrame messages in JSON encoding; {_describe_channels(raw)}",
         path=p,
     )
+
+
+# --- optical markers ---------------------------------------------------------------
+def _marker_channel(raw: _Raw) -> _Channel | None:
+    chans = [c for c in sorted(raw.channels.values(), key=lambda c: c.id) if c.schema_name == MARKERS_SCHEMA]
+    return chans[0] if chans else None
+
+
+def has_markers(path: str | os.PathLike) -> bool:
+    """Whether an MCAP file holds a ``physmocap.LabelledPoints`` marker channel."""
+    return _marker_channel(_load(Path(path))) is not None
+
+
+def read_mcap_markers(path: str | os.PathLike, units: str | float | None = None):
+    """The marker recording (:class:`~physmocap.markers.recording.MarkerRecording`) of an MCAP
+    file written by :func:`physmocap.export.mcap.write_markers_mcap` (or any
+    ``physmocap.LabelledPoints`` channel): frame ``i`` is the message with ``"frame": i``;
+    markers absent from a message are gaps."""
+    p = Path(path)
+    return _markers(p, _load(p), units)
+
+
+def _markers(p: Path, raw: _Raw, units: str | float | None):
+    from ..markers.recording import MarkerRecording, unit_scale
+
+    ch = _marker_channel(raw)
+    if ch is None:
+        raise InputError(f"no marker channel (physmocap.LabelledPoints); {_describe_channels(raw)}", path=p)
+    dec = _Decoder(p, ch)
+    meta = next((m for name, m in raw.metadata if name == MARKERS_METADATA and m.get("topic", ch.topic) == ch.topic), {})
+    msgs = raw.messages.get(ch.id, [])
+    if not msgs:
+        raise InputError(f"no messages on {ch.topic}", path=p)
+    frames: list[tuple[int, dict]] = []
+    labels: list[str] = []
+    try:
+        labels = [str(x) for x in parse_json(meta["labels"])] if "labels" in meta else []
+    except (ValueError, TypeError):
+        raise InputError("the physmocap.markers metadata's labels are not a JSON list", path=p) from None
+    seen = set(labels)
+    times = []
+    for k, (log_time, data) in enumerate(msgs):
+        obj = dec.load(k, data)
+        f = obj.get("frame")
+        if isinstance(f, bool) or not isinstance(f, int) or f < 0:
+            raise dec.fail(k, f"field 'frame' must be a non-negative integer, got {f!r}")
+        pts = obj.get("points")
+        if not isinstance(pts, dict):
+            raise dec.fail(k, "field 'points' must be an object of label -> {x, y, z}")
+        for lab in pts:
+            if lab not in seen:
+                seen.add(lab)
+                labels.append(lab)
+        frames.append((f, pts))
+        times.append(dec.stamp(k, obj, log_time))
+    F = max(f for f, _ in frames) + 1
+    check_grid(p, F, len(labels), sum(len(pts) for _, pts in frames))
+    col = {lab: j for j, lab in enumerate(labels)}
+    P = np.full((F, len(labels), 3), np.nan)
+    for k, (f, pts) in enumerate(frames):
+        for lab, v in pts.items():
+            P[f, col[lab]] = dec.vec3(k, pts, lab)
+    try:
+        fps = float(meta["fps"]) if "fps" in meta else float("nan")
+    except ValueError:
+        fps = float("nan")
+    if not (math.isfinite(fps) and fps > 0):
+        dt = np.diff(np.unique(times))
+        if not dt.size:
+            raise InputError("cannot tell the frame rate: one timestamp and no fps metadata", path=p)
+        fps = 1e9 / float(np.median(dt))
+    scale = unit_scale(units, p) if units is not None else 1.0
+    first = int(meta.get("first_frame", "0")) if str(meta.get("first_frame", "0")).isdigit() else 0
+    return MarkerRecording(labels=tuple(labels), positions=P * scale, fps=fps, source=p, first_frame=first)

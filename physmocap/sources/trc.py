@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..markers.recording import UNITS, MarkerRecording
+from ..markers.recording import UNITS, MarkerRecording, unit_scale
 from ..motion import Motion
 
 __all__ = ["read_trc_markers", "read_trc"]
@@ -31,8 +31,11 @@ def _split(line: str, sep: str) -> list[str]:
     return [c.strip() for c in line.rstrip("\r\n").split(sep)]
 
 
-def read_trc_markers(path: str | os.PathLike) -> MarkerRecording:
-    """The labelled markers of a TRC file (metres, the file's axes)."""
+def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) -> MarkerRecording:
+    """The labelled markers of a TRC file (metres, the file's axes).
+
+    ``units`` overrides the header's ``Units`` (a unit name of
+    :data:`~physmocap.markers.recording.UNITS` or metres per file unit)."""
     p = Path(path)
     if not p.is_file():
         raise InputError("file not found", path=p)
@@ -54,8 +57,13 @@ def read_trc_markers(path: str | os.PathLike) -> MarkerRecording:
     if not (math.isfinite(rate) and 0 < rate < 1e6):
         raise InputError(f"line 3: DataRate must be a positive number, got {head.get('DataRate')!r}", path=p)
     unit = (head.get("Units") or "mm").strip().lower()
-    if unit not in UNITS:
-        raise InputError(f"line 3: unknown Units {unit!r}; expected one of {', '.join(UNITS)}", path=p)
+    if units is not None:
+        scale = unit_scale(units, p)
+    elif unit not in UNITS:
+        raise InputError(f"line 3: unknown Units {unit!r}; expected one of {', '.join(UNITS)} "
+                         "(or give the unit with --in-units)", path=p)
+    else:
+        scale = UNITS[unit]
     names = _split(lines[3], sep)
     labels = [n for n in names[2:] if n]
     if not labels:
@@ -91,15 +99,17 @@ def read_trc_markers(path: str | os.PathLike) -> MarkerRecording:
         warn(f"{p}: the header declares {declared} frames but the file holds {len(rows)}; read what is there")
     if short:
         warn(f"{p}: {short} row(s) end early; their missing markers are gaps")
-    pos = np.array(rows, dtype=float).reshape(len(rows), M, 3) * UNITS[unit]
+    pos = np.array(rows, dtype=float).reshape(len(rows), M, 3) * scale
     pos[np.all(pos == 0.0, axis=2)] = np.nan
     if not np.isfinite(pos).any():
         raise InputError("every marker sample is missing", path=p)
     return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p)
 
 
-def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
-    """A TRC file as the actor's canonical joint centres (:func:`physmocap.markers.motion.marker_motion`)."""
+def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
+             solve: bool = False, **options: Any) -> Motion:
+    """A TRC file as the actor's canonical joint centres, or with ``solve`` the solved actor
+    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
-    return marker_motion(read_trc_markers(path), marker_set, **options)
+    return marker_motion(read_trc_markers(path, units), marker_set, solve=solve, **options)

@@ -255,10 +255,33 @@ def test_two_unrelated_jumps_do_not_make_a_spike(walk):
     qb = Rotation.from_rotvec(np.radians(30.0) * np.array([0.0, 0.0, 1.0])).as_quat()
     R[200:, j] = quat_mul(np.broadcast_to(qa, (len(R) - 200, 4)), R[200:, j])
     R[230:, j] = quat_mul(np.broadcast_to(qb, (len(R) - 230, 4)), R[230:, j])
-    _, report = clean(dataclasses.replace(walk, rotations=R))
+    from physmocap.clean import CleanOptions
+
+    bad = dataclasses.replace(walk, rotations=R)
+    _, report = clean(bad)
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
     assert not [g for g in mine if g.kind in ("spike", "flip")]
-    assert {(g.kind, g.start) for g in mine if g.kind != "anatomical"} == {("discontinuity", 200), ("discontinuity", 230)}
+    # the first, mostly a twist, moves the hand 3 cm: below jump_distance, a solver's pop
+    assert {(g.kind, g.start) for g in mine if g.kind != "anatomical"} == {("discontinuity", 230)}
+    _, report = clean(bad, CleanOptions(jump_distance=0.02))
+    mine = [g for g in report.glitches if g.joint == "LeftForeArm" and g.kind != "anatomical"]
+    assert {(g.kind, g.start) for g in mine} == {("discontinuity", 200), ("discontinuity", 230)}
+
+
+def test_a_pop_the_next_joint_undoes_is_not_a_spike(walk):
+    """A spine joint popping 20 degrees out and back while its child turns back the same
+    (a solver moving a bend between consecutive joints: the chest and arms stay put) is no
+    spike; the same offset carried by the child is one."""
+    j, k = _joint(walk, "Spine"), _joint(walk, "Spine1")
+    frames = list(range(200, 210))
+    q = Rotation.from_rotvec(np.radians(20.0) * np.array([0.0, 0.6, 0.8])).as_quat()
+    R = np.array(walk.rotations, copy=True)
+    R[frames, j] = quat_mul(R[frames, j], np.broadcast_to(q, (len(frames), 4)))  # in the joint's own frame
+    R[frames, k] = quat_mul(np.broadcast_to(Rotation.from_quat(q).inv().as_quat(), (len(frames), 4)), R[frames, k])
+    _, report = clean(dataclasses.replace(walk, rotations=R))
+    assert not [g for g in report.glitches if g.kind in ("spike", "flip")]
+    _, report = clean(_with(walk, j, frames, q))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "Spine"] == [("spike", 200, 209)]
 
 
 def test_frozen_repair_keeps_the_joints_speed_and_leaves_no_catch_up_jump(walk):

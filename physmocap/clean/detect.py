@@ -74,6 +74,17 @@ class CleanOptions:
             hyperextension) get none.
         swap_min_distance: A left joint and its right twin this far apart (metres) or more
             can be seen trading places (positional sources).
+        jump_distance: A single jump (a discontinuity) must also move some point of the
+            joint's limb (its descendants, relative to the joint) this many metres farther
+            than the limb moves on the neighbouring frames: a toe, finger or twist popping by
+            a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
+            markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
+        carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
+            its world orientation jumps by at least this fraction of its local jump, and
+            some child's world orientation by at least this fraction of its own (an offset
+            on one joint turns everything it carries by the same angle).  A solver moving a
+            bend between consecutive joints turns one while the next turns back, and the
+            limbs beyond stay where they were.
     """
 
     jump_deg: float = 10.0
@@ -90,6 +101,8 @@ class CleanOptions:
     stretch_ratio: float = 0.1
     rom_soft_margin: float = 15.0
     swap_min_distance: float = 0.05
+    jump_distance: float = 0.05
+    carry_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         from ..options import check_fields
@@ -143,9 +156,57 @@ def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
     return median_filter(x, footprint=footprint, mode="nearest")
 
 
-def _jumps(
-    rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, world: np.ndarray | None = None
-) -> list[Glitch]:
+@dataclass(frozen=True)
+class Limb:
+    r"""What a joint's rotation moves, to tell its own jumps from a solver's redistribution.
+
+    Attributes:
+        world: ``(F, 4)`` the joint's world orientation (x-y-z-w).
+        carried: ``(F,)`` degrees: the largest world-orientation step of its animated
+            children on each frame (None: it has none; a leaf carries nothing to compare).
+        reach: ``(F,)`` metres: the largest step of its descendants' positions relative
+            to the joint, :math:`\max_d |(p_d - p_j)(t) - (p_d - p_j)(t-1)|` (None: no
+            descendants).
+    """
+
+    world: np.ndarray
+    carried: np.ndarray | None = None
+    reach: np.ndarray | None = None
+
+
+def limbs(motion: Motion, positions: np.ndarray, world: np.ndarray, joints: list[int]) -> dict[int, Limb]:
+    """:class:`Limb` of each of ``joints`` from the world ``positions (F, J, 3)`` and
+    ``world`` rotations ``(F, J, 4)`` of ``motion``."""
+    sk = motion.skeleton
+    F = len(world)
+    out = {}
+    for j in joints:
+        kids = [c for c in sk.children(j) if not sk.end_site[c] and c in joints]
+        carried = None
+        if kids:
+            carried = np.zeros(F)
+            carried[1:] = np.max(_angle(world[1:, kids], world[:-1, kids]), axis=1)
+        below = _descendants(sk.parents, j)
+        reach = None
+        if below:
+            rel = positions[:, below] - positions[:, [j]]
+            reach = np.zeros(F)
+            reach[1:] = np.max(np.linalg.norm(rel[1:] - rel[:-1], axis=-1), axis=1)
+        out[j] = Limb(world[:, j], carried, reach)
+    return out
+
+
+def _descendants(parents: np.ndarray, j: int) -> list[int]:
+    """Every joint below ``j`` (end sites included)."""
+    out, todo = [], [j]
+    while todo:
+        kids = np.flatnonzero(parents == todo.pop()).tolist()
+        out += kids
+        todo += kids
+    return out
+
+
+def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
     r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
 
     A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
@@ -159,11 +220,13 @@ def _jumps(
     unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
     paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
     limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
-    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`); an unpaired
-    jump (or one whose pair fails those) is a ``discontinuity`` only if it is faster than
-    ``max_speed``, both in the joint's local rotation and, when ``world (F, 4)`` is given, in
-    its world orientation: a local jump its parent's jump cancels (a solver moving a twist
-    from one joint to the next, the limb itself not turning) moves no segment.
+    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`) and both jumps
+    carried by its segment and children (:func:`_carried`, when ``limb`` says what it
+    carries); an unpaired jump (or one whose pair fails those) is a ``discontinuity`` only if
+    it is faster than ``max_speed`` both in the joint's local rotation and in its world
+    orientation (a local jump its parent's jump cancels, a solver moving a twist from one
+    joint to the next, moves no segment), and moves the limb below the joint
+    ``jump_distance`` metres farther than the limb's own motion on the neighbouring frames.
     """
     from ..rotations import quat_conj, quat_mul
 
@@ -171,11 +234,12 @@ def _jumps(
     step = np.zeros(F)
     step[1:] = _angle(rot[1:], rot[:-1])
     wstep = step
-    if world is not None:
+    if limb is not None:
         wstep = np.zeros(F)
-        wstep[1:] = _angle(world[1:], world[:-1])
+        wstep[1:] = _angle(limb.world[1:], limb.world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
+    single = _single_jump(step, wstep, limb, half, opt.max_speed / fps, opt.jump_distance)
     is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
     # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
@@ -218,7 +282,7 @@ def _jumps(
             pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            if min(step[a], wstep[a]) > opt.max_speed / fps:
+            if single(a):
                 out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
     # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
     # glitches of one joint do not vouch for each other)
@@ -229,14 +293,37 @@ def _jumps(
         elsewhere[max(0, a - n) : b + n] = False
     for a, b in pairs:
         size = float(np.max(_angle(rot[a:b], rot[a - 1])))
-        if step[a] < opt.flip_deg and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]:
-            for t in (a, b):  # a pop to a pose the joint takes anyway: each jump on its own
-                if min(step[t], wstep[t]) > opt.max_speed / fps:
-                    out.append(Glitch("discontinuity", joint, t, t, float(step[t])))
+        carried = limb is None or all(_carried(step, wstep, limb.carried, t, opt.carry_ratio) for t in (a, b))
+        if step[a] < opt.flip_deg and (not carried or _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]):
+            # a pop to a pose the joint takes anyway, or one the next joint undoes: each jump on its own
+            out += [Glitch("discontinuity", joint, t, t, float(step[t])) for t in (a, b) if single(t)]
             continue
         kind = "flip" if size >= opt.flip_deg else "spike"
         out.append(Glitch(kind, joint, a, b - 1, size))
     return sorted(out, key=lambda g: g.start)
+
+
+def _carried(step: np.ndarray, wstep: np.ndarray, carried: np.ndarray | None, t: int, ratio: float) -> bool:
+    """Does the jump on frame ``t`` turn the joint's segment and what it carries: its world
+    step at least ``ratio`` of its local ``step`` (the parent does not turn it back), and
+    some child's world step (``carried``, None for a joint that carries none) at least
+    ``ratio`` of its world step (the children do not turn it back)?"""
+    return bool(wstep[t] >= ratio * step[t] and (carried is None or carried[t] >= ratio * wstep[t]))
+
+
+def _single_jump(step: np.ndarray, wstep: np.ndarray, limb: Limb | None, half: int, most: float, distance: float):
+    """Predicate on a frame ``t``: is the jump there a discontinuity on its own?  Faster than
+    ``most`` degrees per frame in the local ``step`` and the world ``wstep``, and moving the
+    limb (``limb.reach``) ``distance`` metres farther than its median step over ``half``
+    frames each side."""
+    excess = None
+    if limb is not None and limb.reach is not None:
+        excess = limb.reach - _neighbour_median(limb.reach, half)
+
+    def single(t: int) -> bool:
+        return bool(min(step[t], wstep[t]) > most and (excess is None or excess[t] > distance))
+
+    return single
 
 
 def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
@@ -288,9 +375,10 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
             warnings.simplefilter("ignore")
             skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
-        W = np.asarray(motion.world_rotations(), dtype=float)
+        P, W = motion.forward_kinematics()
+        limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip, W[:, j])
+            glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
         # the body moves on a frame where the median joint moves more than 0.05 degrees
         moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
         for j in animated:

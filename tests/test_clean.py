@@ -374,3 +374,22 @@ def test_shortened_benchmark_on_the_bundled_walk(walk):
         det = bench._flagged(report, names) - faint - (own - truth[kind])
         p, r, _ = bench._prf(len(det & truth[kind]), len(det - truth[kind]), len(truth[kind] - det))
         assert r >= 0.95 and p >= 0.95, (kind, p, r)
+
+
+def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
+    """A knee frozen for 0.4 s of a walk: no curve knows the swing it hides, but the other
+    strides do; the matched motion takes off most of the error."""
+    j = _joint(walk, "RightLeg")
+    frames = list(range(300, 348))
+    bad = _with(walk, j, frames, hold=True)
+    fixed, report = clean(bad)
+    assert [(g.kind, g.start, g.end, g.corrected) for g in report.glitches if g.joint == "RightLeg"] == [
+        ("frozen", 300, 347, "matched")
+    ]
+    P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
+    before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
+    after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
+    assert after < 0.35 * before
+    untouched = np.ones(walk.num_frames, bool)
+    untouched[frames] = False
+    assert np.array_equal(fixed.rotations[untouched], bad.rotations[untouched])

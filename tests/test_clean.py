@@ -393,3 +393,19 @@ def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
     untouched = np.ones(walk.num_frames, bool)
     untouched[frames] = False
     assert np.array_equal(fixed.rotations[untouched], bad.rotations[untouched])
+
+
+def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):
+    """The body standing (every other joint still but for noise) while the forearm moves:
+    a forearm held for 0.25 s is found by the jump it makes to catch up, not by the body."""
+    m = walk.slice_frames(0, 400)
+    j = _joint(m, "LeftForeArm")
+    R = np.array(m.rotations, copy=True)
+    rng = np.random.default_rng(0)
+    noise = Rotation.from_rotvec(np.radians(0.01) * rng.normal(size=(300 * R.shape[1], 3))).as_quat()
+    still = quat_mul(noise.reshape(300, R.shape[1], 4), np.broadcast_to(R[100], (300, R.shape[1], 4)))
+    others = [k for k in range(R.shape[1]) if k != j]
+    R[100:400, others] = still[:, others]
+    R[200:230, j] = R[199, j]
+    _, report = clean(dataclasses.replace(m, rotations=R))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "LeftForeArm"] == [("frozen", 200, 229)]

@@ -39,6 +39,10 @@ from ..motion import Motion
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
 
 
+#: A frame-to-frame step (degrees) below which a joint is not moving (a capture's noise floor).
+STILL_DEG = 0.05
+
+
 @dataclass(frozen=True)
 class CleanOptions:
     """Detection thresholds.
@@ -337,10 +341,16 @@ def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
 
 
 def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
-    """Runs where the joint's rotation is exactly constant while the body moves."""
+    """Runs where the joint's rotation is exactly constant while the body moves, or that end
+    with the joint catching up: its first step after the run ``jump_ratio`` times its median
+    step over the ``context_time`` after (a joint that really stops starts again smoothly;
+    one whose value stopped updating jumps to where it had got to; steps below ``STILL_DEG``
+    count as that)."""
     F = len(rot)
     same = np.zeros(F, dtype=bool)
     same[1:] = np.all(rot[1:] == rot[:-1], axis=1)
+    step = joint_angles_step(rot[:, None])[:, 0]
+    half = max(2, int(round(opt.context_time * fps)))
     if same[1:].all():  # never animated: not a glitch
         return []
     shortest = max(3, int(round(opt.frozen_time * fps)))
@@ -352,7 +362,11 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     out = []
     for (start, e), v in zip(runs, values):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if values.count(v) > 1 or not inside or e - start + 1 < shortest or moving[start : e + 1].mean() <= 0.5:
+        if values.count(v) > 1 or not inside or e - start + 1 < shortest:
+            continue
+        after = max(float(np.median(step[e + 2 : e + 2 + half])), STILL_DEG) if e + 2 < F else np.inf
+        catch_up = step[e + 1] > opt.jump_ratio * after
+        if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
         out.append(Glitch("frozen", joint, int(start + 1), int(e), float((e - start) / fps), unit="s"))
     return out
@@ -379,8 +393,8 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
         for j in animated:
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
-        # the body moves on a frame where the median joint moves more than 0.05 degrees
-        moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
+        # the body moves on a frame where the median joint moves
+        moving = np.median(steps[:, animated], axis=1) > STILL_DEG if animated else np.zeros(len(R), bool)
         for j in animated:
             glitches += _frozen(R[:, j], moving, fps, opt, names[j])
     if motion.positions is not None:

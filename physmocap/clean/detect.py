@@ -67,7 +67,9 @@ class CleanOptions:
         max_glitch_time: Longest glitch between a jump and its return (seconds).
         return_ratio: The return brings the joint back to within this fraction of the jump.
         return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
-            twice the joint's own motion (neighbours' median step) on the two frames.
+            twice the joint's own motion on the two frames (its median step over
+            ``context_time`` before or after each jump, whichever is larger: a toe at 30 Hz
+            still swinging into the frame a glitch starts on).
         flip_deg: A glitch whose jump is at least this large is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (positional).
@@ -253,6 +255,7 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     win = sliding_window_view(np.pad(step, half, mode="edge"), half)
     before = np.median(win[:F], axis=1)  # t-half .. t-1
     after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
+    own = np.maximum(before, after)  # the joint's own motion next to a jump, on its busier side
     entry = is_jump & (step > opt.jump_ratio * before)
     exit_ = is_jump & (step > opt.jump_ratio * after)
     jumps = np.flatnonzero(is_jump)
@@ -276,7 +279,7 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             if b in used or not exit_[b]:
                 continue
             # what is left of the entry after the exit: the joint's own motion on those two frames
-            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (ref[a] + ref[b]) + opt.return_deg)
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (own[a] + own[b]) + opt.return_deg)
             undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
             if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b

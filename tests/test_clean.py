@@ -409,3 +409,16 @@ def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):
     R[200:230, j] = R[199, j]
     _, report = clean(dataclasses.replace(m, rotations=R))
     assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "LeftForeArm"] == [("frozen", 200, 229)]
+
+
+def test_two_impossible_jumps_out_and_back_are_a_spike_even_to_a_familiar_pose(walk):
+    """The thigh thrown for 3 frames to the pose farthest from it that it takes elsewhere:
+    each jump, at 120 Hz, is faster than any hip and swings the foot by decimetres, so out
+    and back is a spike though the pose is the leg's own (the pose test is for pops no faster
+    than real motion)."""
+    j = _joint(walk, "RightUpLeg")
+    R = np.array(walk.rotations, copy=True)
+    far = 300 + int(np.argmin(np.abs(R[300:, j] @ R[199, j])))
+    R[200:203, j] = R[far, j]
+    _, report = clean(dataclasses.replace(walk, rotations=R))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg"] == [("spike", 200, 202)]

@@ -61,7 +61,9 @@ class CleanOptions:
             elsewhere in the clip (outside the span and as many frames each side): a joint
             popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
             solved spine settling) is the capture's own behaviour, an offset injected or added
-            by a solver error puts the joint where it never goes.
+            by a solver error puts the joint where it never goes.  Not asked of a pair whose
+            two jumps are each impossible on their own (faster than ``max_speed`` and moving the
+            limb ``jump_distance``): out and back that way is a glitch wherever it goes.
         jump_ratio: ... and at least this many times the median of its neighbours.
         context_time: Seconds of neighbours (each side) for that median.
         max_glitch_time: Longest glitch between a jump and its return (seconds).
@@ -226,7 +228,8 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
     paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
     limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
-    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`) and both jumps
+    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when
+    both jumps are discontinuities on their own) and both jumps
     carried by its segment and children (:func:`_carried`, when ``limb`` says what it
     carries); an unpaired jump (or one whose pair fails those) is a ``discontinuity`` only if
     it is faster than ``max_speed`` both in the joint's local rotation and in its world
@@ -301,7 +304,9 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     for a, b in pairs:
         size = float(np.max(_angle(rot[a:b], rot[a - 1])))
         carried = limb is None or all(_carried(step, wstep, limb.carried, t, opt.carry_ratio) for t in (a, b))
-        if step[a] < opt.flip_deg and (not carried or _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]):
+        # two impossible jumps that undo each other are a spike wherever they go
+        familiar = not (single(a) and single(b)) and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]
+        if step[a] < opt.flip_deg and (not carried or familiar):
             # a pop to a pose the joint takes anyway, or one the next joint undoes: each jump on its own
             out += [Glitch("discontinuity", joint, t, t, float(step[t])) for t in (a, b) if single(t)]
             continue

@@ -29,7 +29,10 @@ stay out of both truth and false positives (counted and printed as "sub-noise").
 Correction is measured per type as the joint-position RMS error against the clean clip over
 the injected frames, before and after, its reduction ``1 - after/before``, and the largest
 increase of a frame's worst joint-position error on any frame the correction changed (but
-the frames of the clip's own glitches, where the "clean" reference is itself glitched).
+the frames of the clip's own glitches, where the "clean" reference is itself glitched), and how
+many of those touched frames got more than 1 cm worse; "beyond ROM" counts the touched frames
+the correction left beyond a range of motion (:mod:`physmocap.clean.anatomy`) that the
+untouched clip is within there.
 
 Usage:  python scripts/glitch_benchmark.py [--clips ...] [--per-type 6] [--seed 0] [--misses]
 """
@@ -113,6 +116,13 @@ def inject(motion, rng: np.random.Generator, per_type: int, kinds=TYPES, floor: 
     return dataclasses.replace(motion, rotations=R), truth, faint
 
 
+def _beyond_rom(motion) -> set[int]:
+    """Frames where some anatomical angle of ``motion`` is beyond its range of motion."""
+    from physmocap.clean.detect import anatomical_glitches
+
+    return {t for g in anatomical_glitches(motion) for t in range(g.start, g.end + 1)}
+
+
 def _flagged(report, names) -> set[tuple[int, int]]:
     return {(names[g.joint], t) for g in report.glitches for t in range(g.start, g.end + 1)}
 
@@ -139,7 +149,9 @@ def main() -> int:
     clips = args.clips or sorted(p.name for p in DATA.glob("*.bvh"))
     count = {t: np.zeros(3, int) for t in args.types}  # tp, fp, fn
     own_fp = {t: 0 for t in args.types}  # false positives the untouched clip already had
-    err = {t: [0.0, 0.0, 0, 0.0] for t in args.types}  # sum sq before, sum sq after, n, worst increase (cm)
+    # sum sq before, sum sq after, n, worst increase (cm), touched frames, of them > 1 cm worse,
+    # of them beyond a range of motion the untouched clip is within
+    err = {t: [0.0, 0.0, 0, 0.0, 0, 0, 0] for t in args.types}
     faint_total = {t: 0 for t in args.types}
     print(f"{'clip':26s} {'frames':>6s} {'untouched flagged %':>19s} {'changed %':>9s}  " + " ".join(f"{t[:9] + ' P/R':>13s}" for t in args.types) + "  (strict P)")
     for ci, clip in enumerate(clips):
@@ -150,6 +162,7 @@ def main() -> int:
         own_fix = np.any(np.asarray(base_fixed.rotations) != np.asarray(motion.rotations), axis=(1, 2))
         flagged = {t for g in base.glitches for t in range(g.start, g.end + 1)}
         base_pairs = _flagged(base, names)
+        base_rom = _beyond_rom(motion)
         if args.misses:
             for g in base.glitches:
                 print(f"    untouched  {g.kind:13s} {g.joint:18s} frames {g.start}-{g.end} severity {g.severity:.1f} {g.unit}")
@@ -188,17 +201,20 @@ def main() -> int:
                     wb = np.nanmax(np.linalg.norm(Pg[changed] - P0[changed], axis=-1), axis=-1)
                     wa = np.nanmax(np.linalg.norm(Pf[changed] - P0[changed], axis=-1), axis=-1)
                     err[t][3] = max(err[t][3], 100 * float(np.max(wa - wb)))
+                    err[t][4] += len(changed)
+                    err[t][5] += int(np.sum(wa - wb > 0.01))
+                    err[t][6] += len(set(changed.tolist()) & (_beyond_rom(fixed) - base_rom))
         print(f"{clip:26s} {motion.num_frames:6d} {100 * len(flagged) / motion.num_frames:19.2f} {100 * own_fix.mean():9.2f}  " + " ".join(f"{c:>13s}" for c in cells), flush=True)
     print()
-    print(f"{'type':11s} {'strict P':>9s} {'injected P':>10s} {'recall':>7s} {'F1':>6s} {'pairs':>6s} {'sub-noise':>9s} {'RMS before':>10s} {'after cm':>8s} {'removed':>7s} {'worst +cm':>9s}")
+    print(f"{'type':11s} {'strict P':>9s} {'injected P':>10s} {'recall':>7s} {'F1':>6s} {'pairs':>6s} {'sub-noise':>9s} {'RMS before':>10s} {'after cm':>8s} {'removed':>7s} {'worst +cm':>9s} {'>1cm worse':>12s} {'beyond ROM':>10s}")
     tot = np.zeros(3, int)
     for t in args.types:
         tot += count[t]
         p, r, f = _prf(*count[t])
         pi, _, f = _prf(count[t][0], count[t][1] - own_fp[t], count[t][2])
-        b, a, n, w = err[t]
+        b, a, n, w, touched, worse, rom = err[t]
         rb, ra = np.sqrt(b / max(1, n)) * 100, np.sqrt(a / max(1, n)) * 100
-        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f}")
+        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f} {worse:5d}/{touched:<6d} {rom:10d}")
     p, r, f = _prf(*tot)
     pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")

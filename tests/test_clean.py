@@ -255,10 +255,33 @@ def test_two_unrelated_jumps_do_not_make_a_spike(walk):
     qb = Rotation.from_rotvec(np.radians(30.0) * np.array([0.0, 0.0, 1.0])).as_quat()
     R[200:, j] = quat_mul(np.broadcast_to(qa, (len(R) - 200, 4)), R[200:, j])
     R[230:, j] = quat_mul(np.broadcast_to(qb, (len(R) - 230, 4)), R[230:, j])
-    _, report = clean(dataclasses.replace(walk, rotations=R))
+    from physmocap.clean import CleanOptions
+
+    bad = dataclasses.replace(walk, rotations=R)
+    _, report = clean(bad)
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
     assert not [g for g in mine if g.kind in ("spike", "flip")]
-    assert {(g.kind, g.start) for g in mine if g.kind != "anatomical"} == {("discontinuity", 200), ("discontinuity", 230)}
+    # the first, mostly a twist, moves the hand 3 cm: below jump_distance, a solver's pop
+    assert {(g.kind, g.start) for g in mine if g.kind != "anatomical"} == {("discontinuity", 230)}
+    _, report = clean(bad, CleanOptions(jump_distance=0.02))
+    mine = [g for g in report.glitches if g.joint == "LeftForeArm" and g.kind != "anatomical"]
+    assert {(g.kind, g.start) for g in mine} == {("discontinuity", 200), ("discontinuity", 230)}
+
+
+def test_a_pop_the_next_joint_undoes_is_not_a_spike(walk):
+    """A spine joint popping 20 degrees out and back while its child turns back the same
+    (a solver moving a bend between consecutive joints: the chest and arms stay put) is no
+    spike; the same offset carried by the child is one."""
+    j, k = _joint(walk, "Spine"), _joint(walk, "Spine1")
+    frames = list(range(200, 210))
+    q = Rotation.from_rotvec(np.radians(20.0) * np.array([0.0, 0.6, 0.8])).as_quat()
+    R = np.array(walk.rotations, copy=True)
+    R[frames, j] = quat_mul(R[frames, j], np.broadcast_to(q, (len(frames), 4)))  # in the joint's own frame
+    R[frames, k] = quat_mul(np.broadcast_to(Rotation.from_quat(q).inv().as_quat(), (len(frames), 4)), R[frames, k])
+    _, report = clean(dataclasses.replace(walk, rotations=R))
+    assert not [g for g in report.glitches if g.kind in ("spike", "flip")]
+    _, report = clean(_with(walk, j, frames, q))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "Spine"] == [("spike", 200, 209)]
 
 
 def test_frozen_repair_keeps_the_joints_speed_and_leaves_no_catch_up_jump(walk):
@@ -351,3 +374,51 @@ def test_shortened_benchmark_on_the_bundled_walk(walk):
         det = bench._flagged(report, names) - faint - (own - truth[kind])
         p, r, _ = bench._prf(len(det & truth[kind]), len(det - truth[kind]), len(truth[kind] - det))
         assert r >= 0.95 and p >= 0.95, (kind, p, r)
+
+
+def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
+    """A knee frozen for 0.4 s of a walk: no curve knows the swing it hides, but the other
+    strides do; the matched motion takes off most of the error."""
+    j = _joint(walk, "RightLeg")
+    frames = list(range(300, 348))
+    bad = _with(walk, j, frames, hold=True)
+    fixed, report = clean(bad)
+    assert [(g.kind, g.start, g.end, g.corrected) for g in report.glitches if g.joint == "RightLeg"] == [
+        ("frozen", 300, 347, "matched")
+    ]
+    P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
+    before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
+    after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
+    assert after < 0.35 * before
+    untouched = np.ones(walk.num_frames, bool)
+    untouched[frames] = False
+    assert np.array_equal(fixed.rotations[untouched], bad.rotations[untouched])
+
+
+def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):
+    """The body standing (every other joint still but for noise) while the forearm moves:
+    a forearm held for 0.25 s is found by the jump it makes to catch up, not by the body."""
+    m = walk.slice_frames(0, 400)
+    j = _joint(m, "LeftForeArm")
+    R = np.array(m.rotations, copy=True)
+    rng = np.random.default_rng(0)
+    noise = Rotation.from_rotvec(np.radians(0.01) * rng.normal(size=(300 * R.shape[1], 3))).as_quat()
+    still = quat_mul(noise.reshape(300, R.shape[1], 4), np.broadcast_to(R[100], (300, R.shape[1], 4)))
+    others = [k for k in range(R.shape[1]) if k != j]
+    R[100:400, others] = still[:, others]
+    R[200:230, j] = R[199, j]
+    _, report = clean(dataclasses.replace(m, rotations=R))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "LeftForeArm"] == [("frozen", 200, 229)]
+
+
+def test_two_impossible_jumps_out_and_back_are_a_spike_even_to_a_familiar_pose(walk):
+    """The thigh thrown for 3 frames to the pose farthest from it that it takes elsewhere:
+    each jump, at 120 Hz, is faster than any hip and swings the foot by decimetres, so out
+    and back is a spike though the pose is the leg's own (the pose test is for pops no faster
+    than real motion)."""
+    j = _joint(walk, "RightUpLeg")
+    R = np.array(walk.rotations, copy=True)
+    far = 300 + int(np.argmin(np.abs(R[300:, j] @ R[199, j])))
+    R[200:203, j] = R[far, j]
+    _, report = clean(dataclasses.replace(walk, rotations=R))
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg"] == [("spike", 200, 202)]

@@ -2,13 +2,18 @@
 
 A spike or flip of 0.15 s or more (``OFFSET_MIN_TIME``) has its offset taken off (the entry
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
-real motion under it; any other rotational glitch is bridged by a cubic Hermite curve in
-rotation space between the joint's last good rotation before it and its first good one
-after it, leaving and arriving at the joint's own speed on both sides (at the clip's ends
-the nearest good rotation is held), so no new discontinuity appears; a positional one (bone stretch,
-gap) by linear interpolation of the joint's position; a left/right swap by trading the
-two joints' positions back over the span.  Discontinuities (a jump with no
-return) are reported, not changed: the motion after them may be the real one.
+real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
+of motion, a short spike or flip) is bridged between the joint's last good rotation before
+it and its first good one after it by whichever of two estimates rebuilds the joint's own
+good motion next to the span better (:func:`_bridge`): a cubic Hermite curve in rotation
+space, leaving and arriving at the joint's own speed, or the joint's motion in the windows
+of the clip where the whole body moves most like it does around the span
+(:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
+what it was doing).  At the clip's ends the nearest good rotation is held (slerp).  A
+positional glitch (bone stretch, gap) is bridged by linear interpolation of the joint's
+position; a left/right swap by trading the two joints' positions back over the span.
+Discontinuities (a jump with no return) are reported, not changed: the motion after them
+may be the real one.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ import numpy as np
 
 from ..motion import Motion
 from ..rotations import Rotation
-from .detect import Glitch
+from .detect import Glitch, _angle
 
 __all__ = ["correct_glitches"]
 
@@ -70,6 +75,127 @@ def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
     return quat_mul(np.broadcast_to(R[a], (n, 4)), Rotation.from_rotvec(p).as_quat())
 
 
+class _Matcher:
+    r"""Bridging a glitch with the motion the clip itself makes elsewhere.
+
+    A frozen joint (or any long bridged span) hides real motion no curve can guess; the
+    rest of the body still shows what it was doing.  For joint :math:`j` over frames
+    :math:`s..e` (:math:`n` of them) the template is every animated joint's rotation matrix
+    on :math:`s-c .. e+c` (:math:`c` = ``context`` times :math:`n` frames each side),
+    without the glitched (joint, frame) pairs, joint :math:`j`'s own context frames
+    weighted ``own_weight`` (its motion into and out of the span says most about it).  A
+    window :math:`d` frames away scores :math:`\sum_{t,k} w_{tk}
+    \operatorname{tr}(R_k(t)^\top R_k(t+d))` (the squared Frobenius distance up to a
+    constant: one FFT correlation over the clip); the ``best`` highest-scoring windows that
+    do not overlap the template or each other, and whose joint :math:`j` is clean, lend
+    their joint :math:`j` increments :math:`\log(q_j(s-1+d)^{-1} q_j(t+d))`, averaged,
+    applied from the last good rotation :math:`q_j(s-1)`; the mismatch left at
+    :math:`e+1` is spread linearly over the span in the joint's frame, so both ends join
+    exactly.
+    """
+
+    def __init__(
+        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float = 0.5, own_weight: float = 5.0, best: int = 3
+    ) -> None:
+        F = len(R)
+        self.R, self.animated, self.bad = R, animated, bad
+        self.context, self.own_weight, self.best = context, own_weight, best
+        self.M = Rotation.from_quat(R[:, animated].reshape(-1, 4)).as_matrix().reshape(F, len(animated), 9)
+
+    def _scores(self, j: int, s: int, e: int, hidden: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(offsets d, scores)`` of the windows that may lend joint ``j`` motion for
+        ``s..e`` (``hidden (F,)``: joint ``j``'s frames not to use, the span included)."""
+        from scipy.signal import fftconvolve
+
+        F, n = len(self.R), e - s + 1
+        c = max(2, int(round(self.context * n)))
+        lo, hi = max(0, s - c), min(F, e + 1 + c)
+        w = (~self.bad[lo:hi][:, self.animated]).astype(float)
+        if j in self.animated:
+            col = self.animated.index(j)
+            w[:, col] *= self.own_weight * ~hidden[lo:hi]
+        T = (self.M[lo:hi] * w[..., None]).reshape(hi - lo, -1)
+        score = fftconvolve(self.M.reshape(F, -1), T[::-1], mode="valid", axes=0).sum(axis=1)
+        d = np.arange(len(score)) - lo
+        ok = (np.abs(d) >= hi - lo) & (s - 1 + d >= 0) & (e + 1 + d < F)
+        cum = np.concatenate([[0], np.cumsum(self.bad[:, j] | hidden)])
+        first, last = np.clip(s - 1 + d, 0, F), np.clip(e + 2 + d, 0, F)
+        ok &= cum[last] == cum[first]  # joint j's own motion there is clean
+        return d[ok], score[ok]
+
+    def bridge(self, j: int, s: int, e: int, hidden: np.ndarray | None = None) -> np.ndarray | None:
+        """``(e - s + 1, 4)`` rotations of joint ``j`` on ``s..e``, or None (no window
+        fits); ``hidden (F,)`` marks more of joint ``j``'s frames not to use."""
+        from ..rotations import quat_conj, quat_mul
+
+        F, n = len(self.R), e - s + 1
+        if s < 1 or e + 1 >= F:
+            return None
+        hide = np.zeros(F, dtype=bool) if hidden is None else hidden.copy()
+        hide[s : e + 1] = True
+        d, score = self._scores(j, s, e, hide)
+        picks: list[int] = []
+        for k in d[np.argsort(-score, kind="stable")]:
+            if all(abs(k - p) > n for p in picks):
+                picks.append(int(k))
+            if len(picks) == self.best:
+                break
+        if not picks:
+            return None
+        inc = np.zeros((n + 2, 3))
+        for k in picks:
+            src = self.R[s - 1 + k : e + 2 + k, j]
+            inc += Rotation.from_quat(quat_mul(np.broadcast_to(quat_conj(src[0]), src.shape), src)).as_rotvec()
+        step = Rotation.from_rotvec(inc / len(picks)).as_quat()
+        est = quat_mul(np.broadcast_to(self.R[s - 1, j], step.shape), step)
+        miss = Rotation.from_quat(quat_mul(quat_conj(est[-1]), self.R[e + 1, j])).as_rotvec()
+        frac = (np.arange(1, n + 1) / (n + 1))[:, None]
+        return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
+
+
+def _matcher(motion: Motion, glitches: list[Glitch]) -> _Matcher:
+    """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out."""
+    R = np.asarray(motion.rotations, dtype=float)
+    names = {n: j for j, n in enumerate(motion.skeleton.names)}
+    bad = np.zeros(R.shape[:2], dtype=bool)
+    for g in glitches:
+        bad[g.start : g.end + 1, names[g.joint]] = True
+    animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+    return _Matcher(R, animated, bad)
+
+
+def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
+    """The better of the Hermite curve and the matched motion (:class:`_Matcher`) over
+    frames ``s..e`` of joint ``j`` of ``R (F, J, 4)``, judged on the joint's own good motion
+    next to the span: each method rebuilds the ``n = e - s + 1`` frames just before the
+    span (leaving one frame between) and just after it as if they were glitched too, and
+    the one with the smaller RMS rotation error there (degrees) is used.  Returns the
+    rotations and the method's name ("cubic" or "matched")."""
+    cubic = _hermite(R[:, j], s - 1, e + 1)
+    if matcher is None:
+        return cubic, "cubic"
+    F, n = len(R), e - s + 1
+    err = np.zeros(2)
+    tested = False
+    for a in (s - 2 - n, e + 3):  # the pseudo-gap's first frame, before and after
+        b = a + n - 1
+        if a < 2 or b + 2 >= F:
+            continue
+        hidden = np.zeros(F, bool)
+        hidden[a : b + 1] = True
+        matched = matcher.bridge(j, a, b, hidden)
+        if matched is None:
+            continue
+        truth = R[a : b + 1, j]
+        err += [np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2), np.sum(_angle(matched, truth) ** 2)]
+        tested = True
+    if tested and err[1] < err[0]:
+        matched = matcher.bridge(j, s, e)
+        if matched is not None:
+            return matched, "matched"
+    return cubic, "cubic"
+
+
 def _remove_offset(R: np.ndarray, a: int, b: int) -> np.ndarray | None:
     """Frames ``a+1 .. b-1`` of ``R (F, 4)`` with the glitch's offset taken off: the entry
     jump :math:`q_{a+1} q_a^{-1}` (or, in the joint's own frame, :math:`q_a^{-1} q_{a+1}`)
@@ -111,9 +237,29 @@ def _twin(name: str, names: dict[str, int]) -> int | None:
     return None
 
 
+def _repair_rotation(R: np.ndarray, j: int, g: Glitch, fps: float, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
+    """Joint ``j``'s rotations over glitch ``g`` in ``R (F, J, 4)`` repaired, and how.
+
+    A glitch over a few frames is bridged best (the offset read off one jump carries that
+    frame's real motion); over a longer spike or flip the real motion under the offset is
+    worth more than any bridge.  At the clip's ends the nearest good rotation is held."""
+    F, n = len(R), g.end - g.start + 1
+    a, b = g.start - 1, g.end + 1
+    if g.kind in ("spike", "flip") and n >= OFFSET_MIN_TIME * fps:
+        fixed = _remove_offset(R[:, j], a, b)
+        if fixed is not None:
+            return fixed, "offset removed"
+    if 0 <= a and b < F:
+        return _bridge(R, j, g.start, g.end, matcher)
+    first, last = (R[a, j], R[a, j]) if a >= 0 else (R[b, j], R[b, j])
+    return _slerp(first, last, n), "slerp"
+
+
 def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, list[Glitch]]:
-    """A copy of ``motion`` with the repairable glitches interpolated over, and the glitch list
-    with ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space), "slerp" (at the clip's ends), "linear" or "" for reported only)."""
+    """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
+    ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
+    "matched" (:class:`_Matcher`), "slerp" (at the clip's ends), "linear", "swapped back",
+    or "" for reported only)."""
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     rot = None if motion.rotations is None else np.array(motion.rotations, copy=True)
     pos = None if motion.positions is None else np.array(motion.positions, copy=True)
@@ -121,6 +267,7 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
     out = []
     names_of = motion.skeleton.names
     swapped: set[tuple[int, int, int]] = set()
+    matcher: _Matcher | None = None
     for g in glitches:
         if g.kind == "lr_swap" and pos is not None:
             # trade the pair back (once per pair and span; both joints carry the glitch)
@@ -139,25 +286,17 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
             out.append(g)
             continue
         j = names[g.joint]
-        n = g.end - g.start + 1
+        if how == "rotation":
+            if 0 <= a and b < F:
+                matcher = matcher or _matcher(motion, glitches)
+            arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher)
+            out.append(dataclasses.replace(g, corrected=curve))
+            continue
         first = arr[a, j] if a >= 0 else arr[b, j]  # the good value before, or after at the start
         last = arr[b, j] if b < F else arr[a, j]
-        if how == "rotation":
-            # a glitch over a few frames is bridged best by the curve (the offset read off one
-            # jump carries that frame's real motion); over a longer one the real motion under
-            # the offset is worth more than any curve
-            long_ = n >= OFFSET_MIN_TIME * float(motion.fps)
-            fixed_span = _remove_offset(arr[:, j], a, b) if g.kind in ("spike", "flip") and long_ else None
-            if fixed_span is not None:
-                arr[g.start : g.end + 1, j] = fixed_span
-                out.append(dataclasses.replace(g, corrected="offset removed"))
-                continue
-            arr[g.start : g.end + 1, j] = _hermite(arr[:, j], a, b) if 0 <= a and b < F else _slerp(first, last, n)
-        else:
-            w = (np.arange(1, n + 1) / (n + 1))[:, None]
-            arr[g.start : g.end + 1, j] = (1 - w) * first + w * last
-        curve = "cubic" if 0 <= a and b < F else "slerp"
-        out.append(dataclasses.replace(g, corrected=curve if how == "rotation" else "linear"))
+        w = (np.arange(1, g.end - g.start + 2) / (g.end - g.start + 2))[:, None]
+        arr[g.start : g.end + 1, j] = (1 - w) * first + w * last
+        out.append(dataclasses.replace(g, corrected="linear"))
     fixed = dataclasses.replace(motion, rotations=rot) if rot is not None else motion
     if pos is not None:
         fixed = dataclasses.replace(fixed, positions=pos)

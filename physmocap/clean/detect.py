@@ -39,6 +39,10 @@ from ..motion import Motion
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
 
 
+#: A frame-to-frame step (degrees) below which a joint is not moving (a capture's noise floor).
+STILL_DEG = 0.05
+
+
 @dataclass(frozen=True)
 class CleanOptions:
     """Detection thresholds.
@@ -57,13 +61,17 @@ class CleanOptions:
             elsewhere in the clip (outside the span and as many frames each side): a joint
             popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
             solved spine settling) is the capture's own behaviour, an offset injected or added
-            by a solver error puts the joint where it never goes.
+            by a solver error puts the joint where it never goes.  Not asked of a pair whose
+            two jumps are each impossible on their own (faster than ``max_speed`` and moving the
+            limb ``jump_distance``): out and back that way is a glitch wherever it goes.
         jump_ratio: ... and at least this many times the median of its neighbours.
         context_time: Seconds of neighbours (each side) for that median.
         max_glitch_time: Longest glitch between a jump and its return (seconds).
         return_ratio: The return brings the joint back to within this fraction of the jump.
         return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
-            twice the joint's own motion (neighbours' median step) on the two frames.
+            twice the joint's own motion on the two frames (its median step over
+            ``context_time`` before or after each jump, whichever is larger: a toe at 30 Hz
+            still swinging into the frame a glitch starts on).
         flip_deg: A glitch whose jump is at least this large is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (positional).
@@ -74,6 +82,17 @@ class CleanOptions:
             hyperextension) get none.
         swap_min_distance: A left joint and its right twin this far apart (metres) or more
             can be seen trading places (positional sources).
+        jump_distance: A single jump (a discontinuity) must also move some point of the
+            joint's limb (its descendants, relative to the joint) this many metres farther
+            than the limb moves on the neighbouring frames: a toe, finger or twist popping by
+            a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
+            markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
+        carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
+            its world orientation jumps by at least this fraction of its local jump, and
+            some child's world orientation by at least this fraction of its own (an offset
+            on one joint turns everything it carries by the same angle).  A solver moving a
+            bend between consecutive joints turns one while the next turns back, and the
+            limbs beyond stay where they were.
     """
 
     jump_deg: float = 10.0
@@ -90,6 +109,8 @@ class CleanOptions:
     stretch_ratio: float = 0.1
     rom_soft_margin: float = 15.0
     swap_min_distance: float = 0.05
+    jump_distance: float = 0.05
+    carry_ratio: float = 0.5
 
     def __post_init__(self) -> None:
         from ..options import check_fields
@@ -143,9 +164,57 @@ def _neighbour_median(x: np.ndarray, half: int) -> np.ndarray:
     return median_filter(x, footprint=footprint, mode="nearest")
 
 
-def _jumps(
-    rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, world: np.ndarray | None = None
-) -> list[Glitch]:
+@dataclass(frozen=True)
+class Limb:
+    r"""What a joint's rotation moves, to tell its own jumps from a solver's redistribution.
+
+    Attributes:
+        world: ``(F, 4)`` the joint's world orientation (x-y-z-w).
+        carried: ``(F,)`` degrees: the largest world-orientation step of its animated
+            children on each frame (None: it has none; a leaf carries nothing to compare).
+        reach: ``(F,)`` metres: the largest step of its descendants' positions relative
+            to the joint, :math:`\max_d |(p_d - p_j)(t) - (p_d - p_j)(t-1)|` (None: no
+            descendants).
+    """
+
+    world: np.ndarray
+    carried: np.ndarray | None = None
+    reach: np.ndarray | None = None
+
+
+def limbs(motion: Motion, positions: np.ndarray, world: np.ndarray, joints: list[int]) -> dict[int, Limb]:
+    """:class:`Limb` of each of ``joints`` from the world ``positions (F, J, 3)`` and
+    ``world`` rotations ``(F, J, 4)`` of ``motion``."""
+    sk = motion.skeleton
+    F = len(world)
+    out = {}
+    for j in joints:
+        kids = [c for c in sk.children(j) if not sk.end_site[c] and c in joints]
+        carried = None
+        if kids:
+            carried = np.zeros(F)
+            carried[1:] = np.max(_angle(world[1:, kids], world[:-1, kids]), axis=1)
+        below = _descendants(sk.parents, j)
+        reach = None
+        if below:
+            rel = positions[:, below] - positions[:, [j]]
+            reach = np.zeros(F)
+            reach[1:] = np.max(np.linalg.norm(rel[1:] - rel[:-1], axis=-1), axis=1)
+        out[j] = Limb(world[:, j], carried, reach)
+    return out
+
+
+def _descendants(parents: np.ndarray, j: int) -> list[int]:
+    """Every joint below ``j`` (end sites included)."""
+    out, todo = [], [j]
+    while todo:
+        kids = np.flatnonzero(parents == todo.pop()).tolist()
+        out += kids
+        todo += kids
+    return out
+
+
+def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
     r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
 
     A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
@@ -159,11 +228,14 @@ def _jumps(
     unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
     paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
     limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
-    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`); an unpaired
-    jump (or one whose pair fails those) is a ``discontinuity`` only if it is faster than
-    ``max_speed``, both in the joint's local rotation and, when ``world (F, 4)`` is given, in
-    its world orientation: a local jump its parent's jump cancels (a solver moving a twist
-    from one joint to the next, the limb itself not turning) moves no segment.
+    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when
+    both jumps are discontinuities on their own) and both jumps
+    carried by its segment and children (:func:`_carried`, when ``limb`` says what it
+    carries); an unpaired jump (or one whose pair fails those) is a ``discontinuity`` only if
+    it is faster than ``max_speed`` both in the joint's local rotation and in its world
+    orientation (a local jump its parent's jump cancels, a solver moving a twist from one
+    joint to the next, moves no segment), and moves the limb below the joint
+    ``jump_distance`` metres farther than the limb's own motion on the neighbouring frames.
     """
     from ..rotations import quat_conj, quat_mul
 
@@ -171,11 +243,12 @@ def _jumps(
     step = np.zeros(F)
     step[1:] = _angle(rot[1:], rot[:-1])
     wstep = step
-    if world is not None:
+    if limb is not None:
         wstep = np.zeros(F)
-        wstep[1:] = _angle(world[1:], world[:-1])
+        wstep[1:] = _angle(limb.world[1:], limb.world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
+    single = _single_jump(step, wstep, limb, half, opt.max_speed / fps, opt.jump_distance)
     is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
     # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
@@ -185,6 +258,7 @@ def _jumps(
     win = sliding_window_view(np.pad(step, half, mode="edge"), half)
     before = np.median(win[:F], axis=1)  # t-half .. t-1
     after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
+    own = np.maximum(before, after)  # the joint's own motion next to a jump, on its busier side
     entry = is_jump & (step > opt.jump_ratio * before)
     exit_ = is_jump & (step > opt.jump_ratio * after)
     jumps = np.flatnonzero(is_jump)
@@ -208,7 +282,7 @@ def _jumps(
             if b in used or not exit_[b]:
                 continue
             # what is left of the entry after the exit: the joint's own motion on those two frames
-            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (ref[a] + ref[b]) + opt.return_deg)
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (own[a] + own[b]) + opt.return_deg)
             undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
             if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
@@ -218,7 +292,7 @@ def _jumps(
             pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            if min(step[a], wstep[a]) > opt.max_speed / fps:
+            if single(a):
                 out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
     # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
     # glitches of one joint do not vouch for each other)
@@ -229,14 +303,39 @@ def _jumps(
         elsewhere[max(0, a - n) : b + n] = False
     for a, b in pairs:
         size = float(np.max(_angle(rot[a:b], rot[a - 1])))
-        if step[a] < opt.flip_deg and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]:
-            for t in (a, b):  # a pop to a pose the joint takes anyway: each jump on its own
-                if min(step[t], wstep[t]) > opt.max_speed / fps:
-                    out.append(Glitch("discontinuity", joint, t, t, float(step[t])))
+        carried = limb is None or all(_carried(step, wstep, limb.carried, t, opt.carry_ratio) for t in (a, b))
+        # two impossible jumps that undo each other are a spike wherever they go
+        familiar = not (single(a) and single(b)) and _novelty(rot[a:b], rot[elsewhere]) < opt.novelty_ratio * step[a]
+        if step[a] < opt.flip_deg and (not carried or familiar):
+            # a pop to a pose the joint takes anyway, or one the next joint undoes: each jump on its own
+            out += [Glitch("discontinuity", joint, t, t, float(step[t])) for t in (a, b) if single(t)]
             continue
         kind = "flip" if size >= opt.flip_deg else "spike"
         out.append(Glitch(kind, joint, a, b - 1, size))
     return sorted(out, key=lambda g: g.start)
+
+
+def _carried(step: np.ndarray, wstep: np.ndarray, carried: np.ndarray | None, t: int, ratio: float) -> bool:
+    """Does the jump on frame ``t`` turn the joint's segment and what it carries: its world
+    step at least ``ratio`` of its local ``step`` (the parent does not turn it back), and
+    some child's world step (``carried``, None for a joint that carries none) at least
+    ``ratio`` of its world step (the children do not turn it back)?"""
+    return bool(wstep[t] >= ratio * step[t] and (carried is None or carried[t] >= ratio * wstep[t]))
+
+
+def _single_jump(step: np.ndarray, wstep: np.ndarray, limb: Limb | None, half: int, most: float, distance: float):
+    """Predicate on a frame ``t``: is the jump there a discontinuity on its own?  Faster than
+    ``most`` degrees per frame in the local ``step`` and the world ``wstep``, and moving the
+    limb (``limb.reach``) ``distance`` metres farther than its median step over ``half``
+    frames each side."""
+    excess = None
+    if limb is not None and limb.reach is not None:
+        excess = limb.reach - _neighbour_median(limb.reach, half)
+
+    def single(t: int) -> bool:
+        return bool(min(step[t], wstep[t]) > most and (excess is None or excess[t] > distance))
+
+    return single
 
 
 def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
@@ -250,10 +349,16 @@ def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
 
 
 def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
-    """Runs where the joint's rotation is exactly constant while the body moves."""
+    """Runs where the joint's rotation is exactly constant while the body moves, or that end
+    with the joint catching up: its first step after the run ``jump_ratio`` times its median
+    step over the ``context_time`` after (a joint that really stops starts again smoothly;
+    one whose value stopped updating jumps to where it had got to; steps below ``STILL_DEG``
+    count as that)."""
     F = len(rot)
     same = np.zeros(F, dtype=bool)
     same[1:] = np.all(rot[1:] == rot[:-1], axis=1)
+    step = joint_angles_step(rot[:, None])[:, 0]
+    half = max(2, int(round(opt.context_time * fps)))
     if same[1:].all():  # never animated: not a glitch
         return []
     shortest = max(3, int(round(opt.frozen_time * fps)))
@@ -265,7 +370,11 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     out = []
     for (start, e), v in zip(runs, values):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if values.count(v) > 1 or not inside or e - start + 1 < shortest or moving[start : e + 1].mean() <= 0.5:
+        if values.count(v) > 1 or not inside or e - start + 1 < shortest:
+            continue
+        after = max(float(np.median(step[e + 2 : e + 2 + half])), STILL_DEG) if e + 2 < F else np.inf
+        catch_up = step[e + 1] > opt.jump_ratio * after
+        if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
         out.append(Glitch("frozen", joint, int(start + 1), int(e), float((e - start) / fps), unit="s"))
     return out
@@ -288,11 +397,12 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
             warnings.simplefilter("ignore")
             skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
-        W = np.asarray(motion.world_rotations(), dtype=float)
+        P, W = motion.forward_kinematics()
+        limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip, W[:, j])
-        # the body moves on a frame where the median joint moves more than 0.05 degrees
-        moving = np.median(steps[:, animated], axis=1) > 0.05 if animated else np.zeros(len(R), bool)
+            glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
+        # the body moves on a frame where the median joint moves
+        moving = np.median(steps[:, animated], axis=1) > STILL_DEG if animated else np.zeros(len(R), bool)
         for j in animated:
             glitches += _frozen(R[:, j], moving, fps, opt, names[j])
     if motion.positions is not None:

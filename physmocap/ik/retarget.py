@@ -233,7 +233,8 @@ def plan_targets(
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
     levelled = level_targets(targets, character, labels)
     positions, offsets = planted_positions(
-        levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
+        levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
+        planting.toe_contacts(),
     )
     if body_labels:
         positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)

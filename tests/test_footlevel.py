@@ -128,3 +128,47 @@ def test_undefined_frames_are_left_as_they_are():
     ok = np.ones(F, bool)
     ok[[10, 11, 12, 30]] = False
     assert np.isfinite(new_ori[ok]).all() and np.isfinite(new_pos[ok]).all()
+
+
+def test_toes_are_levelled_with_the_foot():
+    """A skeleton whose toe bone points 30 degrees down while the actor stands flat gets the
+    character's flat toes on the stance frames; the actor's toe flexion relative to that (toes
+    bending after frame 80) is kept."""
+    F, fps = 120, 60.0
+    rest = _rest()
+    ori = np.zeros((F, 3, 4))
+    ori[..., 3] = 1.0
+    ori[:, 0] = rest["left_ankle"][1]
+    pos = np.zeros((F, 3, 3))
+    pos[:, 0] = [0.0, 0.1, 0.07]
+    pos[:, 1] = [0.13, 0.1, 0.02]
+    bend = np.where(np.arange(F) < 80, 0.0, np.radians(20.0))  # the toes curl 20 degrees later
+    down = np.radians(30.0) + bend
+    pos[:, 2] = pos[:, 1] + 0.07 * np.stack([np.cos(down), np.zeros(F), -np.sin(down)], axis=1)
+    stance = np.arange(F) < 80
+    labels = {"left_heel": stance, "left_toe": stance}
+    new_pos, _, levels = level_feet(pos, ori, np.array([True, False, False]), NAMES, labels, rest, fps)
+    seg = new_pos[:, 2] - new_pos[:, 1]
+    pitch = np.degrees(np.arctan2(-seg[:, 2], seg[:, 0]))
+    assert np.allclose(pitch[stance], 0.0, atol=1e-6)  # flat, as the character's rest toes
+    assert np.allclose(pitch[~stance], 20.0, atol=1e-6)  # the actor's curl, relative to flat
+    assert np.allclose(np.linalg.norm(seg, axis=1), 0.07)
+
+
+def test_a_pitched_toe_segment_rests_on_its_lowest_point():
+    """ToeContact.lowest: a capsule toe (radius 1 cm from the toe joint to the tip) pitched 60
+    degrees down rests on the tip's end cap, not on its flat-toe contact site."""
+    from physmocap.ik.footplan import ToeContact
+
+    seg = ToeContact(
+        direction=np.array([0.07, 0.0, 0.0]),
+        offsets=np.array([[0.0, 0.0, 0.0], [0.07, 0.0, 0.0]]),
+        radii=np.array([0.01, 0.01]),
+        height=0.0,
+    )
+    toe = np.array([[0.0, 0.0, 0.1], [0.0, 0.0, 0.1]])
+    a = np.radians([0.0, 60.0])
+    tip = toe + 0.07 * np.stack([np.cos(a), np.zeros(2), -np.sin(a)], axis=1)
+    low = seg.lowest(toe, tip)
+    assert np.allclose(low[:, 2], tip[:, 2] - 0.01)
+    assert np.allclose(low[1, :2], tip[1, :2])

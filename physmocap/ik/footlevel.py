@@ -145,8 +145,39 @@ def level_feet(
         it = col[toe]
         old_dir = positions[good, it] - positions[good, ia]
         pos[good, it] = pos[good, ia] + (new * q_c0.inv()).apply(rest[toe][0] - rest[ankle][0])
-        if tip in col:
+        if tip in col and tip in rest:
             ie = col[tip]
             turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
-            pos[good, ie] = pos[good, it] + quat_apply(turn, positions[good, ie] - positions[good, it])
+            toe_dir = quat_apply(turn, positions[good, ie] - positions[good, it])
+            pos[good, ie] = pos[good, it] + _level_toes(toe_dir, new, stance[good], q_c0, rest[tip][0] - rest[toe][0])
     return pos, ori, levels
+
+
+def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: Rotation, rest_dir: np.ndarray) -> np.ndarray:
+    r"""``(F, 3)`` toe segments (toe joint to tip, world) with the toes levelled like the foot.
+
+    Skeletons also disagree on where the toe tip sits relative to the foot, so
+    the actor's toe segment, seen in the (levelled) foot's frame, is turned by
+    one constant rotation :math:`D` that makes its mean direction over the
+    flat-stance frames the character's rest one
+    (:math:`D` = the smallest rotation from
+    :math:`\operatorname{mean}_{stance} \widehat{F(t)^{-1} d(t)}` to
+    :math:`\widehat{Q_{c,0}^{-1} d_{c,0}}`, :math:`F(t)` the foot's target orientation):
+    the toes lie flat when the actor's do, and their flexion relative to that
+    (toes bending at toe-off, curling in the swing) is the actor's.
+
+    Args:
+        toe_dir: ``(F, 3)`` the actor's toe segments (toe joint to tip), world.
+        foot: ``F`` levelled foot orientations (the ankle's targets).
+        stance: ``(F,)`` flat-stance frames.
+        q_c0: The character's rest orientation of the foot.
+        rest_dir: The character's rest toe segment (toe joint to tip), world.
+    """
+    local = foot.inv().apply(toe_dir)
+    unit = local / np.maximum(np.linalg.norm(local, axis=-1, keepdims=True), 1e-12)
+    mean = unit[stance].mean(axis=0)
+    want = q_c0.inv().apply(rest_dir)
+    if np.linalg.norm(mean) < 1e-6 or np.linalg.norm(want) < 1e-9:
+        return toe_dir
+    D = quat_between(mean, want)
+    return foot.apply(quat_apply(D, local))

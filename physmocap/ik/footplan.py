@@ -39,7 +39,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -229,11 +229,12 @@ def knee_between(
     An actor's straight leg gives no plane (its knee lies on the line, and
     which side it sits on is capture noise), yet the planned ankle may need
     the character's knee to bend: the bend direction is then
-    :math:`p \propto w_\perp + \epsilon\, f_\perp`, with :math:`w_\perp` the
-    original knee's offset from the line, :math:`f_\perp` the unit ``forward``
-    hint (the foot's direction: knees bend over the toes) off the line, and
-    :math:`\epsilon = 0.05\, l_1`: a knee bent visibly keeps its own plane, a
-    straight one bends forward instead of flipping sideways.
+    :math:`p \propto w_\perp + \max(\epsilon - |w_\perp|, 0)\, f_\perp`, with
+    :math:`w_\perp` the original knee's offset from the line, :math:`f_\perp` the
+    unit ``forward`` hint (the foot's direction: knees bend over the toes) off the
+    line, and :math:`\epsilon = 0.05\, l_1`: a straight knee bends forward instead
+    of flipping sideways, and one bent by :math:`\epsilon` or more keeps exactly
+    its own plane (a feet-out stance's knees do not point over the toes).
     """
     v = ankle - hip
     d = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -259,8 +260,9 @@ FOOT_JOINTS = ("ankle", "toe", "toe_end")
 
 
 #: Fraction of thigh plus shank that a planted leg may reach (a fully straight knee is a
-#: singular IK pose).
-REACH = 0.995
+#: singular IK pose): 0.999 leaves the knee bent at least 5 degrees (0.995 forced 11.5, and
+#: an actor standing with straight legs got a character with bent knees and shanks 9 degrees off).
+REACH = 0.999
 
 
 def planted_positions(
@@ -271,12 +273,21 @@ def planted_positions(
     ease_time: float,
     leg_lengths: Mapping[str, tuple[float, float]],
     heights: Mapping[str, float],
+    toe_sites: Mapping[str, "ToeContact"] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Targets with both feet planted: ``(new positions (F, N, 3), foot offsets (F, 2, 2))``.
 
     The feet follow their :class:`FootPlan`; where a planted leg could not
     reach its foot, the rest of the body comes down smoothly by
     :func:`pelvis_drop`; the knees are re-placed by :func:`knee_between`.
+
+    A foot with a toe segment (``toe`` and ``toe_end`` targets) and contact
+    sites on it (``toe_sites``) is planned by the segment's lowest point
+    (:meth:`ToeContact.lowest`): the segment keeps the actor's pitch and is
+    only translated, so that its lowest point rests on the floor (a foot
+    rolling over its toe tips does so), and the toe joint is never planned
+    below its own stance height.  Otherwise the toe joint and the
+    toe tip are each held at their stance heights (the toes lie flat).
 
     Args:
         positions: ``(F, N, 3)`` target positions (not modified).
@@ -297,25 +308,36 @@ def planted_positions(
         ankle = f"{side}_ankle"
         if ankle not in col:
             continue
-        # the joints carrying each contact point: heel -> ankle, toe -> toe joint and toe tip
-        carriers = {"heel": [ankle], "toe": [f"{side}_{j}" for j in ("toe", "toe_end") if f"{side}_{j}" in col]}
-        if not carriers["toe"]:
-            carriers["toe"] = [ankle]
-        pts = {j: positions[:, col[j]] for group in carriers.values() for j in group}
-        lab = {
-            j: np.asarray(labels.get(f"{side}_{point}", np.zeros(F, bool)), dtype=bool)
-            for point, group in carriers.items()
-            for j in group
-        }
-        if carriers["toe"] == [ankle]:  # no toe joint: the ankle carries both contact points
-            lab[ankle] = lab[ankle] | np.asarray(labels.get(f"{side}_toe", np.zeros(F, bool)), dtype=bool)
-        plan = foot_offsets(pts, lab, fps, ease_time, {j: heights[j] for j in pts})
+        heel_label = np.asarray(labels.get(f"{side}_heel", np.zeros(F, bool)), dtype=bool)
+        toe_label = np.asarray(labels.get(f"{side}_toe", np.zeros(F, bool)), dtype=bool)
+        toe, tip = f"{side}_toe", f"{side}_toe_end"
+        segment = toe_sites.get(side) if toe_sites and toe in col and tip in col else None
+        if segment is not None:  # the toe segment's contact sites carry the toe contact
+            # held horizontally at the toe tip joint (the lowest candidate may switch ends of
+            # the segment), vertically by the segment's lowest point
+            site = np.concatenate([positions[:, col[tip], :2], segment.lowest(positions[:, col[toe]], positions[:, col[tip]])[:, 2:]], axis=1)
+            pts = {ankle: positions[:, col[ankle]], "toe_sites": site}
+            lab = {ankle: heel_label, "toe_sites": toe_label}
+            hts = {ankle: heights[ankle], "toe_sites": segment.height}
+        else:  # the joints carrying each contact point: heel -> ankle, toe -> toe joint and tip
+            group = [j for j in (toe, tip) if j in col] or [ankle]
+            pts = {j: positions[:, col[j]] for j in [ankle, *group]}
+            lab = {ankle: heel_label, **{j: toe_label for j in group}}
+            if group == [ankle]:  # no toe joint: the ankle carries both contact points
+                lab[ankle] = heel_label | toe_label
+            hts = {j: heights[j] for j in pts}
+        plan = foot_offsets(pts, lab, fps, ease_time, hts)
         offsets[:, s] = plan.xy
         moved = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
         feet[moved] = True
         out[:, moved, :2] += plan.xy[:, None, :]
         for j in pts:
-            out[:, col[j], 2] += plan.z[j]
+            if j in col:
+                out[:, col[j], 2] += plan.z[j]
+        if segment is not None:
+            own = foot_offsets({toe: positions[:, col[toe]]}, {toe: toe_label}, fps, ease_time, {toe: heights[toe]}).z[toe]
+            out[:, col[tip], 2] += plan.z["toe_sites"]
+            out[:, col[toe], 2] += np.maximum(plan.z["toe_sites"], own)
         hip, knee = f"{side}_hip", f"{side}_knee"
         if side in leg_lengths and hip in col and knee in col:
             feet[col[knee]] = True
@@ -331,6 +353,44 @@ def planted_positions(
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
     return out, offsets
+
+
+@dataclass(frozen=True)
+class ToeContact:
+    """The material of one foot's toe segment, in the character's rest pose (metres).
+
+    Attributes:
+        direction: Rest toe segment, toe joint to toe tip (world).
+        offsets: ``(K, 3)`` rest positions of the segment's lowest-point candidates
+            (:func:`~physmocap.models.geometry.geom_candidates` of its collision
+            geoms, else its contact sites) from the toe joint (world).
+        radii: ``(K,)`` their radii (the material reaches this far below a candidate).
+        height: Rest height above the floor of the segment's lowest point (it rests on the floor).
+    """
+
+    direction: np.ndarray
+    offsets: np.ndarray
+    radii: np.ndarray
+    height: float
+
+    def lowest(self, toe: np.ndarray, tip: np.ndarray) -> np.ndarray:
+        r"""``(F, 3)`` the lowest material point of toe segments with joints ``toe``, ``tip`` ``(F, 3)``.
+
+        Each candidate is carried rigidly by the segment: :math:`x_k = T_{toe} + R\,o_k`
+        with :math:`R` the smallest rotation taking the rest direction onto
+        :math:`T_{tip} - T_{toe}` (a toe segment has no roll to follow; its
+        material lies near its own sagittal plane, where roll barely moves it), and
+        the lowest point is :math:`\min_k (x_{k,z} - r_k)`.
+        """
+        from ..rotations import quat_apply, quat_between
+
+        q = quat_between(np.broadcast_to(self.direction, tip.shape), tip - toe)
+        pts = toe[:, None, :] + quat_apply(q[:, None, :], self.offsets[None, :, :])
+        low = pts[..., 2] - self.radii[None, :]
+        k = np.argmin(low, axis=1)
+        out = pts[np.arange(pts.shape[0]), k]
+        out[:, 2] = low[np.arange(pts.shape[0]), k]
+        return out
 
 
 def _foot_forward(positions: np.ndarray, col: Mapping[str, int], side: str) -> np.ndarray | None:

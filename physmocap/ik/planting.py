@@ -46,11 +46,12 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from ..models.geometry import character_geoms, geom_candidates
 from ..options import check_fields
-from .footplan import FOOT_JOINTS, knee_between
+from .footplan import FOOT_JOINTS, ToeContact, knee_between
 from .tasks import SitePositionTask
 
-__all__ = ["PlantOptions", "FootPlanter", "FootAnchor", "Planting"]
+__all__ = ["PlantOptions", "PlanHints", "FootPlanter", "FootAnchor", "Planting"]
 
 
 @dataclass
@@ -116,6 +117,21 @@ def _smooth(x: float) -> float:
     return x * x * (3.0 - 2.0 * x)
 
 
+@dataclass(frozen=True)
+class PlanHints:
+    """What the offline plan says about each contact site this frame (sites in planter order).
+
+    Attributes:
+        rolling: The site's height is planned by the targets (a toe segment rolling
+            with the actor's, :mod:`.footplan`): held horizontally while labelled,
+            whatever its height, and not pulled down.
+        holdable: The site may be held (the others are only pulled down).
+    """
+
+    rolling: np.ndarray
+    holdable: np.ndarray
+
+
 class FootPlanter:
     """Lock state of every contact site, turned into IK tasks frame by frame."""
 
@@ -151,7 +167,10 @@ class FootPlanter:
         self.age[:] = 0
 
     def update(
-        self, in_contact: Mapping[str, bool] | np.ndarray, data: mujoco.MjData
+        self,
+        in_contact: Mapping[str, bool] | np.ndarray,
+        data: mujoco.MjData,
+        hints: "PlanHints | None" = None,
     ) -> tuple[list[SitePositionTask], list[SitePositionTask], np.ndarray]:
         """Advance one frame.
 
@@ -169,6 +188,8 @@ class FootPlanter:
                 (a mapping by site name, or a bool array in ``self.sites`` order).
             data: MuJoCo data holding the previous frame's solution (anchors
                 and heights are taken from it).
+            hints: Offline, what the planned targets say about each site this
+                frame (:class:`PlanHints`); None when streaming.
 
         Returns:
             ``(soft tasks, equality constraints, engaged flags)``.
@@ -191,12 +212,13 @@ class FootPlanter:
             sid = task.site_id
             # hysteresis: a held site stays held until it is clearly above the band
             band = opt.engage_height + (opt.release_margin if self.locked[k] else 0.0)
-            low = min(z[k], z[k] + 2.0 * vz[k]) < band
+            rolling = hints is not None and bool(hints.rolling[k])
+            low = min(z[k], z[k] + 2.0 * vz[k]) < band or (rolling and self.locked[k])
             # A lock starts when a labelled site touches down (a labelled site still in
             # the air is pulled down first: holding it in the air would keep it from
             # reaching the floor).  With lock_low it lasts, label or not, until the
             # site lifts clear of the band, so a foot rises before it moves.
-            engaged[k] = low and (flags[k] or (opt.lock_low and self.locked[k]))
+            engaged[k] = low and (flags[k] or (opt.lock_low and self.locked[k])) and (hints is None or bool(hints.holdable[k]))
             if engaged[k]:
                 if not self.locked[k]:
                     self.anchor[k, :2] = data.site_xpos[sid, :2]
@@ -207,7 +229,7 @@ class FootPlanter:
             else:
                 self.locked[k] = False
             self.free[k] = not flags[k] and not engaged[k]
-            if flags[k]:
+            if flags[k] and not rolling:
                 # pulled onto the floor, the pull ramping in over onset_time
                 self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
                 ramp = _smooth((self.age[k] + 1) / self.onset_frames)
@@ -307,6 +329,18 @@ class FootAnchor:
         return new
 
 
+def _material_points(model: mujoco.MjModel, data: mujoco.MjData, bodies: set[int]) -> np.ndarray:
+    """``(K, 4)`` world lowest-point candidates ``(x, y, z, radius)`` of the collision geoms
+    of ``bodies`` in the pose of ``data`` (:func:`~physmocap.models.geometry.geom_candidates`)."""
+    rows = []
+    for g in character_geoms(model, collision_only=True):
+        if int(model.geom_bodyid[g]) in bodies:
+            c = geom_candidates(model, g)
+            xyz = data.geom_xpos[g] + c[:, :3] @ data.geom_xmat[g].reshape(3, 3).T
+            rows.append(np.hstack([xyz, c[:, 3:]]))
+    return np.vstack(rows) if rows else np.zeros((0, 4))
+
+
 class Planting:
     """Per-frame planting for one character: foot target offsets plus contact-site locks.
 
@@ -354,6 +388,20 @@ class Planting:
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
         self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
+        self._site_side = ["left" if s in character.contacts.get("left", ()) else "right" for s in self.sites]
+        self._side_sites = {side: [k for k, v in enumerate(self._site_side) if v == side] for side in ("left", "right")}
+        #: sites on a toe segment of a foot that also has sites on its own body
+        self._toe_segment = np.array(
+            [roles.get(site) == "hold" and any(r == "release" for r in self._toe_roles(model, character, side).values())
+             for side in ("left", "right") for site in character.contacts.get(side, ())],
+            dtype=bool,
+        )
+        rolling = set(self.toe_contacts())
+        #: toe-segment sites whose height the offline plan sets while only the toes are down
+        self._rolling = np.array(
+            [roles.get(site) == "hold" and side in rolling for side in ("left", "right") for site in character.contacts.get(side, ())],
+            dtype=bool,
+        )
         self.lengths: dict[str, tuple[int, int, int, float, float]] = {}
         rest = {c: character.rest_positions()[c] for c in self.names if c in character.rest_positions()}
         for side in ("left", "right"):
@@ -429,6 +477,31 @@ class Planting:
         rest = self.character.rest_positions()
         return {c: float(rest[c][2] - self.locks.floor) for c in self.names if c in rest}
 
+    def toe_contacts(self) -> dict[str, ToeContact]:
+        """Side -> the :class:`~physmocap.ik.footplan.ToeContact` of a foot whose toe segment
+        (``toe`` and ``toe_end`` tracked) carries contact sites (role ``"hold"``)."""
+        model = self.character.model
+        rest = self.character.rest_positions()
+        data = mujoco.MjData(model)
+        data.qpos[:] = self.character.rest_qpos
+        mujoco.mj_kinematics(model, data)
+        out: dict[str, ToeContact] = {}
+        for side in ("left", "right"):
+            toe, tip = f"{side}_toe", f"{side}_toe_end"
+            held = [s for s, role in self._toe_roles(model, self.character, side).items() if role == "hold"]
+            if not held or toe not in rest or tip not in rest or toe not in self.names or tip not in self.names:
+                continue
+            points = _material_points(model, data, {int(model.site(s).bodyid[0]) for s in held})
+            if not len(points):  # no collision geometry on the toes: their contact sites
+                points = np.array([[*data.site(s).xpos, 0.0] for s in held])
+            out[side] = ToeContact(
+                direction=rest[tip] - rest[toe],
+                offsets=points[:, :3] - rest[toe],
+                radii=points[:, 3],
+                height=float((points[:, 2] - points[:, 3]).min() - self.locks.floor),
+            )
+        return out
+
     def leg_lengths(self) -> dict[str, tuple[float, float]]:
         """Side -> (thigh, shank) length of the character (metres)."""
         return {side: (v[3], v[4]) for side, v in self.lengths.items()}
@@ -470,12 +543,26 @@ class Planting:
             return out, [], [], offsets
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
         toes_only = np.zeros(len(self.sites), dtype=bool)
+        flat = np.zeros(len(self.sites), dtype=bool)
         if not self.anchored:
             for k, site in enumerate(self.sites):
                 side = "left" if site in self.character.contacts.get("left", ()) else "right"
-                toes_only[k] = bool(labels.get(f"{side}_toe", False)) and not labels.get(f"{side}_heel", False)
+                toe, heel = bool(labels.get(f"{side}_toe", False)), bool(labels.get(f"{side}_heel", False))
+                toes_only[k] = toe and not heel
+                flat[k] = toe and heel
             flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
-        tasks, hard, engaged = self.locks.update(flags, data)
+        # toes rolling with the actor's (planned by the toe segment, .footplan): held, not pulled
+        # Offline, the toes of a flat foot are held only once the ball of the foot is (they are
+        # pulled down before): a foot landing with its toes curled flattens them instead of
+        # being locked at its landing shape by a toe tip held where it first touched.
+        hints = None
+        if not self.anchored:
+            ball_down = {
+                side: any(self.locks.locked[k] for k in idx if self._release[k]) for side, idx in self._side_sites.items()
+            }
+            waiting = flat & self._toe_segment & ~np.array([ball_down[self._site_side[k]] for k in range(len(self.sites))])
+            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
+        tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging
             pivots = {self.locks.tasks[k].site_id for k in np.flatnonzero(toes_only & self._pivot)}

@@ -31,6 +31,7 @@ from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, SolverOptions
 from .targets import Targets, build_targets, character_rest_frames
+from .toetips import extend_toe_tips
 
 __all__ = ["retarget", "solve_targets", "map_motion", "RetargetConfig"]
 
@@ -176,6 +177,7 @@ def retarget(
         motion = motion.resample(float(fps))
     if joint_indices is None:
         joint_indices = map_motion(motion, profile=profile, mapping=mapping)
+        motion, joint_indices = extend_toe_tips(motion, joint_indices, character.rest_positions())
     found = resolve_contacts(motion, joint_indices, contacts if plant else False, config)
     if targets is None:
         floor = found.floor if found is not None else None
@@ -233,7 +235,8 @@ def plan_targets(
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
     levelled = level_targets(targets, character, labels)
     positions, offsets = planted_positions(
-        levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights()
+        levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
+        planting.toe_contacts(),
     )
     if body_labels:
         positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)

@@ -6,15 +6,15 @@ generator (:mod:`physmocap.models.humanoid_builder`) writes them into
 range this table gives.
 
 Sources (degrees, active range from the anatomical neutral position: standing,
-arms at the sides, palms facing the thighs, feet forward), as tabulated in
-``shared/design/rom.md``:
+arms at the sides, palms facing the thighs, feet forward); every value is in
+the tables below, with its source:
 
 * ``S1``-``S4``: the four goniometry sources of a 2017 mocap-cleanup study
   (Luttgens, Hamilton and Weimar, *Kinesiology: Scientific Basis of Human
   Motion*, 12th ed., 2011; and a goniometry reference table, AOK Health 2017).
   Where a source gives a span ("60-90") the upper end is stored.
-* ``AAOS``: American Academy of Orthopaedic Surgeons figures quoted in
-  rom.md for movements the four sources lack (ankle inversion and eversion,
+* ``AAOS``: American Academy of Orthopaedic Surgeons figures, for movements
+  the four sources lack (ankle inversion and eversion,
   first metatarsophalangeal extension and flexion, knee hyperextension).
 * ``NEUMANN``: D. A. Neumann, *Kinesiology of the Musculoskeletal System*,
   2nd ed., 2010, ch. 5, sterno-clavicular joint: elevation 45, depression 10,
@@ -142,7 +142,7 @@ def _m(name: str, margin: bool = True, **values: float) -> Movement:
     return Movement(name, dict(values), margin)
 
 
-# -- the clinical values (rom.md) ---------------------------------------------
+# -- the clinical values (sources above) ------------------------------------------
 _TL_FLEX = _m("flexion", S1=50, S4=45)
 _TL_EXT = _m("extension", S1=25, S4=35)
 _TL_LAT = _m("lateral flexion", S1=25, S4=30)

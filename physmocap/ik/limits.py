@@ -154,6 +154,9 @@ class GeomCandidates:
         self.radius = np.zeros(len(self.geoms))
         if len(self.owner):
             np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
+        self._rows_key: bytes | None = None
+        self._rows = np.zeros(0, dtype=int)
+        self._all = np.arange(len(self.gid))
 
     def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height.
@@ -180,22 +183,38 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
+    def _near_rows(self, data: mujoco.MjData, below: float) -> np.ndarray | None:
+        """Candidate rows of the geoms whose bounding sphere reaches below ``below`` (None:
+        every geom does); the index array is kept while the same geoms stay near, which
+        they do over many iterations (a walking robot: its feet and shins)."""
+        near = data.geom_xpos[self.geoms, 2] - self.radius < below
+        if near.all():
+            return None
+        key = near.tobytes()
+        if self._rows_key != key:
+            self._rows_key = key
+            self._rows = np.flatnonzero(near[self.owner])
+        return self._rows
+
+    def near_z(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(rows (k,), z (k,))``: the candidates of the geoms whose bounding sphere reaches
+        below ``below`` (ascending rows) and their lowest surface heights (metres)."""
+        rows = self._near_rows(data, below)
+        if rows is None:
+            rows = self._all
+        gid = self.gid[rows]
+        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
+        z -= self.local[rows, 3]
+        return rows, z
+
     def surface_z(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
         """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
         metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
-        if len(self.gid) == 0:
-            return np.zeros(0)
+        rows, zr = self.near_z(data, np.inf if below is None else below)
+        if len(rows) == len(self.gid):
+            return zr
         z = np.full(len(self.gid), np.inf)
-        if below is not None:
-            near = data.geom_xpos[self.geoms, 2] - self.radius < below
-            if not near.all():
-                rows = np.flatnonzero(near[self.owner])
-                gid = self.gid[rows]
-                z[rows] = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
-                z[rows] -= self.local[rows, 3]
-                return z
-        z[:] = data.geom_xpos[self.gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[self.gid, 6:9], self.local[:, :3])
-        z -= self.local[:, 3]
+        z[rows] = zr
         return z
 
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
@@ -270,6 +289,7 @@ class FloorLimit(mink.Limit):
         self._pj = PointJacobians(model)
         self._cand = GeomCandidates(model, self.geoms)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
+        self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
         self._zcache: tuple[bytes, np.ndarray] | None = None
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
@@ -295,24 +315,43 @@ class FloorLimit(mink.Limit):
         self._cache = (key, out)  # the same configuration is queried several times per iteration
         return out
 
-    def z(self, data: mujoco.MjData) -> np.ndarray:
-        """``z (n,)`` of :meth:`heights` alone (metres; ``inf`` beyond the activation
-        band for geoms), cached per configuration: what the residuals need."""
+    def near(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """``(idx (k,), z (k,))``: the points of :meth:`heights` that can be near the floor
+        (the geoms whose bounding sphere reaches into the activation band, and every site),
+        ascending, and their heights (metres); cached per configuration.  The points left
+        out are above the band: what the rows and the residuals need, without the rest."""
         key = data.qpos.tobytes()
         if self._zcache is not None and self._zcache[0] == key:
             return self._zcache[1]
-        z_g = self._cand.surface_z(data, below=self.floor + self.activation)
-        z = np.concatenate([z_g, data.site_xpos[self.sites, 2]]) if len(self.sites) else z_g
-        self._zcache = (key, z)
+        rows, z_g = self._cand.near_z(data, self.floor + self.activation)
+        if len(self.sites):
+            rows = np.concatenate([rows, self._site_rows])
+            z_g = np.concatenate([z_g, data.site_xpos[self.sites, 2]])
+        out = (rows, z_g)
+        self._zcache = (key, out)
+        return out
+
+    def z(self, data: mujoco.MjData) -> np.ndarray:
+        """``z (n,)`` of :meth:`heights` alone (metres; ``inf`` beyond the activation
+        band for geoms), from :meth:`near`."""
+        idx, zn = self.near(data)
+        z = np.full(len(self._bodies), np.inf)
+        z[idx] = zn
         return z
+
+    def lowest(self, data: mujoco.MjData) -> float:
+        """Height of the lowest constrained point (metres; ``inf`` when none is near the floor)."""
+        zn = self.near(data)[1]
+        return float(zn.min()) if zn.size else float("inf")
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt
         if not self.enabled:
             return mink.Constraint()
         data = configuration.data
-        z = self.z(data)
-        active = np.flatnonzero(z < self.floor + self.activation)
+        idx, zn = self.near(data)
+        inside = zn < self.floor + self.activation
+        active = idx[inside]
         if active.size == 0:
             return mink.Constraint()
         n_act = len(active)
@@ -326,7 +365,7 @@ class FloorLimit(mink.Limit):
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
         np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
-        za = z[active]
+        za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
         if self.swing_bodies:
             clear = np.full(self.model.nbody, np.nan)

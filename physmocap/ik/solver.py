@@ -426,9 +426,7 @@ class FrameSolver:
         rc = self._contact_residual()
         rf = 0.0
         if self.options.floor:
-            z = self.floor_limit.z(self.configuration.data)
-            if z.size:
-                rf = max(0.0, float(self.options.floor_height - z.min()))
+            rf = max(0.0, self.options.floor_height - self.floor_limit.lowest(self.configuration.data))
         self._res_cache = (key, (rc, rf))
         return rc, rf
 

@@ -16,7 +16,10 @@ and the script prints, per clip and character:
   ``FrameSolver._line_search`` and ``FrameSolver._integrate``;
 * **constraint figures** of each output: joint-limit violations, deepest floor
   penetration (mm), deepest self-penetration (mm), frames that needed a
-  relaxation, mean IK iterations per frame.
+  relaxation, mean IK iterations per frame;
+* **quality**: mean tracking error of every target (cm), mean absolute joint
+  acceleration (rad/s^2), and the retarget's frames per CPU second (one run: a
+  hint only, ``bench_retarget.py`` measures speed).
 
 The wrapping only counts calls; it changes nothing the solver computes.
 
@@ -32,6 +35,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -76,7 +80,7 @@ def _count_calls() -> dict[str, int]:
 def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> None:
     """Retarget one clip with counters; writes ``out`` (.npz: qpos) and prints JSON figures."""
     from physmocap.ik.retarget import retarget
-    from physmocap.metrics import joint_limit_violations, penetration, self_penetration
+    from physmocap.metrics import joint_limit_violations, penetration, self_penetration, smoothness, tracking_errors
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
@@ -85,7 +89,9 @@ def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> N
     if frames:
         motion = motion.slice_frames(0, min(frames, motion.num_frames))
     ch = load_character(character)
+    c0 = time.process_time()
     traj = retarget(motion, ch, progress=False, plant=plant)
+    cpu = time.process_time() - c0
     n = traj.qpos.shape[0]
     np.savez(out, qpos=traj.qpos)
     figures = {
@@ -98,6 +104,9 @@ def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> N
         "limit_violations": joint_limit_violations(ch.model, traj.qpos)["count"],
         "floor_pen_mm": penetration(ch.model, traj.qpos)["max_mm"],
         "self_pen_mm": self_penetration(ch, traj.qpos)["max_mm"],
+        "tracking_cm": tracking_errors(traj)["all_mean_cm"],
+        "acc_rad_s2": smoothness(ch.model, traj.qpos, traj.fps)["mean_abs_acc"],
+        "cpu_fps": n / cpu,
     }
     print(json.dumps(figures))
 
@@ -148,7 +157,7 @@ def main() -> int:
 
     plant = not args.no_plant
     cols = ("qps_per_frame", "failed_ls_per_frame", "iterations_per_frame", "relaxed_frames",
-            "limit_violations", "floor_pen_mm", "self_pen_mm")
+            "limit_violations", "floor_pen_mm", "self_pen_mm", "tracking_cm", "acc_rad_s2", "cpu_fps")
     print(f"this {REPO} vs reference {args.ref}; {'planting' if plant else 'no planting'}")
     print(f"{'clip':28s} {'character':16s} {'max dq':>9s} {'root m':>9s} {'root rad':>9s}  "
           + "  ".join(f"{c} this/ref" for c in cols))

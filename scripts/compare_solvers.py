@@ -43,7 +43,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
-G1 = REPO.parent / "shared" / "robots" / "unitree_g1" / "g1_mocap_29dof.xml"
+G1 = DATA.parent / "robots" / "unitree_g1" / "g1_mocap_29dof.xml"
 
 
 def _count_calls() -> dict[str, int]:

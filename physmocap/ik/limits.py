@@ -93,6 +93,7 @@ class FrameStepLimit(mink.Limit):
         self.frame_interval = float(frame_interval)
         self.shrink = float(shrink)
         self.q_prev: np.ndarray | None = None
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         n = len(self.dofadr)
         G = np.zeros((2 * n, model.nv))
         G[np.arange(n), self.dofadr] = 1.0
@@ -102,13 +103,17 @@ class FrameStepLimit(mink.Limit):
     def set_previous(self, q_prev: np.ndarray | None) -> None:
         """The previous frame's solution (None disables the limit, e.g. on frame 0)."""
         self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
+        self._bounds = None
+        if self.q_prev is not None:
+            step = self.vmax * self.frame_interval
+            prev = self.q_prev[self.qposadr]
+            self._bounds = (prev - step + self.shrink, prev + step - self.shrink)
 
     def step_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Absolute bounds ``(lo, hi)`` on the limited joints' values this frame."""
-        assert self.q_prev is not None
-        step = self.vmax * self.frame_interval
-        prev = self.q_prev[self.qposadr]
-        return prev - step + self.shrink, prev + step - self.shrink
+        """Absolute bounds ``(lo, hi)`` on the limited joints' values this frame (computed
+        once per frame by :meth:`set_previous`)."""
+        assert self._bounds is not None
+        return self._bounds
 
     def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         r"""The limit as simple bounds on the step: ``(dofs, lo, hi)`` with
@@ -120,8 +125,8 @@ class FrameStepLimit(mink.Limit):
         """
         if self.q_prev is None or len(self.dofadr) == 0:
             return None
-        lo, hi = self.step_bounds()
-        q = configuration.q[self.qposadr]
+        lo, hi = self._bounds
+        q = configuration.data.qpos[self.qposadr]
         return self.dofadr, -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
@@ -292,11 +297,34 @@ class FloorLimit(mink.Limit):
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
         self._zcache: tuple[bytes, np.ndarray] | None = None
-        #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
-        self.clearance: dict[int, float] = {}
-        #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
-        self.swing_bodies: dict[int, float] = {}
+        self.clearance = {}
+        self.swing_bodies = {}
         self.max_rise = 0.004
+
+    @property
+    def clearance(self) -> dict[int, float]:
+        """Site id -> clearance height (metres above the floor) for swing feet; set per frame."""
+        return self._clearance
+
+    @clearance.setter
+    def clearance(self, value: Mapping[int, float]) -> None:
+        self._clearance = dict(value)
+        self._clear_sites = np.array(list(self._clearance), dtype=int)
+        self._clear_heights = np.array(list(self._clearance.values()), dtype=float)
+
+    @property
+    def swing_bodies(self) -> dict[int, float]:
+        """Body id -> clearance height for all geom points of a swing foot's bodies; set per frame."""
+        return self._swing_bodies
+
+    @swing_bodies.setter
+    def swing_bodies(self, value: Mapping[int, float]) -> None:
+        self._swing_bodies = dict(value)
+        self._swing_clear = None  # body id -> clearance (nan: not a swing body)
+        if self._swing_bodies:
+            self._swing_clear = np.full(self.model.nbody, np.nan)
+            for body_id, c in self._swing_bodies.items():
+                self._swing_clear[body_id] = c
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points.
@@ -367,21 +395,19 @@ class FloorLimit(mink.Limit):
         np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
         za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
-        if self.swing_bodies:
-            clear = np.full(self.model.nbody, np.nan)
-            for body_id, c in self.swing_bodies.items():
-                clear[body_id] = c
-            c = clear[b]
+        if self._swing_clear is not None:
+            c = self._swing_clear[b]
             swing = ~np.isnan(c)
             if swing.any():
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, (sid, c) in enumerate(self.clearance.items(), start=n_act):
-            zs = data.site_xpos[sid, 2]
+        for row, sid in enumerate(self._clear_sites.tolist(), start=n_act):
             mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
-            G[row] = -self._jacp[2]
-            h[row] = zs - min(self.floor + c, zs + self.max_rise)
+            np.negative(self._jacp[2], out=G[row])
+        if len(self._clear_sites):
+            zs = data.site_xpos[self._clear_sites, 2]
+            h[n_act:] = zs - np.minimum(self.floor + self._clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 
 
@@ -409,6 +435,8 @@ class RootStepLimit(mink.Limit):
         self.step_ang = float(w_max) * float(frame_interval)
         self.q_prev: np.ndarray | None = None
         self._dofs = np.arange(self.dadr, self.dadr + 6) if free else np.zeros(0, dtype=int)
+        # the rows' right-hand sides without a previous frame: no translation bound
+        self._h0 = np.concatenate([np.full(3, np.inf), np.full(3, self.step_ang), np.full(3, np.inf), np.full(3, self.step_ang)])
         if free:
             G = np.zeros((12, model.nv))
             for k in range(6):
@@ -421,16 +449,13 @@ class RootStepLimit(mink.Limit):
 
     def _h(self, configuration: mink.Configuration) -> np.ndarray:
         """Right-hand sides of the rows ``+e_k`` (k = 0..5) then ``-e_k``; inf when absent."""
-        p = configuration.q[self.qadr : self.qadr + 3]
-        if self.q_prev is None:
-            hi_lin = np.full(3, np.inf)
-            lo_lin = np.full(3, np.inf)
-        else:
+        h = self._h0.copy()
+        if self.q_prev is not None:
+            p = configuration.data.qpos[self.qadr : self.qadr + 3]
             prev = self.q_prev[self.qadr : self.qadr + 3]
-            hi_lin = np.maximum(prev + self.step_lin - p, 0.0)
-            lo_lin = np.maximum(p - (prev - self.step_lin), 0.0)
-        ang = np.full(3, self.step_ang)
-        return np.concatenate([hi_lin, ang, lo_lin, ang])
+            h[:3] = np.maximum(prev + self.step_lin - p, 0.0)
+            h[6:9] = np.maximum(p - (prev - self.step_lin), 0.0)
+        return h
 
     def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         r"""The limit as simple bounds ``(dofs, lo, hi)`` on the root's six step

@@ -243,11 +243,14 @@ class FrameSolver:
     # -- targets ----------------------------------------------------------------
     def _set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
-        wxyz = xyzw_to_wxyz(orientations)
+        # every target's (w, x, y, z, x, y, z) in one new array: each task gets its own row
+        # (what FrameTask.set_target's copy would make; the rows are never written again)
+        poses = np.concatenate([xyzw_to_wxyz(orientations), positions], axis=1)
+        flags = np.asarray(valid, dtype=bool).tolist()
         for j, (k, task, pc, oc) in enumerate(self.frame_tasks):
-            on = bool(valid[k])
+            on = flags[k]
             if on:
-                task.set_target(mink.SE3(wxyz_xyz=np.concatenate([wxyz[k], positions[k]])))
+                task.transform_target_to_world = mink.SE3(wxyz_xyz=poses[k])
             else:
                 task.set_target_from_configuration(self.configuration)
             if on != self._task_on[j]:

@@ -24,7 +24,7 @@ and the script prints, per clip and character:
 The wrapping only counts calls; it changes nothing the solver computes.
 
 Usage:  python scripts/compare_solvers.py --ref ../main [--clips a.bvh ...] [--characters humanoid G1.xml]
-        [--no-plant] [--frames N]
+        [--no-plant] [--frames N] [--set second_order_correction=true]
 """
 
 from __future__ import annotations
@@ -77,8 +77,9 @@ def _count_calls() -> dict[str, int]:
     return counts
 
 
-def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> None:
-    """Retarget one clip with counters; writes ``out`` (.npz: qpos) and prints JSON figures."""
+def _worker(clip: str, character: str, plant: bool, frames: int, out: Path, options: dict) -> None:
+    """Retarget one clip with counters (and flat retarget ``options``); writes ``out``
+    (.npz: qpos) and prints JSON figures."""
     from physmocap.ik.retarget import retarget
     from physmocap.metrics import joint_limit_violations, penetration, self_penetration, smoothness, tracking_errors
     from physmocap.models import load_character
@@ -90,7 +91,7 @@ def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> N
         motion = motion.slice_frames(0, min(frames, motion.num_frames))
     ch = load_character(character)
     c0 = time.process_time()
-    traj = retarget(motion, ch, progress=False, plant=plant)
+    traj = retarget(motion, ch, progress=False, plant=plant, **options)
     cpu = time.process_time() - c0
     n = traj.qpos.shape[0]
     np.savez(out, qpos=traj.qpos)
@@ -111,11 +112,12 @@ def _worker(clip: str, character: str, plant: bool, frames: int, out: Path) -> N
     print(json.dumps(figures))
 
 
-def _run(checkout: Path, clip: str, character: str, plant: bool, frames: int, out: Path) -> dict:
+def _run(checkout: Path, clip: str, character: str, plant: bool, frames: int, out: Path, options: dict) -> dict:
     """One worker run with ``PYTHONPATH=checkout``."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
     res = subprocess.run(
-        [sys.executable, str(Path(__file__).resolve()), "--worker", clip, character, "1" if plant else "0", str(frames), str(out)],
+        [sys.executable, str(Path(__file__).resolve()), "--worker", clip, character, "1" if plant else "0", str(frames),
+         str(out), json.dumps(options)],
         env=env, check=True, capture_output=True, text=True,
     )
     return json.loads(res.stdout.strip().splitlines()[-1])
@@ -143,8 +145,8 @@ def joint_differences(model, qa: np.ndarray, qb: np.ndarray) -> tuple[float, flo
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
         warnings.simplefilter("ignore")
-        clip, character, plant, frames, out = sys.argv[2:7]
-        _worker(clip, character, plant == "1", int(frames), Path(out))
+        clip, character, plant, frames, out, options = sys.argv[2:8]
+        _worker(clip, character, plant == "1", int(frames), Path(out), json.loads(options))
         return 0
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--ref", type=Path, required=True, help="reference checkout (e.g. ../main)")
@@ -152,13 +154,16 @@ def main() -> int:
     ap.add_argument("--characters", nargs="+", default=["humanoid"] + ([str(G1)] if G1.exists() else []))
     ap.add_argument("--no-plant", action="store_true")
     ap.add_argument("--frames", type=int, default=0, help="only the first N frames (0: all)")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="flat retarget options for this checkout only, e.g. second_order_correction=true")
     args = ap.parse_args()
     from physmocap.models import load_character
 
     plant = not args.no_plant
+    options = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
     cols = ("qps_per_frame", "failed_ls_per_frame", "iterations_per_frame", "relaxed_frames",
             "limit_violations", "floor_pen_mm", "self_pen_mm", "tracking_cm", "acc_rad_s2", "cpu_fps")
-    print(f"this {REPO} vs reference {args.ref}; {'planting' if plant else 'no planting'}")
+    print(f"this {REPO} {options or ''} vs reference {args.ref}; {'planting' if plant else 'no planting'}")
     print(f"{'clip':28s} {'character':16s} {'max dq':>9s} {'root m':>9s} {'root rad':>9s}  "
           + "  ".join(f"{c} this/ref" for c in cols))
     worst = 0.0
@@ -166,8 +171,8 @@ def main() -> int:
         for character in args.characters:
             model = load_character(character).model
             for clip in args.clips:
-                ours = _run(REPO, clip, character, plant, args.frames, Path(tmp) / "this.npz")
-                ref = _run(args.ref, clip, character, plant, args.frames, Path(tmp) / "ref.npz")
+                ours = _run(REPO, clip, character, plant, args.frames, Path(tmp) / "this.npz", options)
+                ref = _run(args.ref, clip, character, plant, args.frames, Path(tmp) / "ref.npz", {})
                 qa, qb = np.load(Path(tmp) / "this.npz")["qpos"], np.load(Path(tmp) / "ref.npz")["qpos"]
                 dj, dp, dr = joint_differences(model, qa, qb)
                 worst = max(worst, dj, dr)

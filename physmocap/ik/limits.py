@@ -297,34 +297,26 @@ class FloorLimit(mink.Limit):
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
         self._zcache: tuple[bytes, np.ndarray] | None = None
-        self.clearance = {}
-        self.swing_bodies = {}
+        #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
+        self.clearance: dict[int, float] = {}
+        #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
+        self.swing_bodies: dict[int, float] = {}
         self.max_rise = 0.004
+        self._swing: tuple | None = None  # the two dicts as arrays, see _swing_arrays
 
-    @property
-    def clearance(self) -> dict[int, float]:
-        """Site id -> clearance height (metres above the floor) for swing feet; set per frame."""
-        return self._clearance
-
-    @clearance.setter
-    def clearance(self, value: Mapping[int, float]) -> None:
-        self._clearance = dict(value)
-        self._clear_sites = np.array(list(self._clearance), dtype=int)
-        self._clear_heights = np.array(list(self._clearance.values()), dtype=float)
-
-    @property
-    def swing_bodies(self) -> dict[int, float]:
-        """Body id -> clearance height for all geom points of a swing foot's bodies; set per frame."""
-        return self._swing_bodies
-
-    @swing_bodies.setter
-    def swing_bodies(self, value: Mapping[int, float]) -> None:
-        self._swing_bodies = dict(value)
-        self._swing_clear = None  # body id -> clearance (nan: not a swing body)
-        if self._swing_bodies:
-            self._swing_clear = np.full(self.model.nbody, np.nan)
-            for body_id, c in self._swing_bodies.items():
-                self._swing_clear[body_id] = c
+    def _swing_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(clearance sites, their heights, body id -> clearance or nan (None: no swing
+        body))`` of :attr:`clearance` and :attr:`swing_bodies`, rebuilt when either is
+        replaced by a new mapping (the solver sets new ones every frame)."""
+        if self._swing is None or self._swing[0] is not self.clearance or self._swing[1] is not self.swing_bodies:
+            per_body = None
+            if self.swing_bodies:
+                per_body = np.full(self.model.nbody, np.nan)
+                per_body[list(self.swing_bodies)] = list(self.swing_bodies.values())
+            sites = np.array(list(self.clearance), dtype=int)
+            heights = np.array(list(self.clearance.values()), dtype=float)
+            self._swing = (self.clearance, self.swing_bodies, sites, heights, per_body)
+        return self._swing[2], self._swing[3], self._swing[4]
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points.
@@ -395,19 +387,20 @@ class FloorLimit(mink.Limit):
         np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
         za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
-        if self._swing_clear is not None:
-            c = self._swing_clear[b]
+        clear_sites, clear_heights, per_body = self._swing_arrays()
+        if per_body is not None:
+            c = per_body[b]
             swing = ~np.isnan(c)
             if swing.any():
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, sid in enumerate(self._clear_sites.tolist(), start=n_act):
+        for row, sid in enumerate(clear_sites.tolist(), start=n_act):
             mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
             np.negative(self._jacp[2], out=G[row])
-        if len(self._clear_sites):
-            zs = data.site_xpos[self._clear_sites, 2]
-            h[n_act:] = zs - np.minimum(self.floor + self._clear_heights, zs + self.max_rise)
+        if len(clear_sites):
+            zs = data.site_xpos[clear_sites, 2]
+            h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 
 

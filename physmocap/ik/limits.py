@@ -212,16 +212,6 @@ class GeomCandidates:
         z -= self.local[rows, 3]
         return rows, z
 
-    def surface_z(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
-        """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
-        metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
-        rows, zr = self.near_z(data, np.inf if below is None else below)
-        if len(rows) == len(self.gid):
-            return zr
-        z = np.full(len(self.gid), np.inf)
-        z[rows] = zr
-        return z
-
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
         """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``."""
         gid = self.gid[rows]
@@ -296,7 +286,7 @@ class FloorLimit(mink.Limit):
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
-        self._zcache: tuple[bytes, np.ndarray] | None = None
+        self._zcache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None  # near(), per configuration
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
         #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.

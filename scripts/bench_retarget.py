@@ -25,7 +25,7 @@ A character is a bundled name (``humanoid``, ``robot``) or an MJCF path (e.g.
 ``../shared/robots/unitree_g1/g1_mocap_29dof.xml``).
 
 Usage:  python scripts/bench_retarget.py [--runs 5] [--frames N] [--characters humanoid robot]
-        [--clips cmu_12_01_walk.bvh] [--no-plant] [--compare ../main]
+        [--clips cmu_12_01_walk.bvh] [--no-plant] [--compare ../main] [--set second_order_correction=true]
 """
 
 from __future__ import annotations
@@ -48,8 +48,10 @@ DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "da
 CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"]
 
 
-def _measure(clip: str, character: str, frames: int | None, plant: bool) -> dict[str, float]:
-    """One run: retarget ``clip`` onto ``character``; CPU and wall frames/s, IK latencies."""
+def _measure(clip: str, character: str, frames: int | None, plant: bool, options: dict | None = None) -> dict[str, float]:
+    """One run: retarget ``clip`` onto ``character`` (with flat retarget ``options``); CPU and
+    wall frames/s, IK latencies."""
+    from physmocap.ik.config import RetargetConfig
     from physmocap.ik.contacts import detect_contacts
     from physmocap.ik.retarget import map_motion, retarget, solve_targets
     from physmocap.ik.targets import build_targets
@@ -61,13 +63,14 @@ def _measure(clip: str, character: str, frames: int | None, plant: bool) -> dict
         motion = motion.slice_frames(0, min(frames, motion.num_frames))
     ch = load_character(character)
     c0, w0 = time.process_time(), time.perf_counter()
-    retarget(motion, ch, progress=False, plant=plant)
+    config = RetargetConfig().with_options(**(options or {}))
+    retarget(motion, ch, config, progress=False, plant=plant)
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     idx = map_motion(motion)
     contacts = detect_contacts(motion, idx)
     targets = build_targets(motion, idx, ch, floor=contacts.floor)
     c0 = time.process_time()
-    traj = solve_targets(targets, ch, labels=contacts.labels if plant else None, progress=False)
+    traj = solve_targets(targets, ch, config.solver, labels=contacts.labels if plant else None, progress=False)
     ik_cpu = time.process_time() - c0
     lat = np.asarray(traj.solver.latency[1:]) * 1000.0
     n = motion.num_frames
@@ -115,9 +118,12 @@ def main() -> int:
     ap.add_argument("--compare", type=Path, default=None, metavar="REF_DIR",
                     help="also run the checkout REF_DIR (PYTHONPATH=REF_DIR), alternating runs, and print the ratio")
     ap.add_argument("--no-stream", action="store_true", help="skip the streaming latency")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="flat retarget options for this checkout only (JSON values), e.g. second_order_correction=true")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     plant = not args.no_plant
+    options = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
 
     import physmocap
 
@@ -131,12 +137,12 @@ def main() -> int:
         for clip, name in combos:
             if args.compare is not None:
                 ref[(clip, name)].append(_subprocess_run(args.compare, clip, name, args.frames, plant))
-            ours[(clip, name)].append(_measure(clip, name, args.frames, plant))
+            ours[(clip, name)].append(_measure(clip, name, args.frames, plant, options))
 
     def med(runs: list[dict], key: str) -> float:
         return statistics.median(r[key] for r in runs)
 
-    print(f"physmocap from {Path(physmocap.__file__).parent.parent}; {'planting' if plant else 'no planting'};"
+    print(f"physmocap from {Path(physmocap.__file__).parent.parent} {options or ''}; {'planting' if plant else 'no planting'};"
           f" medians of {args.runs} interleaved runs")
     head = (f"{'clip':27s} {'character':17s} {'frames':>6s} {'CPU fps':>8s} {'wall fps':>8s} {'IK CPU fps':>10s}"
             f" {'lat med ms':>10s} {'lat p99 ms':>10s}")

@@ -93,6 +93,7 @@ class FrameStepLimit(mink.Limit):
         self.frame_interval = float(frame_interval)
         self.shrink = float(shrink)
         self.q_prev: np.ndarray | None = None
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         n = len(self.dofadr)
         G = np.zeros((2 * n, model.nv))
         G[np.arange(n), self.dofadr] = 1.0
@@ -102,13 +103,17 @@ class FrameStepLimit(mink.Limit):
     def set_previous(self, q_prev: np.ndarray | None) -> None:
         """The previous frame's solution (None disables the limit, e.g. on frame 0)."""
         self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
+        self._bounds = None
+        if self.q_prev is not None:
+            step = self.vmax * self.frame_interval
+            prev = self.q_prev[self.qposadr]
+            self._bounds = (prev - step + self.shrink, prev + step - self.shrink)
 
     def step_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Absolute bounds ``(lo, hi)`` on the limited joints' values this frame."""
-        assert self.q_prev is not None
-        step = self.vmax * self.frame_interval
-        prev = self.q_prev[self.qposadr]
-        return prev - step + self.shrink, prev + step - self.shrink
+        """Absolute bounds ``(lo, hi)`` on the limited joints' values this frame (computed
+        once per frame by :meth:`set_previous`)."""
+        assert self._bounds is not None
+        return self._bounds
 
     def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         r"""The limit as simple bounds on the step: ``(dofs, lo, hi)`` with
@@ -120,8 +125,8 @@ class FrameStepLimit(mink.Limit):
         """
         if self.q_prev is None or len(self.dofadr) == 0:
             return None
-        lo, hi = self.step_bounds()
-        q = configuration.q[self.qposadr]
+        lo, hi = self._bounds
+        q = configuration.data.qpos[self.qposadr]
         return self.dofadr, -np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
@@ -154,6 +159,9 @@ class GeomCandidates:
         self.radius = np.zeros(len(self.geoms))
         if len(self.owner):
             np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
+        self._rows_key: bytes | None = None
+        self._rows = np.zeros(0, dtype=int)
+        self._all = np.arange(len(self.gid))
 
     def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height.
@@ -180,23 +188,29 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def surface_z(self, data: mujoco.MjData, below: float | None = None) -> np.ndarray:
-        """``z (k,)`` of :meth:`points` alone (lowest surface height of every candidate,
-        metres; ``inf`` for skipped geoms): the world z row of each candidate, no points."""
-        if len(self.gid) == 0:
-            return np.zeros(0)
-        z = np.full(len(self.gid), np.inf)
-        if below is not None:
-            near = data.geom_xpos[self.geoms, 2] - self.radius < below
-            if not near.all():
-                rows = np.flatnonzero(near[self.owner])
-                gid = self.gid[rows]
-                z[rows] = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
-                z[rows] -= self.local[rows, 3]
-                return z
-        z[:] = data.geom_xpos[self.gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[self.gid, 6:9], self.local[:, :3])
-        z -= self.local[:, 3]
-        return z
+    def _near_rows(self, data: mujoco.MjData, below: float) -> np.ndarray | None:
+        """Candidate rows of the geoms whose bounding sphere reaches below ``below`` (None:
+        every geom does); the index array is kept while the same geoms stay near, which
+        they do over many iterations (a walking robot: its feet and shins)."""
+        near = data.geom_xpos[self.geoms, 2] - self.radius < below
+        if near.all():
+            return None
+        key = near.tobytes()
+        if self._rows_key != key:
+            self._rows_key = key
+            self._rows = np.flatnonzero(near[self.owner])
+        return self._rows
+
+    def near_z(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(rows (k,), z (k,))``: the candidates of the geoms whose bounding sphere reaches
+        below ``below`` (ascending rows) and their lowest surface heights (metres)."""
+        rows = self._near_rows(data, below)
+        if rows is None:
+            rows = self._all
+        gid = self.gid[rows]
+        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
+        z -= self.local[rows, 3]
+        return rows, z
 
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
         """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``."""
@@ -270,13 +284,29 @@ class FloorLimit(mink.Limit):
         self._pj = PointJacobians(model)
         self._cand = GeomCandidates(model, self.geoms)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
+        self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
-        self._zcache: tuple[bytes, np.ndarray] | None = None
+        self._zcache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None  # near(), per configuration
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
         self.clearance: dict[int, float] = {}
         #: body id -> clearance height for all geom points of a swing foot's bodies; set per frame.
         self.swing_bodies: dict[int, float] = {}
         self.max_rise = 0.004
+        self._swing: tuple | None = None  # the two dicts as arrays, see _swing_arrays
+
+    def _swing_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(clearance sites, their heights, body id -> clearance or nan (None: no swing
+        body))`` of :attr:`clearance` and :attr:`swing_bodies`, rebuilt when either is
+        replaced by a new mapping (the solver sets new ones every frame)."""
+        if self._swing is None or self._swing[0] is not self.clearance or self._swing[1] is not self.swing_bodies:
+            per_body = None
+            if self.swing_bodies:
+                per_body = np.full(self.model.nbody, np.nan)
+                per_body[list(self.swing_bodies)] = list(self.swing_bodies.values())
+            sites = np.array(list(self.clearance), dtype=int)
+            heights = np.array(list(self.clearance.values()), dtype=float)
+            self._swing = (self.clearance, self.swing_bodies, sites, heights, per_body)
+        return self._swing[2], self._swing[3], self._swing[4]
 
     def heights(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(z (n,), anchor (n, 3), body (n,))`` of all constrained points.
@@ -295,24 +325,43 @@ class FloorLimit(mink.Limit):
         self._cache = (key, out)  # the same configuration is queried several times per iteration
         return out
 
-    def z(self, data: mujoco.MjData) -> np.ndarray:
-        """``z (n,)`` of :meth:`heights` alone (metres; ``inf`` beyond the activation
-        band for geoms), cached per configuration: what the residuals need."""
+    def near(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """``(idx (k,), z (k,))``: the points of :meth:`heights` that can be near the floor
+        (the geoms whose bounding sphere reaches into the activation band, and every site),
+        ascending, and their heights (metres); cached per configuration.  The points left
+        out are above the band: what the rows and the residuals need, without the rest."""
         key = data.qpos.tobytes()
         if self._zcache is not None and self._zcache[0] == key:
             return self._zcache[1]
-        z_g = self._cand.surface_z(data, below=self.floor + self.activation)
-        z = np.concatenate([z_g, data.site_xpos[self.sites, 2]]) if len(self.sites) else z_g
-        self._zcache = (key, z)
+        rows, z_g = self._cand.near_z(data, self.floor + self.activation)
+        if len(self.sites):
+            rows = np.concatenate([rows, self._site_rows])
+            z_g = np.concatenate([z_g, data.site_xpos[self.sites, 2]])
+        out = (rows, z_g)
+        self._zcache = (key, out)
+        return out
+
+    def z(self, data: mujoco.MjData) -> np.ndarray:
+        """``z (n,)`` of :meth:`heights` alone (metres; ``inf`` beyond the activation
+        band for geoms), from :meth:`near`."""
+        idx, zn = self.near(data)
+        z = np.full(len(self._bodies), np.inf)
+        z[idx] = zn
         return z
+
+    def lowest(self, data: mujoco.MjData) -> float:
+        """Height of the lowest constrained point (metres; ``inf`` when none is near the floor)."""
+        zn = self.near(data)[1]
+        return float(zn.min()) if zn.size else float("inf")
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt
         if not self.enabled:
             return mink.Constraint()
         data = configuration.data
-        z = self.z(data)
-        active = np.flatnonzero(z < self.floor + self.activation)
+        idx, zn = self.near(data)
+        inside = zn < self.floor + self.activation
+        active = idx[inside]
         if active.size == 0:
             return mink.Constraint()
         n_act = len(active)
@@ -326,23 +375,22 @@ class FloorLimit(mink.Limit):
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
         np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
-        za = z[active]
+        za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
-        if self.swing_bodies:
-            clear = np.full(self.model.nbody, np.nan)
-            for body_id, c in self.swing_bodies.items():
-                clear[body_id] = c
-            c = clear[b]
+        clear_sites, clear_heights, per_body = self._swing_arrays()
+        if per_body is not None:
+            c = per_body[b]
             swing = ~np.isnan(c)
             if swing.any():
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, (sid, c) in enumerate(self.clearance.items(), start=n_act):
-            zs = data.site_xpos[sid, 2]
+        for row, sid in enumerate(clear_sites.tolist(), start=n_act):
             mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
-            G[row] = -self._jacp[2]
-            h[row] = zs - min(self.floor + c, zs + self.max_rise)
+            np.negative(self._jacp[2], out=G[row])
+        if len(clear_sites):
+            zs = data.site_xpos[clear_sites, 2]
+            h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 
 
@@ -370,6 +418,8 @@ class RootStepLimit(mink.Limit):
         self.step_ang = float(w_max) * float(frame_interval)
         self.q_prev: np.ndarray | None = None
         self._dofs = np.arange(self.dadr, self.dadr + 6) if free else np.zeros(0, dtype=int)
+        # the rows' right-hand sides without a previous frame: no translation bound
+        self._h0 = np.concatenate([np.full(3, np.inf), np.full(3, self.step_ang), np.full(3, np.inf), np.full(3, self.step_ang)])
         if free:
             G = np.zeros((12, model.nv))
             for k in range(6):
@@ -382,16 +432,13 @@ class RootStepLimit(mink.Limit):
 
     def _h(self, configuration: mink.Configuration) -> np.ndarray:
         """Right-hand sides of the rows ``+e_k`` (k = 0..5) then ``-e_k``; inf when absent."""
-        p = configuration.q[self.qadr : self.qadr + 3]
-        if self.q_prev is None:
-            hi_lin = np.full(3, np.inf)
-            lo_lin = np.full(3, np.inf)
-        else:
+        h = self._h0.copy()
+        if self.q_prev is not None:
+            p = configuration.data.qpos[self.qadr : self.qadr + 3]
             prev = self.q_prev[self.qadr : self.qadr + 3]
-            hi_lin = np.maximum(prev + self.step_lin - p, 0.0)
-            lo_lin = np.maximum(p - (prev - self.step_lin), 0.0)
-        ang = np.full(3, self.step_ang)
-        return np.concatenate([hi_lin, ang, lo_lin, ang])
+            h[:3] = np.maximum(prev + self.step_lin - p, 0.0)
+            h[6:9] = np.maximum(p - (prev - self.step_lin), 0.0)
+        return h
 
     def box(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         r"""The limit as simple bounds ``(dofs, lo, hi)`` on the root's six step

@@ -118,7 +118,7 @@ class QPBuilder:
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
         self._diag = np.arange(nv) * (nv + 1)
-        self._ids: dict[tuple, int] = {}
+        self._ids: dict[int, tuple] = {}  # id(task) -> (task, frame type, frame id)
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
 
@@ -142,18 +142,19 @@ class QPBuilder:
             self._C = np.zeros((n, 6))
             self._g = np.zeros((n, 1))
         J, M, E, C, g = self._jacF, self._M, self._E, self._C, self._g
-        model, ids = self.model, self._ids
+        model = self.model
+        arrays: dict[str, tuple] = {}  # kind -> (jacobian function, xmat, xpos) of this data
         for i, task in enumerate(tasks):
-            kind = task.frame_type
-            key = (task.frame_name, kind)
-            fid = ids.get(key)
-            if fid is None:
-                fid = ids[key] = _resolve(model, task.frame_name, kind)
-            xmat = getattr(data, _XMAT[kind])[fid]
-            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, getattr(data, _XPOS[kind])[fid])
+            kind, fid = self._frame_id(task)
+            fn_xmat_xpos = arrays.get(kind)
+            if fn_xmat_xpos is None:
+                fn_xmat_xpos = arrays[kind] = (_JAC[kind], getattr(data, _XMAT[kind]), getattr(data, _XPOS[kind]))
+            jac, xmats, xposs = fn_xmat_xpos
+            xmat = xmats[fid]
+            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, xposs[fid])
             target = task.transform_target_to_world.wxyz_xyz
             Ji = J[i]
-            _JAC[kind](model, data, Ji[:3], Ji[3:], fid)
+            jac(model, data, Ji[:3], Ji[3:], fid)
             np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)),
                       _native.se3_rotation_adjoint_from_xmat(xmat), out=M[i])
             E[i] = _native.se3_rminus(target, frame)
@@ -162,6 +163,14 @@ class QPBuilder:
         M[:n] *= -C[:n, :, None]
         np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
         np.multiply(C[:n], -g[:n] * E[:n], out=eps.reshape(n, 6))
+
+    def _frame_id(self, task: mink.FrameTask) -> tuple[str, int]:
+        """``(frame type, id)`` of a ``FrameTask``'s frame, resolved once per task."""
+        ids = self._ids.get(id(task))
+        if ids is None or ids[0] is not task:
+            kind = task.frame_type
+            ids = self._ids[id(task)] = (task, kind, _resolve(self.model, task.frame_name, kind))
+        return ids[1], ids[2]
 
     def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
         r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked

@@ -37,6 +37,7 @@ configuration.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
@@ -96,6 +97,11 @@ class SolverOptions:
         weights: Canonical joint -> (position cost, orientation cost) overrides.
         solver: QP solver: ``daqp`` (called directly, warm-started) or any other
             qpsolvers backend name (the same problem through qpsolvers).
+        second_order_correction: When a full step leaves the planted contacts off their
+            anchors (the equalities' second-order error), first try the step of the same
+            QP with that error subtracted (:meth:`FrameSolver._corrected`) before halving
+            it.  Off by default (the default output is unchanged); on, far fewer line
+            searches fail on takes with planted feet under straight knees.
     """
 
     max_iterations: int = 4
@@ -116,6 +122,7 @@ class SolverOptions:
     self_collision_margin: float = 0.005
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
+    second_order_correction: bool = False
 
     def __post_init__(self) -> None:
         check_fields(
@@ -239,15 +246,19 @@ class FrameSolver:
         self._constraints: list[mink.Task] = []
         self._hold_rows: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._extra_tasks: list[mink.Task] = []
+        self._qp: QP | None = None  # the last QP with contact equalities (second_order_correction)
 
     # -- targets ----------------------------------------------------------------
     def _set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
-        wxyz = xyzw_to_wxyz(orientations)
+        # every target's (w, x, y, z, x, y, z) in one new array: each task gets its own row
+        # (what FrameTask.set_target's copy would make; the rows are never written again)
+        poses = np.concatenate([xyzw_to_wxyz(orientations), positions], axis=1)
+        flags = np.asarray(valid, dtype=bool).tolist()
         for j, (k, task, pc, oc) in enumerate(self.frame_tasks):
-            on = bool(valid[k])
+            on = flags[k]
             if on:
-                task.set_target(mink.SE3(wxyz_xyz=np.concatenate([wxyz[k], positions[k]])))
+                task.transform_target_to_world = mink.SE3(wxyz_xyz=poses[k])
             else:
                 task.set_target_from_configuration(self.configuration)
             if on != self._task_on[j]:
@@ -365,6 +376,7 @@ class FrameSolver:
             limits=general,
             constraints=constraints,
         )
+        self._qp = problem if constraints and opt.second_order_correction else None
         return self._solve(problem)
 
     def _settle_from_rest(self) -> None:
@@ -426,9 +438,7 @@ class FrameSolver:
         rc = self._contact_residual()
         rf = 0.0
         if self.options.floor:
-            z = self.floor_limit.z(self.configuration.data)
-            if z.size:
-                rf = max(0.0, float(self.options.floor_height - z.min()))
+            rf = max(0.0, self.options.floor_height - self.floor_limit.lowest(self.configuration.data))
         self._res_cache = (key, (rc, rf))
         return rc, rf
 
@@ -436,8 +446,7 @@ class FrameSolver:
         """How far (metres, largest coordinate) the planted contacts are off their anchors."""
         rc = 0.0
         if self._hold_rows is not None:
-            sites, axes, target = self._hold_rows
-            rc = max(rc, float(np.max(np.abs(self.configuration.data.site_xpos[sites, axes] - target))))
+            rc = max(rc, float(np.max(np.abs(self._contact_errors()))))
         else:
             for task in self._constraints:
                 rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
@@ -454,7 +463,9 @@ class FrameSolver:
         The QP satisfies the linearised constraints exactly, but near a
         singular pose (a straight knee under a planted foot) a full step can
         overshoot by millimetres and the next step undo it, forever.  Backtracking
-        on the hard-constraint residual removes that oscillation.
+        on the hard-constraint residual removes that oscillation.  With
+        ``second_order_correction`` a refused full step is first corrected
+        (:meth:`_corrected`) before it is halved.
         """
         if not self._constraints and not self.options.floor:
             self._integrate(v, 1.0)
@@ -463,16 +474,15 @@ class FrameSolver:
         r0 = self._residual if self._residual is not None else self._hard_residual()
         bound = max(r0, tol)
         qpos = self.configuration.data.qpos
+        qp, self._qp = self._qp, None
+        e0 = self._contact_errors() if qp is not None else None
         alpha = 1.0
         for _ in range(4):
             self._integrate(v, alpha)
-            # the contacts' residual first: when it alone is too large the step is refused
-            # without the floor's (the same decision as on their maximum)
-            if self._contact_residual() <= bound:
-                r1 = self._hard_residual()
-                if r1 <= bound:
-                    self._residual = r1
-                    return
+            if self._accept(bound):
+                return
+            if alpha == 1.0 and e0 is not None and self._corrected(qp, v, q0, e0, bound):
+                return
             alpha *= 0.5
             qpos[:] = q0  # the next trial integrates from q0 (its kinematics are not needed)
         self._integrate(v, alpha)
@@ -481,6 +491,48 @@ class FrameSolver:
             self._set_q(q0)
             r1 = r0
         self._residual = r1
+
+    def _contact_errors(self) -> np.ndarray | None:
+        """The planted contacts' errors :math:`e(q)` (metres, the equality rows' order), or None
+        when the constraints are not all :class:`SitePositionTask` s."""
+        if self._hold_rows is None:
+            return None
+        sites, axes, target = self._hold_rows
+        return self.configuration.data.site_xpos[sites, axes] - target
+
+    def _corrected(self, qp: QP, v: np.ndarray, q0: np.ndarray, e0: np.ndarray, bound: float) -> bool:
+        r"""Second-order correction of a full step :math:`v` that left the planted contacts
+        off their anchors (Nocedal & Wright, *Numerical Optimization*, 15.6).
+
+        The QP held :math:`A v = b` (:math:`b = -\alpha e(q)`), but the contacts moved by
+        :math:`e(q \oplus v) - e(q) = A v + s`, :math:`s` the second-order term.  The same QP
+        with :math:`A \Delta q = b - s` gives a step whose contacts' error is third order.
+        Takes it from ``q0`` and returns True if its hard-constraint residual is within
+        ``bound``; otherwise leaves the configuration at ``q0`` (kinematics not updated)."""
+        s = self._contact_errors() - e0 - qp.A @ v
+        try:
+            w = self._solve(dataclasses.replace(qp, b=qp.b - s))
+        except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+            self.configuration.data.qpos[:] = q0
+            return False
+        self.configuration.data.qpos[:] = q0
+        self._integrate(w, 1.0)
+        if self._accept(bound):
+            return True
+        self.configuration.data.qpos[:] = q0
+        return False
+
+    def _accept(self, bound: float) -> bool:
+        """True (and the residual kept) if the current trial's hard-constraint residual is
+        within ``bound``: the contacts' residual first, so that when it alone is too large
+        the trial is refused without the floor's (the same decision as on their maximum)."""
+        if self._contact_residual() > bound:
+            return False
+        r1 = self._hard_residual()
+        if r1 > bound:
+            return False
+        self._residual = r1
+        return True
 
     def _constraints_ok(self, tol: float | None = None) -> bool:
         """True if every equality constraint (planted contact) holds within ``tol`` metres.

@@ -1,0 +1,71 @@
+"""The IK's shortcuts give the figures of the long way round.
+
+* :meth:`FloorLimit.near` evaluates only the candidates of the geoms near the floor:
+  its heights are :meth:`FloorLimit.heights`'s, and the points it leaves out are
+  above the activation band.
+* The second-order correction (``SolverOptions.second_order_correction``) of a full
+  step leaves the planted contacts far closer to their anchors than the step itself,
+  and is off by default.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physmocap.ik.solver import ContactHolds, SolverOptions
+from test_qp import _setup
+
+
+@pytest.mark.parametrize("name,seed", [("humanoid", 0), ("humanoid", 3), ("robot", 2)])
+def test_floor_near_points_are_the_heights_within_reach(name, seed):
+    solver = _setup(name, seed)
+    limit, data = solver.floor_limit, solver.configuration.data
+    rng = np.random.default_rng(seed)
+    q0 = solver.configuration.q
+    for drop in (0.0, 0.05, 0.3):
+        q = q0.copy()
+        q[2] += drop
+        q[7:] += rng.normal(0.0, 0.05, len(q) - 7)
+        solver.reset(q)
+        z_all, _, _ = limit.heights(data)
+        idx, z_near = limit.near(data)
+        np.testing.assert_array_equal(z_near, z_all[idx])
+        assert np.all(np.diff(idx) > 0)
+        left_out = np.setdiff1d(np.arange(len(z_all)), idx)
+        assert np.all(z_all[left_out] == np.inf)
+        np.testing.assert_array_equal(limit.z(data), z_all)
+        assert limit.lowest(data) == (z_all.min() if np.isfinite(z_all).any() else np.inf)
+
+
+def test_second_order_correction_is_off_by_default():
+    assert SolverOptions().second_order_correction is False
+    solver = _setup("humanoid", 0)
+    solver._step(0)
+    assert solver._qp is None
+
+
+@pytest.mark.parametrize("name,seed", [("humanoid", 0), ("humanoid", 1), ("robot", 2)])
+def test_second_order_correction_removes_the_contacts_second_order_error(name, seed):
+    solver = _setup(name, seed)
+    for _ in range(8):  # near the frame's solution first: a step of the size frames take
+        solver._line_search(solver._step(0))
+    rng = np.random.default_rng(seed)
+    for task in solver._constraints:  # the planted contacts move by a few millimetres
+        task.set_target(task.target + rng.normal(0.0, 0.003, 3))
+    limit = solver.floor_limit
+    solver._set_holds(ContactHolds(tuple(solver._extra_tasks), tuple(solver._constraints), limit.clearance, limit.swing_bodies))
+    solver.options.second_order_correction = True
+    solver._sync()
+    v = solver._step(0)
+    qp, q0, e0 = solver._qp, solver.configuration.q, solver._contact_errors()
+    assert qp is not None and e0 is not None
+    solver._integrate(v, 1.0)
+    full = solver._contact_residual()
+    # from the full step's pose, as the line search calls it; any residual accepted: only
+    # the correction's effect is measured
+    assert solver._corrected(qp, v, q0, e0, np.inf)
+    corrected = solver._contact_residual()
+    assert full > 1e-6  # the full step's linearisation error is there to remove
+    assert corrected < 0.05 * full
+    assert np.all(np.isfinite(solver.configuration.q))

@@ -74,7 +74,23 @@ _XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
 _XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
 
 
+
+def _weighted_residual(task: mink.Task, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray]:
+    r"""``(W_k, e_k)`` of a mink task: :math:`W_k = \mathrm{diag}(w) J`, :math:`e_k = -\mathrm{diag}(w)\,g\,e`
+    (weights :math:`w`, gain :math:`g`, error :math:`e`, Jacobian :math:`J`), as mink's
+    ``compute_qp_objective`` builds them; mink releases without ``compute_qp_residual``
+    (1.0.0, the lowest supported) get the same rows from the error and Jacobian."""
+    residual = getattr(task, "compute_qp_residual", None)
+    if residual is not None:
+        Wk, ek, _ = residual(configuration)
+        return Wk, ek
+    e = -task.gain * np.atleast_1d(task.compute_error(configuration))
+    cost = np.broadcast_to(np.asarray(task.cost, dtype=float), e.shape)
+    return cost[:, None] * task.compute_jacobian(configuration), cost * e
+
+
 @dataclass
+
 class QP:
     r"""One QP: :math:`\min \frac12 x^T H x + c^T x` s.t. ``lb <= x <= ub``, ``G x <= h``, ``A x = b``.
 
@@ -235,7 +251,7 @@ class QPBuilder:
                 np.multiply(task.cost[:, None], self._jac3[task.axes, :], out=W[r : r + k])
                 np.multiply(task.cost, -task.gain * task.compute_error(configuration), out=eps[r : r + k])
             else:  # any other mink task: its own weighted residual
-                Wk, ek, _ = task.compute_qp_residual(configuration)
+                Wk, ek = _weighted_residual(task, configuration)
                 k = len(ek)
                 W[r : r + k] = Wk
                 eps[r : r + k] = ek
@@ -334,7 +350,8 @@ class QPBuilder:
         H, c = self.objective(configuration, tasks, damping, posture)
         lb, ub = self.bounds(configuration, trust, config_limit, boxes)
         Gs, hs = [], []
-        if config_limit is not None and len(config_limit._ball_qposadr):
+        # ball joints' limits (mink >= 1.1) stay general rows; mink 1.0 has none
+        if config_limit is not None and len(getattr(config_limit, "_ball_qposadr", ())):
             con = config_limit.compute_qp_inequalities(configuration, 1.0)
             n = 0 if config_limit.projection_matrix is None else 2 * len(config_limit.indices)
             Gs.append(con.G[n:])

@@ -17,12 +17,17 @@ held by each structure of the result (motion, targets and what they carry, conta
 trajectory, solver statistics, fidelity) and the peak of each writer (``tracemalloc``, which
 numpy reports its buffers to), per frame.
 
+``--identity REF_DIR`` instead retargets every shared BVH clip with the checkout ``REF_DIR``
+(``PYTHONPATH=REF_DIR``) and with this one, and compares the BVH and NPZ files byte for byte.
+
 Usage:  python scripts/bench_memory.py [--minutes 1 5 15] [--clip cmu_12_01_walk.bvh] [--breakdown]
+        python scripts/bench_memory.py --identity ../main
 """
 
 from __future__ import annotations
 
 import argparse
+import filecmp
 import os
 import subprocess
 import sys
@@ -145,10 +150,12 @@ def breakdown(clip: Path, tmp: Path) -> None:
     kept = [("source motion", traj.source_motion), ("trajectory qpos", traj.qpos), ("solver stats", traj.solver),
             ("contact labels", traj.contacts), ("fidelity", traj.fidelity)]
     targets = traj.targets
-    kept += [(f"targets.{name}", getattr(targets, name)) for name in ("positions", "orientations", "valid", "has_orientation")]
-    kept += [(f"targets.info[{k!r}]", v) for k, v in sorted(targets.info.items())]
+    kept += [(f"targets.info[{k!r}]", v) for k, v in sorted(targets.info.items())]  # raw positions first: shared
+    kept += [(f"targets.{name}", getattr(targets, name)) for name in targets.__dataclass_fields__ if name != "info"]
     for name, obj in kept:
-        rows.append((name, array_bytes(obj, seen)))
+        nbytes = array_bytes(obj, seen)
+        if nbytes >= F:  # a few bytes per frame at least: the per-frame structures
+            rows.append((name, nbytes))
     _, bvh_peak = traced_peak(lambda: write_character_bvh(traj, tmp / "b.bvh"))
     _, npz_peak = traced_peak(lambda: write_trajectory_npz(traj, tmp / "b.npz"))
     rows += [("write BVH (peak)", bvh_peak), ("write NPZ (peak)", npz_peak)]
@@ -159,6 +166,34 @@ def breakdown(clip: Path, tmp: Path) -> None:
     print(f"  {'held after retargeting (sum)':40s} {held / F:10.1f}")
 
 
+def retarget_with(checkout: Path, clip: Path, out: Path) -> None:
+    """``physmocap retarget clip -o out.bvh --qpos out.npz`` with ``PYTHONPATH=checkout``."""
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    argv = [sys.executable, "-m", "physmocap", "retarget", str(clip), "-o", str(out.with_suffix(".bvh")),
+            "--qpos", str(out.with_suffix(".npz")), "--quiet"]
+    subprocess.run(argv, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def identity(ref: Path) -> int:
+    """Compare this checkout's BVH and NPZ outputs with ``ref``'s on every shared BVH clip;
+    0 if every file is byte-identical."""
+    clips = sorted(DATA.glob("*.bvh"))
+    differ = 0
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        (tmp / "ref").mkdir()
+        (tmp / "ours").mkdir()
+        for clip in clips:
+            retarget_with(ref.resolve(), clip, tmp / "ref" / clip.stem)
+            retarget_with(REPO, clip, tmp / "ours" / clip.stem)
+            same = {s: filecmp.cmp(tmp / "ref" / (clip.stem + s), tmp / "ours" / (clip.stem + s), shallow=False)
+                    for s in (".bvh", ".npz")}
+            differ += not all(same.values())
+            print(f"{clip.name:28s} " + "  ".join(f"{s[1:]} {'identical' if v else 'DIFFERENT'}" for s, v in same.items()),
+                  flush=True)
+    return 1 if differ else 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--minutes", type=float, nargs="+", default=[1.0, 5.0, 15.0])
@@ -166,7 +201,11 @@ def main() -> int:
     ap.add_argument("--breakdown", action="store_true", help="also print bytes per frame by structure (shortest clip)")
     ap.add_argument("--extrapolate", type=float, default=60.0, metavar="MIN",
                     help="print the peak extrapolated to this many minutes (default 60)")
+    ap.add_argument("--identity", type=Path, metavar="REF_DIR",
+                    help="compare outputs on every shared clip with the checkout REF_DIR, byte for byte")
     args = ap.parse_args()
+    if args.identity is not None:
+        return identity(args.identity)
     src = DATA / args.clip
     if not src.exists():
         print(f"skip: {src} not found", file=sys.stderr)

@@ -124,3 +124,18 @@ def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (folder / "out").exists()
+
+
+def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
+    from physmocap.batch import read_manifest
+
+    (tmp_path / "m.txt").write_text("# clips\na.bvh\n\nsub/b.bvh\n")
+    assert [(e.line, e.input, e.options) for e in read_manifest(tmp_path / "m.txt")] == [
+        (2, tmp_path / "a.bvh", {}), (4, tmp_path / "sub" / "b.bvh", {})]
+    (tmp_path / "m.jsonl").write_text(
+        '{"input": "a.bvh", "--character": "robot", "source_map": "maps/s.toml", "fps": 30, "no_floor": "yes"}\n'
+        '{"input": "b.bvh", "character": "chars/c.xml", "up": "z"}\n')
+    first, second = read_manifest(tmp_path / "m.jsonl")
+    assert first.options == {"character": "robot", "source_map": str(tmp_path / "maps" / "s.toml"), "fps": 30.0,
+                             "no_floor": True}
+    assert second.options == {"character": str(tmp_path / "chars" / "c.xml"), "up": "z"}

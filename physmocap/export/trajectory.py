@@ -68,44 +68,42 @@ class ArrayBlocks:
     blocks: Callable[[], Iterator[np.ndarray]]
 
 
-def _as_blocks(value) -> ArrayBlocks:
-    """An array (or :class:`ArrayBlocks`) as row blocks of :data:`BLOCK_ROWS`."""
-    if isinstance(value, ArrayBlocks):
-        return value
-    arr = np.asarray(value)
-    if arr.ndim == 0:
-        return ArrayBlocks((), arr.dtype, lambda: iter([arr]))
-    return ArrayBlocks(arr.shape, arr.dtype, lambda: (arr[s : s + BLOCK_ROWS] for s in range(0, len(arr), BLOCK_ROWS)))
-
-
 def write_npz(path: str | os.PathLike, arrays: dict[str, "np.ndarray | ArrayBlocks"]) -> Path:
     """Write ``arrays`` as an uncompressed ``.npz`` with deterministic bytes, atomically.
 
-    Each member is a ``.npy`` file (format 1.0 header, C order) streamed into the archive a
-    block of rows at a time, so writing needs no copy of any array: the bytes are those of
-    ``np.save`` into ``ZipFile.writestr`` with a fixed timestamp.
+    Each member is a ``.npy`` file (format 1.0 header) streamed into the archive: an array by
+    ``np.lib.format.write_array`` straight into the member (no in-memory copy of the file),
+    an :class:`ArrayBlocks` a block of rows at a time.  The bytes are those of ``np.save``
+    into ``ZipFile.writestr`` with a fixed timestamp.
     """
     p = Path(path)
     with atomic_open(p, "wb") as fh:
         with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED) as zf:
             for name, value in arrays.items():
-                _write_member(zf, name, _as_blocks(value), p)
+                _write_member(zf, name, value, p)
     return p
 
 
-def _write_member(zf: zipfile.ZipFile, name: str, arr: ArrayBlocks, path: Path) -> None:
-    """One ``<name>.npy`` member: the header, then the blocks' raw bytes."""
+def _write_member(zf: zipfile.ZipFile, name: str, value: "np.ndarray | ArrayBlocks", path: Path) -> None:
+    """One ``<name>.npy`` member of a known size (so the archive's bytes do not depend on
+    how it is streamed): the header, then the data."""
+    arr = value if isinstance(value, ArrayBlocks) else np.asarray(value)
     if arr.dtype == object:
         raise OutputError(f"array {name!r} has object dtype, which needs pickle", path=path)
     header = io.BytesIO()
-    np.lib.format.write_array_header_1_0(
-        header, {"descr": np.lib.format.dtype_to_descr(arr.dtype), "fortran_order": False, "shape": tuple(arr.shape)}
-    )
+    if isinstance(arr, ArrayBlocks):
+        fields = {"descr": np.lib.format.dtype_to_descr(arr.dtype), "fortran_order": False, "shape": tuple(arr.shape)}
+    else:
+        fields = np.lib.format.header_data_from_array_1_0(arr)
+    np.lib.format.write_array_header_1_0(header, fields)
     info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
     info.external_attr = 0o644 << 16
     info.compress_type = zipfile.ZIP_STORED
     info.file_size = len(header.getvalue()) + int(np.prod(arr.shape, dtype=np.int64)) * arr.dtype.itemsize
     with zf.open(info, mode="w") as dest:
+        if not isinstance(arr, ArrayBlocks):
+            np.lib.format.write_array(dest, arr, allow_pickle=False)
+            return
         dest.write(header.getvalue())
         for block in arr.blocks():
             dest.write(np.ascontiguousarray(block, dtype=arr.dtype).tobytes())

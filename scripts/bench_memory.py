@@ -10,7 +10,7 @@ command line in a fresh process::
 
 (read, retarget with the default humanoid and every constraint, write BVH and NPZ) and reports
 its peak resident set size (``os.wait4``'s ``ru_maxrss`` of that process alone).  The growth
-per frame is the slope between the clip lengths; ``--extrapolate`` prints the hour from it.
+per frame is the slope between the two longest clips; ``--extrapolate`` prints the hour from it.
 
 ``--breakdown`` retargets the shortest clip in this process and prints the bytes per frame
 held by each structure of the result (motion, targets and what they carry, contact labels,
@@ -229,7 +229,7 @@ def main() -> int:
                   f"({(peak - base) * MB / frames:6.0f} B/frame over the baseline), {wall:.0f} s", flush=True)
             clip.unlink()
         if len(points) >= 2:
-            (f0, m0), (f1, m1) = points[0], points[-1]
+            (f0, m0), (f1, m1) = points[-2], points[-1]  # the two longest: the long-clip regime
             slope = (m1 - m0) * MB / (f1 - f0)
             target = args.extrapolate * 60.0 * fps
             print(f"growth {slope:.0f} B/frame between {f0} and {f1} frames; "

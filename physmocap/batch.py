@@ -137,7 +137,7 @@ def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | Non
 
         parser = retarget_option_parser()
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's CSV may start with a byte-order mark
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read the manifest: {exc}", path=p) from None
     suffix = p.suffix.lower()

@@ -129,7 +129,7 @@ def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
 def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
     from physmocap.batch import read_manifest
 
-    (tmp_path / "m.txt").write_text("# clips\na.bvh\n\nsub/b.bvh\n")
+    (tmp_path / "m.txt").write_text("\ufeff# clips\na.bvh\n\nsub/b.bvh\n", encoding="utf-8")
     assert [(e.line, e.input, e.options) for e in read_manifest(tmp_path / "m.txt")] == [
         (2, tmp_path / "a.bvh", {}), (4, tmp_path / "sub" / "b.bvh", {})]
     (tmp_path / "m.jsonl").write_text(

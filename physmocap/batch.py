@@ -1,11 +1,14 @@
 """Whole datasets: retarget every file of a folder, glob or manifest, on local processes or Ray.
 
 * :func:`plan` turns the inputs into :class:`Job` s, outputs mirrored under the output
-  folder (``walks/a.bvh`` -> ``OUT/walks/a.<suffix>``).
+  folder (``walks/a.bvh`` -> ``OUT/walks/a.<suffix>``).  A manifest (:func:`read_manifest`:
+  ``.txt``, one input a line; ``.csv`` or ``.jsonl`` with ``input``, optional ``output`` and
+  per-file ``retarget`` options) may name each file's output and options.
 * :func:`run_job` retargets one file in the current process and returns a
   :class:`FileResult` (never raises: a failure is recorded with its error).
 * :func:`run_batch` runs the jobs on a process pool (``jobs`` workers, ``spawn`` start) or
-  as Ray tasks, skips files already done (output newer than its input, same options),
+  as Ray tasks, skips files already done (output newer than its input, same options,
+  per-file ones included),
   and writes ``summary.csv`` and ``summary.json`` (sorted by input, no timings: the same
   whatever the workers) and ``timings.csv``.
 
@@ -15,9 +18,11 @@ another machine rebuilds exactly the same call.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import glob as globlib
 import hashlib
+import io
 import json
 import os
 import time
@@ -27,10 +32,17 @@ from typing import Any, Iterable
 
 from .errors import InputError, OptionError, PhysmocapError
 
-__all__ = ["Job", "FileResult", "plan", "run_job", "run_batch", "SUMMARY_FIELDS"]
+__all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_job", "run_batch", "SUMMARY_FIELDS"]
 
 #: Input suffixes a folder or glob picks up.
 INPUT_SUFFIXES = (".bvh", ".c3d", ".trc", ".mcap", ".csv", ".jsonl")
+#: Manifest suffixes: one input a line (.txt), or a table with per-file options (.csv, .jsonl).
+MANIFEST_SUFFIXES = (".txt", ".csv", ".jsonl")
+#: Output suffixes a manifest's ``output`` may have.
+OUTPUT_SUFFIXES = (".npz", ".bvh", ".csv", ".mcap")
+#: Per-file options that name files (relative to the manifest); ``character`` only when it
+#: is a path (has a suffix or a folder), not a bundled name.
+PATH_OPTIONS = ("map", "source_map", "marker_set", "contacts", "character")
 #: Columns of summary.csv, in order.
 SUMMARY_FIELDS = (
     "input", "output", "status", "error", "frames", "fps", "limit_violations", "penetration_max_mm",
@@ -41,10 +53,24 @@ STATE_FILE = ".physmocap-batch.json"
 
 @dataclass(frozen=True)
 class Job:
-    """One file to retarget: its input and mirrored output (absolute paths)."""
+    """One file to retarget: its input and output (absolute paths), and the options that
+    differ for this file from the batch's (``retarget``'s option names as argparse
+    destinations, ``no_plant``, ``max_iterations``...; a manifest line's)."""
 
     input: str
     output: str
+    options: dict[str, Any] = field(default_factory=dict, hash=False)
+
+
+@dataclass(frozen=True)
+class ManifestEntry:
+    """One line of a manifest: its number (1-based; 0 for a file of a folder or glob),
+    input, output (None: mirrored) and per-file options (argparse destinations to values)."""
+
+    line: int
+    input: Path
+    output: Path | None
+    options: dict[str, Any]
 
 
 @dataclass
@@ -67,36 +93,193 @@ class FileResult:
     seconds: float = field(default=0.0, compare=False)
 
 
-def _inputs(source: str) -> tuple[list[Path], Path]:
-    """Files of a folder (recursively), a glob or a manifest, and the root they mirror from."""
+def _inputs(source: str) -> tuple[list[ManifestEntry], Path]:
+    """Entries for the files of a folder (recursively), a glob or a manifest, and the root
+    their mirrored outputs start from."""
     p = Path(source)
     if p.is_dir():
         files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in INPUT_SUFFIXES)
-        return files, p
+        return [ManifestEntry(0, f, None, {}) for f in files], p
     if any(ch in source for ch in "*?["):
         files = sorted(Path(f) for f in globlib.glob(source, recursive=True) if Path(f).is_file())
         root = Path(os.path.commonpath([str(f.parent) for f in files])) if files else Path(".")
-        return files, root
-    if p.is_file() and p.suffix.lower() == ".txt":  # manifest: one input path per line
-        base = p.parent
-        lines = [ln.strip() for ln in p.read_text(encoding="utf-8").splitlines()]
-        files = [(base / ln) if not Path(ln).is_absolute() else Path(ln) for ln in lines if ln and not ln.startswith("#")]
-        root = Path(os.path.commonpath([str(f.parent) for f in files])) if files else base
-        return files, root
-    raise InputError("expected a folder, a glob pattern or a manifest (.txt, one input per line)", path=p)
+        return [ManifestEntry(0, f, None, {}) for f in files], root
+    if p.is_file() and p.suffix.lower() in MANIFEST_SUFFIXES:
+        entries = read_manifest(p)
+        root = Path(os.path.commonpath([str(e.input.parent) for e in entries])) if entries else p.parent
+        return entries, root
+    raise InputError(
+        "expected a folder, a glob pattern or a manifest (.txt: one input a line; .csv or .jsonl: "
+        "input, output and per-file options)",
+        path=p,
+    )
+
+
+def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | None = None) -> list[ManifestEntry]:
+    """The entries of a manifest, paths relative to its folder made absolute.
+
+    ``.txt``: one input a line (blank lines and ``#`` comments skipped).  ``.csv``: a header
+    row naming ``input``, optionally ``output``, and per-file options; an empty cell is an
+    option not given.  ``.jsonl``: one JSON object a line with the same keys (blank lines
+    and ``#`` comments skipped; ``null`` is not given).  Option names are ``retarget``'s
+    command-line options (``no-plant``, ``max-iterations``, ``start``...; a leading ``--``
+    and ``_`` for ``-`` accepted); flags take true/false, 1/0 or yes/no.  Values are parsed
+    by ``retarget``'s own option parser (``parser``, default
+    :func:`~physmocap.cli.retarget.retarget_option_parser`).
+
+    Raises:
+        InputError: The manifest cannot be read, a line is not well-formed or has no input.
+        OptionError: An unknown option or a bad value (naming the manifest and line).
+    """
+    p = Path(path)
+    if parser is None:
+        from .cli.retarget import retarget_option_parser
+
+        parser = retarget_option_parser()
+    try:
+        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's CSV may start with a byte-order mark
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the manifest: {exc}", path=p) from None
+    suffix = p.suffix.lower()
+    rows = _txt_rows(text) if suffix == ".txt" else _csv_rows(text, p) if suffix == ".csv" else _jsonl_rows(text, p)
+    return [_entry(line, row, p, parser) for line, row in rows]
+
+
+def _txt_rows(text: str) -> list[tuple[int, dict[str, Any]]]:
+    """``(line, {"input": path})`` per non-blank, non-comment line."""
+    lines = [(n, ln.strip()) for n, ln in enumerate(text.splitlines(), start=1)]
+    return [(n, {"input": ln}) for n, ln in lines if ln and not ln.startswith("#")]
+
+
+def _csv_rows(text: str, path: Path) -> list[tuple[int, dict[str, Any]]]:
+    """``(line, {column: cell})`` per non-blank row; empty cells left out."""
+    reader = csv.reader(io.StringIO(text))
+    names = [h.strip() for h in next(reader, [])]
+    if "input" not in names:
+        raise InputError("a CSV manifest starts with a header row naming an 'input' column", path=path, line=1)
+    rows = []
+    for cells in reader:
+        if not any(c.strip() for c in cells):
+            continue
+        if len(cells) != len(names):
+            raise InputError(f"{len(cells)} cells but the header names {len(names)} columns", path=path, line=reader.line_num)
+        rows.append((reader.line_num, {k: v.strip() for k, v in zip(names, cells) if v.strip()}))
+    return rows
+
+
+def _jsonl_rows(text: str, path: Path) -> list[tuple[int, dict[str, Any]]]:
+    """``(line, object)`` per non-blank, non-comment line; ``null`` values left out."""
+    rows = []
+    for n, ln in enumerate(text.splitlines(), start=1):
+        if not ln.strip() or ln.lstrip().startswith("#"):
+            continue
+        try:
+            row = json.loads(ln)
+        except ValueError as exc:
+            raise InputError(f"not a JSON object: {exc}", path=path, line=n) from None
+        if not isinstance(row, dict):
+            raise InputError(f"expected a JSON object, found {type(row).__name__}", path=path, line=n)
+        rows.append((n, {k: v for k, v in row.items() if v is not None}))
+    return rows
+
+
+def _entry(line: int, row: dict[str, Any], manifest: Path, parser: argparse.ArgumentParser) -> ManifestEntry:
+    """One manifest row as an entry: paths resolved against the manifest's folder, options
+    parsed and checked as ``retarget`` does (:func:`parse_file_options`)."""
+    base = manifest.parent
+    row = dict(row)
+    inp, out = row.pop("input", None), row.pop("output", None)
+    for key, value in (("input", inp), ("output", out)):
+        if value is not None and (not isinstance(value, str) or not value.strip()):
+            raise InputError(f"{key} must be a path, got {value!r}", path=manifest, line=line)
+    if inp is None:
+        raise InputError("no input on this line", path=manifest, line=line)
+    output = None if out is None else base / out
+    if output is not None and output.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise OptionError(f"output {out!r}: the suffix must be one of {', '.join(OUTPUT_SUFFIXES)}",
+                          path=manifest, line=line)
+    try:
+        options = parse_file_options(row, parser, base)
+    except OptionError as exc:
+        raise OptionError(exc.message, path=manifest, line=line) from None
+    return ManifestEntry(line, base / inp, output, options)
+
+
+def parse_file_options(row: dict[str, Any], parser: argparse.ArgumentParser, base: Path) -> dict[str, Any]:
+    """Per-file options (``retarget``'s option names) parsed by ``parser`` and validated by
+    :func:`~physmocap.cli.retarget.config_from_args`, the configuration ``retarget`` builds:
+    argparse destination -> value, only the options given.  The paths of
+    :data:`PATH_OPTIONS` are taken relative to ``base``.
+
+    Raises:
+        OptionError: An unknown option, one that is not per-file, or a bad value.
+    """
+    from .cli.retarget import config_from_args
+
+    actions = {a.dest: a for a in parser._actions if a.option_strings and a.dest != "quiet"}  # noqa: SLF001
+    given: dict[str, Any] = {}
+    for key, value in row.items():
+        action = actions.get(str(key).strip().lstrip("-").replace("-", "_"))
+        if action is None:
+            known = ", ".join(sorted(a.option_strings[-1].lstrip("-") for a in actions.values()))
+            raise OptionError(f"unknown option {key!r}; per-file options are input, output and {known}")
+        given[action.dest] = _parse_value(action, value, parser)
+    for dest in PATH_OPTIONS:
+        if isinstance(given.get(dest), str) and (dest != "character" or _is_path(given[dest])):
+            given[dest] = str(base / given[dest])
+    full = parser.parse_args([])
+    vars(full).update(given)
+    config_from_args(full)  # the checks retarget makes before reading anything
+    return given
+
+
+def _parse_value(action: argparse.Action, value: Any, parser: argparse.ArgumentParser) -> Any:
+    """A manifest cell or JSON value for one option, parsed as the command line would."""
+    name = action.option_strings[-1]
+    if action.nargs == 0:  # a flag (store_true)
+        text = str(value).strip().lower() if not isinstance(value, bool) else str(value).lower()
+        flag = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}.get(text)
+        if flag is None:
+            raise OptionError(f"{name} is a flag: give true or false, got {value!r}")
+        return flag
+    if isinstance(value, (dict, list, bool)):
+        raise OptionError(f"{name} takes one value, got {value!r}")
+    return getattr(parser.parse_args([name, str(value)]), action.dest)
+
+
+def _is_path(value: str) -> bool:
+    """True for a character given as a file (a suffix or a folder), not a bundled name."""
+    return bool(Path(value).suffix) or "/" in value or os.sep in value
 
 
 def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[Job]:
-    """The jobs for every input of ``source``, outputs mirrored under ``outdir``."""
-    files, root = _inputs(source)
-    if not files:
+    """The jobs for every input of ``source``: outputs mirrored under ``outdir`` unless a
+    manifest names them, with the manifest's per-file options.
+
+    Raises:
+        InputError: No input found, or a manifest that cannot be read.
+        OptionError: A manifest's bad option, or two jobs writing the same output.
+    """
+    entries, root = _inputs(source)
+    if not entries:
         raise InputError("no input files found (looked for " + ", ".join(INPUT_SUFFIXES) + ")", path=source)
-    out = Path(outdir)
-    jobs = []
-    for f in files:
-        rel = f.resolve().relative_to(root.resolve()) if f.resolve().is_relative_to(root.resolve()) else Path(f.name)
-        jobs.append(Job(input=str(f.resolve()), output=str((out / rel).with_suffix(suffix).resolve())))
+    jobs: list[Job] = []
+    seen: dict[str, int] = {}
+    for e in entries:
+        target = e.output.resolve() if e.output is not None else _mirrored(e.input, root, Path(outdir), suffix)
+        if str(target) in seen:
+            where = f"lines {seen[str(target)]} and {e.line}" if e.line else "two inputs"
+            raise OptionError(f"{where} write the same output {target}", path=source)
+        seen[str(target)] = e.line
+        jobs.append(Job(input=str(e.input.resolve()), output=str(target), options=dict(e.options)))
     return jobs
+
+
+def _mirrored(inp: Path, root: Path, out: Path, suffix: str) -> Path:
+    """``out/<inp relative to root>`` with ``suffix`` (absolute)."""
+    f, r = inp.resolve(), root.resolve()
+    rel = f.relative_to(r) if f.is_relative_to(r) else Path(f.name)
+    return (out / rel).with_suffix(suffix).resolve()
 
 
 def options_key(options: dict[str, Any]) -> str:
@@ -104,9 +287,14 @@ def options_key(options: dict[str, Any]) -> str:
     return hashlib.sha256(json.dumps(options, sort_keys=True).encode()).hexdigest()[:16]
 
 
+def job_options(job: Job, options: dict[str, Any]) -> dict[str, Any]:
+    """The batch's ``options`` with the job's own on top: what the file is retargeted with."""
+    return {**options, **job.options}
+
+
 def run_job(job: Job, options: dict[str, Any]) -> FileResult:
-    """Retarget one file with the ``retarget`` command's options; never raises."""
-    import argparse
+    """Retarget one file with the ``retarget`` command's options (the batch's, the job's own
+    on top); never raises."""
     import warnings
 
     from . import metrics
@@ -115,7 +303,7 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
     start = time.perf_counter()
     res = FileResult(job.input, job.output, "failed")
     try:
-        ns = argparse.Namespace(**{**options, "input": job.input, "quiet": True})
+        ns = argparse.Namespace(**{**job_options(job, options), "input": job.input, "quiet": True})
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -143,7 +331,7 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
 
 
 def _load_state(outdir: Path) -> dict[str, dict]:
-    """Input -> {"key": options digest, "result": its FileResult} of the files done before."""
+    """Output -> {"key": options digest, "result": its FileResult} of the files done before."""
     try:
         data = json.loads((outdir / STATE_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):
@@ -155,7 +343,7 @@ def _load_state(outdir: Path) -> dict[str, dict]:
 
 def _done(job: Job, key: str, state: dict[str, dict]) -> bool:
     out, inp = Path(job.output), Path(job.input)
-    entry = state.get(job.input)
+    entry = state.get(job.output)
     return (
         entry is not None
         and entry.get("key") == key
@@ -208,32 +396,33 @@ def run_batch(
     ray: str | None = None,
     progress: bool | None = None,
 ) -> list[FileResult]:
-    """Run the jobs, skip those already done, write the summaries; results sorted by input."""
+    """Run the jobs, skip those already done (same output, newer than the input, same options
+    with the job's own), write the summaries; results sorted by input, then output."""
     from .fileio import atomic_open
     from .progress import Progress
 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    key = options_key(options)
+    keys = {j.output: options_key(job_options(j, options)) for j in jobs}
     state = {} if force else _load_state(out)
-    todo = [j for j in jobs if force or not _done(j, key, state)]
+    todo = [j for j in jobs if force or not _done(j, keys[j.output], state)]
     # files done by an earlier run keep their figures (the summary is the same either way)
     results = {}
     for j in jobs:
         if j not in todo:
-            kept = {k: v for k, v in state[j.input]["result"].items() if k in FileResult.__dataclass_fields__}
-            results[j.input] = FileResult(**{**kept, "seconds": 0.0})
+            kept = {k: v for k, v in state[j.output]["result"].items() if k in FileResult.__dataclass_fields__}
+            results[j.output] = FileResult(**{**kept, "seconds": 0.0})
     with Progress(len(todo), "batch", enabled=progress) as bar:
         for res in _execute(todo, options, workers, ray):
-            results[res.input] = res
+            results[res.output] = res
             if res.status == "done":
-                state[res.input] = {"key": key, "result": asdict(res)}
+                state[res.output] = {"key": keys[res.output], "result": asdict(res)}
             else:
-                state.pop(res.input, None)
+                state.pop(res.output, None)
             with atomic_open(out / STATE_FILE) as fh:  # after every file: a killed batch resumes
                 json.dump(state, fh, sort_keys=True, indent=0)
             bar.update(1)
-    ordered = [results[j.input] for j in sorted(jobs, key=lambda j: j.input)]
+    ordered = [results[j.output] for j in sorted(jobs, key=lambda j: (j.input, j.output))]
     _write_summaries(ordered, out)
     return ordered
 

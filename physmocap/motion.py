@@ -177,31 +177,62 @@ class Skeleton:
         )
 
 
+#: Frames forward kinematics works on at a time: its temporaries (local translations, the
+#: float64 copy of a float32 clip, each depth's products) are this many frames, not the clip.
+FK_CHUNK_FRAMES = 4096
+
+
 def forward_kinematics(
     skeleton: Skeleton,
     rotations: np.ndarray,
     translations: np.ndarray | None = None,
     translated: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    *,
+    with_rotations: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """World positions and rotations of every joint, vectorised over frames.
+
+    Frames are independent, so they are computed :data:`FK_CHUNK_FRAMES` at a time (the
+    same operations on each frame, so the same numbers as one pass over the clip).
 
     Args:
         skeleton: The skeleton (offsets in metres).
         rotations: ``(F, J, 4)`` local rotations, x-y-z-w.
         translations: ``(F, K, 3)`` animated local translations in metres.
         translated: ``(K,)`` joint indices that ``translations`` belong to.
+        with_rotations: False returns None for the world rotations (they are then only
+            held a chunk at a time).
 
     Returns:
-        ``(positions (F, J, 3), world_rotations (F, J, 4))``.
+        ``(positions (F, J, 3), world_rotations (F, J, 4) or None)``, float64.
     """
-    rotations = np.asarray(rotations, dtype=float)
-    F, J = rotations.shape[:2]
-    local_t = np.broadcast_to(skeleton.offsets, (F, J, 3)).copy()
-    if translations is not None and translated is not None and len(translated):
-        local_t[:, np.asarray(translated, dtype=int)] = translations
+    F, J = np.shape(rotations)[:2]
     pos = np.empty((F, J, 3))
-    wrot = np.empty((F, J, 4))
-    # one vectorised pass per tree depth (all joints of a depth at once)
+    wrot = np.empty((F, J, 4)) if with_rotations else None
+    moved = translations is not None and translated is not None and len(translated)
+    for s in range(0, F, FK_CHUNK_FRAMES):
+        e = min(F, s + FK_CHUNK_FRAMES)
+        tra = translations[s:e] if moved else None  # type: ignore[index]
+        chunk_rot = None if wrot is None else wrot[s:e]
+        _fk_chunk(skeleton, np.asarray(rotations[s:e], dtype=float), tra, translated, pos[s:e], chunk_rot)
+    return pos, wrot
+
+
+def _fk_chunk(
+    skeleton: Skeleton,
+    rotations: np.ndarray,
+    translations: np.ndarray | None,
+    translated: np.ndarray | None,
+    pos: np.ndarray,
+    wrot: np.ndarray | None,
+) -> None:
+    """Forward kinematics of a few frames into ``pos`` (and ``wrot`` if given):
+    one vectorised pass per tree depth (all joints of a depth at once)."""
+    n, J = rotations.shape[:2]
+    local_t = np.broadcast_to(skeleton.offsets, (n, J, 3)).copy()
+    if translations is not None:
+        local_t[:, np.asarray(translated, dtype=int)] = translations
+    wrot = np.empty((n, J, 4)) if wrot is None else wrot
     for level, (idx, par) in enumerate(_depth_levels(skeleton)):
         if level == 0:
             pos[:, idx] = local_t[:, idx]
@@ -209,7 +240,6 @@ def forward_kinematics(
         else:
             pos[:, idx] = pos[:, par] + quat_apply(wrot[:, par], local_t[:, idx])
             wrot[:, idx] = quat_mul(wrot[:, par], rotations[:, idx])
-    return pos, wrot
 
 
 def _depth_levels(skeleton: Skeleton) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -317,8 +347,14 @@ class Motion:
         return forward_kinematics(self.skeleton, self.rotations, self.translations, self.translated)
 
     def world_positions(self) -> np.ndarray:
-        """``(F, J, 3)`` world positions in metres, Z-up."""
-        return self.forward_kinematics()[0]
+        """``(F, J, 3)`` world positions in metres, Z-up (world rotations computed a chunk of
+        frames at a time and not kept)."""
+        if self.rotations is None:
+            assert self.positions is not None
+            return self.positions
+        return forward_kinematics(
+            self.skeleton, self.rotations, self.translations, self.translated, with_rotations=False
+        )[0]
 
     def world_rotations(self) -> np.ndarray | None:
         """``(F, J, 4)`` world rotations x-y-z-w, or None for positional motions."""

@@ -99,14 +99,19 @@ class Trajectory:
         return qpos_column_names(self.model)
 
     def _run(self, fn) -> np.ndarray:
+        """``fn(data)`` after the kinematics of every frame, stacked ``(F, ...)`` into one
+        array allocated once (not a list of per-frame arrays)."""
         model = self.model
         data = mujoco.MjData(model)
-        out = []
-        for q in self.qpos:
+        out: np.ndarray | None = None
+        for t, q in enumerate(self.qpos):
             data.qpos[:] = q
             mujoco.mj_kinematics(model, data)
-            out.append(fn(data))
-        return np.array(out)
+            value = np.asarray(fn(data))
+            if out is None:
+                out = np.empty((self.num_frames, *value.shape), dtype=value.dtype)
+            out[t] = value
+        return np.empty((0,)) if out is None else out
 
     def body_poses(self) -> tuple[np.ndarray, np.ndarray]:
         """World ``(positions (F, nbody, 3), quaternions (F, nbody, 4) x-y-z-w)``."""

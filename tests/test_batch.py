@@ -71,3 +71,71 @@ def test_batch_on_ray_gives_the_same_files(folder):
 def test_batch_bad_source_is_one_clear_error(tmp_path, capsys):
     assert main(["batch", str(tmp_path / "nothing"), "-o", str(tmp_path / "o")]) == 2
     assert "folder, a glob" in capsys.readouterr().err
+
+
+def _manifest(folder, name, text):
+    path = folder / "in" / name
+    path.write_text(text)
+    return path
+
+
+def test_csv_manifest_per_file_options_and_outputs(folder):
+    manifest = _manifest(folder, "list.csv", "input,output,end,no-plant\na.bvh,../named/a_short.bvh,20,true\nsub/b.bvh,,30,\n")
+    assert main(["batch", str(manifest), "-o", str(folder / "out"), "--quiet", "--jobs", "1"]) == 0
+    assert (folder / "named" / "a_short.bvh").exists()  # relative to the manifest
+    rows = {r["output"]: r for r in json.loads((folder / "out" / "summary.json").read_text())["files"]}
+    assert rows[os.path.join("..", "named", "a_short.bvh")]["frames"] == 19  # --end 20, frame 0 skipped
+    assert rows[os.path.join("sub", "b.npz")]["frames"] == 29  # mirrored under OUTDIR
+    assert rows[os.path.join("..", "named", "a_short.bvh")]["skating_mean_cm_s"] is None  # --no-plant
+    assert rows[os.path.join("sub", "b.npz")]["skating_mean_cm_s"] is not None
+
+
+def test_jsonl_manifest_redoes_only_the_file_whose_options_changed(folder):
+    lines = ['{"input": "a.bvh", "end": 25}', '# a comment', '{"input": "sub/b.bvh", "output": "b.npz", "end": 25}']
+    manifest = _manifest(folder, "list.jsonl", "\n".join(lines) + "\n")
+    run = ["batch", str(manifest), "-o", str(folder / "out"), "--quiet", "--jobs", "1"]
+    assert main(run) == 0
+    a, b = folder / "out" / "a.npz", folder / "in" / "b.npz"
+    stamps = (a.stat().st_mtime_ns, b.stat().st_mtime_ns)
+    time.sleep(0.01)
+    assert main(run) == 0  # nothing to redo
+    assert (a.stat().st_mtime_ns, b.stat().st_mtime_ns) == stamps
+    lines[2] = '{"input": "sub/b.bvh", "output": "b.npz", "end": 25, "max_iterations": 3}'
+    manifest.write_text("\n".join(lines) + "\n")
+    assert main(run) == 0
+    assert a.stat().st_mtime_ns == stamps[0] and b.stat().st_mtime_ns != stamps[1]
+
+
+@pytest.mark.parametrize(
+    "name, text, message",
+    [
+        ("m.csv", "input,speed\na.bvh,3\n", "m.csv:2: unknown option 'speed'"),
+        ("m.csv", "input,max-iterations\na.bvh,0\n", "m.csv:2: --max-iterations must be at least 1"),
+        ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh", "start": "x"}\n', "m.jsonl:2: argument --start: invalid int"),
+        ("m.jsonl", '{"input": "a.bvh", "no-plant": "maybe"}\n', "m.jsonl:1: --no-plant is a flag"),
+        ("m.csv", "input,start,end\na.bvh,30,10\n", "m.csv:2: --start 30 --end 10: the range is empty"),
+        ("m.csv", "output\nx.npz\n", "m.csv:1: a CSV manifest starts with a header row naming an 'input' column"),
+        ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 write the same output"),
+    ],
+)
+def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
+    manifest = _manifest(folder, name, text)
+    assert main(["batch", str(manifest), "-o", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (folder / "out").exists()
+
+
+def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
+    from physmocap.batch import read_manifest
+
+    (tmp_path / "m.txt").write_text("\ufeff# clips\na.bvh\n\nsub/b.bvh\n", encoding="utf-8")
+    assert [(e.line, e.input, e.options) for e in read_manifest(tmp_path / "m.txt")] == [
+        (2, tmp_path / "a.bvh", {}), (4, tmp_path / "sub" / "b.bvh", {})]
+    (tmp_path / "m.jsonl").write_text(
+        '{"input": "a.bvh", "--character": "robot", "source_map": "maps/s.toml", "fps": 30, "no_floor": "yes"}\n'
+        '{"input": "b.bvh", "character": "chars/c.xml", "up": "z"}\n')
+    first, second = read_manifest(tmp_path / "m.jsonl")
+    assert first.options == {"character": "robot", "source_map": str(tmp_path / "maps" / "s.toml"), "fps": 30.0,
+                             "no_floor": True}
+    assert second.options == {"character": str(tmp_path / "chars" / "c.xml"), "up": "z"}

@@ -12,28 +12,29 @@ FORMATS = (".npz", ".bvh", ".csv", ".mcap")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from .retarget import add_retarget_options
+    from .retarget import add_bvh_output_options, add_retarget_options
 
     p = sub.add_parser(
         "batch",
         help="retarget every file of a folder, glob or manifest (resumable, parallel, Ray)",
         description=(
             "Retarget every capture file of SOURCE (a folder, searched recursively; a quoted glob; or a "
-            ".txt manifest with one input per line) with retarget's options. Outputs are mirrored under "
-            "OUTDIR; files already done with the same options are skipped (--force redoes them); a failing "
+            "manifest: .txt with one input per line, or .csv / .jsonl with input, optional output and "
+            "per-file retarget options, paths relative to the manifest) with retarget's options. Outputs "
+            "are mirrored under OUTDIR unless the manifest names them; files already done with the same "
+            "options are skipped (--force redoes them); a failing "
             "file is recorded and the others go on; OUTDIR/summary.csv and summary.json list every file's "
             "figures."
         ),
     )
-    p.add_argument("source", metavar="SOURCE", help="folder, glob pattern or manifest .txt")
+    p.add_argument("source", metavar="SOURCE", help="folder, glob pattern or manifest (.txt, .csv, .jsonl)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--format", default="npz", choices=[f[1:] for f in FORMATS], help="output format (default npz)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: one per core)")
     p.add_argument("--force", action="store_true", help="redo files already done")
     p.add_argument("--ray", metavar="ADDRESS", help="run as Ray tasks: 'local' starts Ray here, 'auto' joins the running "
                    "cluster, or a cluster address (needs physmocap[cluster])")
-    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
-    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    add_bvh_output_options(p)
     add_retarget_options(p)
     p.set_defaults(func=run)
 
@@ -44,9 +45,11 @@ OWN = {"source", "output", "format", "jobs", "force", "ray", "func", "command", 
 
 def run(args: argparse.Namespace) -> int:
     from ..batch import plan, run_batch
+    from .retarget import config_from_args
 
     if args.jobs < 1:
         raise OptionError("--jobs must be at least 1")
+    config_from_args(args)  # a bad option is one error now, not one per file
     options = {k: v for k, v in sorted(vars(args).items()) if k not in OWN}
     jobs = plan(args.source, args.output, "." + args.format)
     results = run_batch(

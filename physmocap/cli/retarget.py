@@ -26,8 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--qpos", metavar="OUT.npz", help="also write the joint trajectory as NPZ")
     p.add_argument("--csv", metavar="OUT.csv", help="also write the joint trajectory as CSV")
     add_retarget_options(p)
-    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
-    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    add_bvh_output_options(p)
     p.add_argument("--report", metavar="REPORT.json", help="print the quality report and write it as JSON")
     p.add_argument("--plots", metavar="DIR", help="write report plots (PNG) here (needs: pip install 'physmocap[plot]')")
     p.add_argument("--preview", metavar="OUT.mp4", help="also render a preview (.mp4, .gif or .png sheet; see physmocap preview)")
@@ -57,6 +56,56 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar, report table or 'wrote' lines (warnings and errors still print)")
+
+
+def add_bvh_output_options(p: argparse.ArgumentParser) -> None:
+    """The options that say how a BVH output is written (shared by ``retarget`` and ``batch``)."""
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
+    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+
+
+class _RaisingParser(argparse.ArgumentParser):
+    """An argument parser that raises :class:`OptionError` instead of exiting."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise OptionError(message)
+
+
+def retarget_option_parser() -> argparse.ArgumentParser:
+    """A parser of ``retarget``'s per-file options alone (:func:`add_retarget_options` and
+    :func:`add_bvh_output_options`), raising :class:`OptionError` on a bad value; ``batch``
+    reads a manifest's per-file options with it."""
+    p = _RaisingParser(prog="retarget", add_help=False)
+    add_retarget_options(p)
+    add_bvh_output_options(p)
+    return p
+
+
+def config_from_args(args: argparse.Namespace):
+    """The :class:`~physmocap.ik.config.RetargetConfig` the options of
+    :func:`add_retarget_options` ask for, validated (nothing is read).
+
+    Raises:
+        OptionError: A frame range, iteration count or option value retarget refuses.
+    """
+    from ..ik.config import RetargetConfig
+    from ..options import check_frame_range
+
+    check_frame_range(args.start, args.end)
+    options = {}
+    if args.max_iterations is not None:
+        if args.max_iterations < 1:
+            raise OptionError("--max-iterations must be at least 1")
+        options["max_iterations"] = args.max_iterations
+    if args.no_floor:
+        options["floor"] = False
+    if args.no_velocity_limits:
+        options["velocity_limits"] = False
+    if getattr(args, "no_self_collision", False):
+        options["self_collision"] = False
+    if args.no_plant:
+        options["plant"] = False
+    return RetargetConfig().with_options(**options)
 
 
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
@@ -107,10 +156,9 @@ def retarget_from_args(args: argparse.Namespace):
     :func:`add_retarget_options`; returns the trajectory."""
     from ..ik.retarget import retarget
     from ..models import load_character
-    from ..options import check_frame_range
     from ..sources import load_motion
 
-    check_frame_range(args.start, args.end)
+    config = config_from_args(args)
     read_opts = {}
     if args.in_units:
         read_opts["units"] = args.in_units
@@ -118,22 +166,10 @@ def retarget_from_args(args: argparse.Namespace):
         read_opts["marker_set"] = args.marker_set
     motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)
-    options = {}
-    if args.max_iterations is not None:
-        if args.max_iterations < 1:
-            raise OptionError("--max-iterations must be at least 1")
-        options["max_iterations"] = args.max_iterations
-    if args.no_floor:
-        options["floor"] = False
-    if args.no_velocity_limits:
-        options["velocity_limits"] = False
-    if getattr(args, "no_self_collision", False):
-        options["self_collision"] = False
-    if args.no_plant:
-        options["plant"] = False
     return retarget(
         motion,
         character,
+        config,
         profile=args.profile,
         mapping=args.source_map,
         start=args.start,
@@ -141,7 +177,6 @@ def retarget_from_args(args: argparse.Namespace):
         fps=args.fps,
         progress=False if args.quiet else None,
         contacts=args.contacts,
-        **options,
     )
 
 

@@ -33,6 +33,9 @@ from ..motion import Motion, Skeleton
 from ..rotations import quat_conj, quat_mul, up_axis_matrix, wxyz_to_xyzw
 from ..trajectory import Trajectory
 
+#: Frames whose world rotations are held at once while the local ones are derived.
+BLOCK_FRAMES = 8192
+
 __all__ = ["character_skeleton", "character_motion", "write_character_bvh"]
 
 
@@ -141,22 +144,25 @@ def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY
     rest_q = wxyz_to_xyzw(rest.xquat)
     F = traj.num_frames
     data = mujoco.MjData(model)
-    D = np.zeros((F, J, 4))
-    D[..., 3] = 1.0
+    local = np.zeros((F, J, 4))
+    local[..., 3] = 1.0
     root_pos = np.zeros((F, 1, 3))
     bodies = np.array([b for b in body_of if b >= 0])
     cols = np.array([i for i, b in enumerate(body_of) if b >= 0])
     inv_rest = quat_conj(rest_q[bodies])
-    for t in range(F):
-        data.qpos[:] = traj.qpos[t]
-        mujoco.mj_kinematics(model, data)
-        D[t, cols] = quat_mul(wxyz_to_xyzw(data.xquat[bodies]), inv_rest)
-        root_pos[t, 0] = data.xpos[body_of[0]]
-    local = D.copy()
-    for j in range(J):
-        p = int(skel.parents[j])
-        if p >= 0:
-            local[:, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
+    for s in range(0, F, BLOCK_FRAMES):  # the world rotations D are held a block at a time
+        e = min(F, s + BLOCK_FRAMES)
+        D = local[s:e].copy()
+        for t in range(s, e):
+            data.qpos[:] = traj.qpos[t]
+            mujoco.mj_kinematics(model, data)
+            D[t - s, cols] = quat_mul(wxyz_to_xyzw(data.xquat[bodies]), inv_rest)
+            root_pos[t, 0] = data.xpos[body_of[0]]
+        local[s:e] = D
+        for j in range(J):
+            p = int(skel.parents[j])
+            if p >= 0:
+                local[s:e, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
     local[:, skel.end_site] = np.array([0.0, 0.0, 0.0, 1.0])
     channels = {}
     for j in range(J):

@@ -37,7 +37,9 @@ from __future__ import annotations
 import io
 import os
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -46,49 +48,99 @@ from ..errors import OutputError
 from ..fileio import atomic_open
 from ..trajectory import Trajectory
 
-__all__ = ["write_npz", "write_trajectory_npz", "write_trajectory_csv", "qvel_from_qpos"]
+__all__ = ["ArrayBlocks", "write_npz", "write_trajectory_npz", "write_trajectory_csv", "qvel_from_qpos", "qvel_blocks"]
 
 _JOINT_TYPES = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}
 
 
-def write_npz(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> Path:
-    """Write ``arrays`` as an uncompressed ``.npz`` with deterministic bytes, atomically."""
+#: Rows of a large array converted and written at a time (NPZ members, velocities, checks).
+BLOCK_ROWS = 8192
+
+
+@dataclass(frozen=True)
+class ArrayBlocks:
+    """An array an NPZ writer writes block by block without ever holding it whole: its
+    ``shape`` and ``dtype``, and ``blocks()``, which yields C-ordered row blocks that
+    together make the array (their first dimensions sum to ``shape[0]``)."""
+
+    shape: tuple[int, ...]
+    dtype: np.dtype
+    blocks: Callable[[], Iterator[np.ndarray]]
+
+
+def write_npz(path: str | os.PathLike, arrays: dict[str, "np.ndarray | ArrayBlocks"]) -> Path:
+    """Write ``arrays`` as an uncompressed ``.npz`` with deterministic bytes, atomically.
+
+    Each member is a ``.npy`` file (format 1.0 header) streamed into the archive: an array by
+    ``np.lib.format.write_array`` straight into the member (no in-memory copy of the file),
+    an :class:`ArrayBlocks` a block of rows at a time.  The bytes are those of ``np.save``
+    into ``ZipFile.writestr`` with a fixed timestamp.
+    """
     p = Path(path)
     with atomic_open(p, "wb") as fh:
         with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED) as zf:
             for name, value in arrays.items():
-                arr = np.asarray(value)
-                if arr.dtype == object:
-                    raise OutputError(f"array {name!r} has object dtype, which needs pickle", path=p)
-                buf = io.BytesIO()
-                np.lib.format.write_array(buf, arr, allow_pickle=False)
-                info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                info.external_attr = 0o644 << 16
-                zf.writestr(info, buf.getvalue())
+                _write_member(zf, name, value, p)
     return p
 
 
-def qvel_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> np.ndarray:
-    """Backward-difference generalised velocities ``(F, nv)``; frame 0 is zero."""
+def _write_member(zf: zipfile.ZipFile, name: str, value: "np.ndarray | ArrayBlocks", path: Path) -> None:
+    """One ``<name>.npy`` member of a known size (so the archive's bytes do not depend on
+    how it is streamed): the header, then the data."""
+    arr = value if isinstance(value, ArrayBlocks) else np.asarray(value)
+    if arr.dtype == object:
+        raise OutputError(f"array {name!r} has object dtype, which needs pickle", path=path)
+    header = io.BytesIO()
+    if isinstance(arr, ArrayBlocks):
+        fields = {"descr": np.lib.format.dtype_to_descr(arr.dtype), "fortran_order": False, "shape": tuple(arr.shape)}
+    else:
+        fields = np.lib.format.header_data_from_array_1_0(arr)
+    np.lib.format.write_array_header_1_0(header, fields)
+    info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+    info.external_attr = 0o644 << 16
+    info.compress_type = zipfile.ZIP_STORED
+    info.file_size = len(header.getvalue()) + int(np.prod(arr.shape, dtype=np.int64)) * arr.dtype.itemsize
+    with zf.open(info, mode="w") as dest:
+        if not isinstance(arr, ArrayBlocks):
+            np.lib.format.write_array(dest, arr, allow_pickle=False)
+            return
+        dest.write(header.getvalue())
+        for block in arr.blocks():
+            dest.write(np.ascontiguousarray(block, dtype=arr.dtype).tobytes())
+
+
+def qvel_blocks(model: mujoco.MjModel, qpos: np.ndarray, fps: float, rows: int = BLOCK_ROWS) -> Iterator[np.ndarray]:
+    """Backward-difference generalised velocities (``mj_differentiatePos``: the velocity
+    that integrates ``qpos[t-1]`` to ``qpos[t]`` in ``1/fps`` seconds) in ``(rows, nv)``
+    blocks; frame 0 is zero."""
     F = qpos.shape[0]
-    qvel = np.zeros((F, model.nv))
-    for t in range(1, F):
-        mujoco.mj_differentiatePos(model, qvel[t], 1.0 / fps, qpos[t - 1], qpos[t])
-    return qvel
+    for s in range(0, F, rows):
+        block = np.zeros((min(F, s + rows) - s, model.nv))
+        for t in range(max(s, 1), s + block.shape[0]):
+            mujoco.mj_differentiatePos(model, block[t - s], 1.0 / fps, qpos[t - 1], qpos[t])
+        yield block
+
+
+def qvel_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> np.ndarray:
+    """Backward-difference generalised velocities ``(F, nv)``; frame 0 is zero (:func:`qvel_blocks`)."""
+    return np.concatenate([np.zeros((0, model.nv)), *qvel_blocks(model, qpos, fps)])
 
 
 def _check_finite(traj: Trajectory, path: Path) -> None:
-    bad = ~np.all(np.isfinite(traj.qpos), axis=1)
-    if np.any(bad):
-        raise OutputError(
-            f"trajectory has non-finite values on frame {int(np.argmax(bad))}; nothing written",
-            path=path,
-        )
+    """Refuse a trajectory with a non-finite number (checked a block of frames at a time)."""
+    for s in range(0, traj.num_frames, BLOCK_ROWS):
+        bad = ~np.all(np.isfinite(traj.qpos[s : s + BLOCK_ROWS]), axis=1)
+        if np.any(bad):
+            raise OutputError(
+                f"trajectory has non-finite values on frame {s + int(np.argmax(bad))}; nothing written",
+                path=path,
+            )
 
 
-def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, np.ndarray]:
-    """The arrays :func:`write_trajectory_npz` stores; paths relative to ``base`` (the
-    output's folder) or bundled names, never the machine's absolute paths."""
+def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, "np.ndarray | ArrayBlocks"]:
+    """The arrays :func:`write_trajectory_npz` stores (``qvel`` as :class:`ArrayBlocks`,
+    computed while it is written); paths relative to ``base`` (the output's folder) or
+    bundled names, never the machine's absolute paths."""
     from ..resources import portable_path
 
     base = Path(".") if base is None else base
@@ -96,7 +148,8 @@ def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, n
     ch = traj.character
     return {
         "qpos": np.ascontiguousarray(traj.qpos, dtype=np.float64),
-        "qvel": qvel_from_qpos(model, traj.qpos, traj.fps),
+        "qvel": ArrayBlocks((traj.num_frames, model.nv), np.dtype(np.float64),
+                            lambda: qvel_blocks(model, traj.qpos, traj.fps)),
         "fps": np.float64(traj.fps),
         "qpos_names": np.array(traj.column_names),
         "joint_names": np.array([model.joint(j).name for j in range(model.njnt)]),

@@ -197,6 +197,7 @@ def retarget(
         plant=config.plant,
         body_labels=found.body_labels if found is not None else None,
     )
+    del targets  # the unplanned targets: traj.targets holds the planned ones (their raw positions too)
     traj.contacts = found
     traj.source_motion = motion  # as retargeted: cut and resampled
     traj.joint_indices = dict(joint_indices)
@@ -240,7 +241,7 @@ def plan_targets(
     )
     if body_labels:
         positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
-    info = {**levelled.info, "raw_positions": targets.positions.copy(), "foot_offsets": offsets}
+    info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return dataclasses.replace(levelled, positions=positions, info=info)
 
 

@@ -1,0 +1,247 @@
+#!/usr/bin/env python3
+"""Peak memory of a long retarget, end to end, and where it goes.
+
+Builds long BVH clips from a shared clip played forwards then backwards (ping-pong: every
+seam is continuous, so the clip is a plausible long take, not a sequence of jumps), of 1, 5
+and 15 minutes by default (``--minutes 60`` for the hour), and for each runs the real
+command line in a fresh process::
+
+    physmocap retarget long.bvh -o out.bvh --qpos out.npz --quiet
+
+(read, retarget with the default humanoid and every constraint, write BVH and NPZ) and reports
+its peak resident set size (``os.wait4``'s ``ru_maxrss`` of that process alone).  The growth
+per frame is the slope between the two longest clips; ``--extrapolate`` prints the hour from it.
+
+``--breakdown`` retargets the shortest clip in this process and prints the bytes per frame
+held by each structure of the result (motion, targets and what they carry, contact labels,
+trajectory, solver statistics, fidelity) and the peak of each writer (``tracemalloc``, which
+numpy reports its buffers to), per frame.
+
+``--identity REF_DIR`` instead retargets every shared BVH clip with the checkout ``REF_DIR``
+(``PYTHONPATH=REF_DIR``) and with this one, and compares the BVH and NPZ files byte for byte.
+
+Usage:  python scripts/bench_memory.py [--minutes 1 5 15] [--clip cmu_12_01_walk.bvh] [--breakdown]
+        python scripts/bench_memory.py --identity ../main
+"""
+
+from __future__ import annotations
+
+import argparse
+import filecmp
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
+MB = 1024.0 * 1024.0
+
+
+def ping_pong_bvh(src: Path, frames: int, out: Path) -> int:
+    """Write ``out``: ``src``'s header and ``frames`` motion rows, frames 1..F-1 of ``src``
+    played forwards, backwards, forwards... (frame 0 is skipped: CMU clips start with a
+    reference pose).  Returns the number of frames written."""
+    lines = src.read_text(encoding="utf-8").splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.strip().lower().startswith("frames:"))
+    rows = [ln for ln in lines[at + 2 :] if ln.strip()]
+    cycle = rows[1:] + rows[-2:1:-1]  # 1..F-1, then F-2..2: no frame repeated at a seam
+    with out.open("w", encoding="utf-8", newline="\n") as fh:
+        fh.write("\n".join(lines[:at]) + "\n")
+        fh.write(f"Frames: {frames}\n{lines[at + 1].strip()}\n")
+        for k in range(frames):
+            fh.write(cycle[k % len(cycle)] + "\n")
+    return frames
+
+
+def frame_rate(src: Path) -> float:
+    """Frames per second of a BVH file (its ``Frame Time`` line)."""
+    for ln in src.read_text(encoding="utf-8").splitlines():
+        if ln.strip().lower().startswith("frame time:"):
+            return 1.0 / float(ln.split(":", 1)[1])
+    raise ValueError(f"{src}: no Frame Time line")
+
+
+def peak_rss_mb(argv: list[str]) -> tuple[float, float]:
+    """Run ``argv`` in a new process; its peak RSS (MB) and wall time (s)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(argv)} failed ({proc.returncode}):\n{err}")
+    return usage.ru_maxrss / 1024.0, wall  # ru_maxrss is in KiB on Linux
+
+
+def baseline_mb() -> float:
+    """Peak RSS of a process that only imports what the retarget imports and loads the humanoid."""
+    code = ("import warnings; warnings.simplefilter('ignore'); import physmocap.cli.retarget, physmocap.ik.retarget, "
+            "physmocap.export.character_bvh, physmocap.export.trajectory; "
+            "from physmocap.models import load_character; load_character(None)")
+    return peak_rss_mb([sys.executable, "-c", code])[0]
+
+
+def cli_run(clip: Path, tmp: Path) -> tuple[float, float]:
+    """Peak RSS (MB) and wall time of ``physmocap retarget clip -o out.bvh --qpos out.npz``."""
+    argv = [sys.executable, "-m", "physmocap", "retarget", str(clip), "-o", str(tmp / "out.bvh"),
+            "--qpos", str(tmp / "out.npz"), "--quiet"]
+    return peak_rss_mb(argv)
+
+
+def array_bytes(obj, seen: set[int] | None = None, depth: int = 0) -> int:
+    """Bytes of the numpy arrays reachable from ``obj`` (dataclasses, dicts, lists), each once."""
+    seen = set() if seen is None else seen
+    if id(obj) in seen or depth > 6:
+        return 0
+    seen.add(id(obj))
+    if isinstance(obj, np.ndarray):
+        base = obj if obj.base is None else obj.base
+        if isinstance(base, np.ndarray) and base is not obj:
+            return array_bytes(base, seen, depth + 1)
+        return int(obj.nbytes)
+    if isinstance(obj, dict):
+        return sum(array_bytes(v, seen, depth + 1) for v in obj.values())
+    if isinstance(obj, (list, tuple)):
+        return sum(array_bytes(v, seen, depth + 1) for v in obj)
+    if hasattr(obj, "__dataclass_fields__"):
+        return sum(array_bytes(getattr(obj, f), seen, depth + 1) for f in obj.__dataclass_fields__)
+    return 0
+
+
+def traced_peak(fn) -> tuple[object, int]:
+    """``fn()``'s result and the peak of the memory it allocated (bytes, tracemalloc)."""
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    base = tracemalloc.get_traced_memory()[0]
+    try:
+        result = fn()
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    return result, peak
+
+
+def breakdown(clip: Path, tmp: Path) -> None:
+    """Bytes per frame of each structure a retarget keeps, and each stage's peak per frame."""
+    import warnings
+
+    warnings.simplefilter("ignore")
+    from physmocap.export.character_bvh import write_character_bvh
+    from physmocap.export.trajectory import write_trajectory_npz
+    from physmocap.ik.retarget import retarget
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    character = load_character(None)
+    motion, read_peak = traced_peak(lambda: load_motion(str(clip), min_frames=1))
+    t0 = time.perf_counter()
+    traj = retarget(motion, character, progress=False)
+    wall = time.perf_counter() - t0
+    F = traj.num_frames
+    seen: set[int] = set()
+    rows = [("read (peak of load_motion)", read_peak)]
+    kept = [("source motion", traj.source_motion), ("trajectory qpos", traj.qpos), ("solver stats", traj.solver),
+            ("contact labels", traj.contacts), ("fidelity", traj.fidelity)]
+    targets = traj.targets
+    kept += [(f"targets.info[{k!r}]", v) for k, v in sorted(targets.info.items())]  # raw positions first: shared
+    kept += [(f"targets.{name}", getattr(targets, name)) for name in targets.__dataclass_fields__ if name != "info"]
+    for name, obj in kept:
+        nbytes = array_bytes(obj, seen)
+        if nbytes >= F:  # a few bytes per frame at least: the per-frame structures
+            rows.append((name, nbytes))
+    _, bvh_peak = traced_peak(lambda: write_character_bvh(traj, tmp / "b.bvh"))
+    _, npz_peak = traced_peak(lambda: write_trajectory_npz(traj, tmp / "b.npz"))
+    rows += [("write BVH (peak)", bvh_peak), ("write NPZ (peak)", npz_peak)]
+    print(f"\nbreakdown on {F} frames ({wall:.0f} s to retarget): bytes per frame")
+    for name, nbytes in rows:
+        print(f"  {name:40s} {nbytes / F:10.1f}")
+    held = sum(b for n, b in rows if "peak" not in n)
+    print(f"  {'held after retargeting (sum)':40s} {held / F:10.1f}")
+
+
+def retarget_with(checkout: Path, clip: Path, out: Path) -> None:
+    """``physmocap retarget clip -o out.bvh --qpos out.npz`` with ``PYTHONPATH=checkout``."""
+    env = dict(os.environ, PYTHONPATH=str(checkout))
+    argv = [sys.executable, "-m", "physmocap", "retarget", str(clip), "-o", str(out.with_suffix(".bvh")),
+            "--qpos", str(out.with_suffix(".npz")), "--quiet"]
+    subprocess.run(argv, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def identity(ref: Path) -> int:
+    """Compare this checkout's BVH and NPZ outputs with ``ref``'s on every shared BVH clip;
+    0 if every file is byte-identical."""
+    clips = sorted(DATA.glob("*.bvh"))
+    differ = 0
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        (tmp / "ref").mkdir()
+        (tmp / "ours").mkdir()
+        for clip in clips:
+            retarget_with(ref.resolve(), clip, tmp / "ref" / clip.stem)
+            retarget_with(REPO, clip, tmp / "ours" / clip.stem)
+            same = {s: filecmp.cmp(tmp / "ref" / (clip.stem + s), tmp / "ours" / (clip.stem + s), shallow=False)
+                    for s in (".bvh", ".npz")}
+            differ += not all(same.values())
+            print(f"{clip.name:28s} " + "  ".join(f"{s[1:]} {'identical' if v else 'DIFFERENT'}" for s, v in same.items()),
+                  flush=True)
+    return 1 if differ else 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--minutes", type=float, nargs="+", default=[1.0, 5.0, 15.0])
+    ap.add_argument("--clip", default="cmu_12_01_walk.bvh", help="shared clip to loop (default: the CMU walk)")
+    ap.add_argument("--breakdown", action="store_true", help="also print bytes per frame by structure (shortest clip)")
+    ap.add_argument("--extrapolate", type=float, default=60.0, metavar="MIN",
+                    help="print the peak extrapolated to this many minutes (default 60)")
+    ap.add_argument("--identity", type=Path, metavar="REF_DIR",
+                    help="compare outputs on every shared clip with the checkout REF_DIR, byte for byte")
+    args = ap.parse_args()
+    if args.identity is not None:
+        return identity(args.identity)
+    src = DATA / args.clip
+    if not src.exists():
+        print(f"skip: {src} not found", file=sys.stderr)
+        return 0
+    fps = frame_rate(src)
+    import physmocap
+
+    print(f"physmocap from {Path(physmocap.__file__).parent.parent}; clip {args.clip} ping-ponged at {fps:.0f} Hz")
+    base = baseline_mb()
+    print(f"baseline (imports + humanoid): {base:.0f} MB")
+    points: list[tuple[int, float]] = []
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        for minutes in sorted(args.minutes):
+            frames = int(round(minutes * 60.0 * fps))
+            clip = tmp / f"long_{minutes:g}min.bvh"
+            ping_pong_bvh(src, frames, clip)
+            peak, wall = cli_run(clip, tmp)
+            points.append((frames, peak))
+            print(f"{minutes:6g} min {frames:8d} frames: peak RSS {peak:7.0f} MB "
+                  f"({(peak - base) * MB / frames:6.0f} B/frame over the baseline), {wall:.0f} s", flush=True)
+            clip.unlink()
+        if len(points) >= 2:
+            (f0, m0), (f1, m1) = points[-2], points[-1]  # the two longest: the long-clip regime
+            slope = (m1 - m0) * MB / (f1 - f0)
+            target = args.extrapolate * 60.0 * fps
+            print(f"growth {slope:.0f} B/frame between {f0} and {f1} frames; "
+                  f"{args.extrapolate:g} min ({target:.0f} frames) extrapolates to "
+                  f"{m1 + slope * (target - f1) / MB:.0f} MB")
+        if args.breakdown:
+            frames = int(round(min(args.minutes) * 60.0 * fps))
+            clip = tmp / "breakdown.bvh"
+            ping_pong_bvh(src, frames, clip)
+            breakdown(clip, tmp)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

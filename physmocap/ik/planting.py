@@ -388,20 +388,16 @@ class Planting:
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
         self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
+        #: the side (left, right) of each site
         self._site_side = ["left" if s in character.contacts.get("left", ()) else "right" for s in self.sites]
         self._side_sites = {side: [k for k, v in enumerate(self._site_side) if v == side] for side in ("left", "right")}
+        held = np.array([roles.get(site) == "hold" for site in self.sites], dtype=bool)
+        has_release = {side: any(self._release[k] for k in ks) for side, ks in self._side_sites.items()}
         #: sites on a toe segment of a foot that also has sites on its own body
-        self._toe_segment = np.array(
-            [roles.get(site) == "hold" and any(r == "release" for r in self._toe_roles(model, character, side).values())
-             for side in ("left", "right") for site in character.contacts.get(side, ())],
-            dtype=bool,
-        )
+        self._toe_segment = held & np.array([has_release[side] for side in self._site_side], dtype=bool)
         rolling = set(self.toe_contacts())
         #: toe-segment sites whose height the offline plan sets while only the toes are down
-        self._rolling = np.array(
-            [roles.get(site) == "hold" and side in rolling for side in ("left", "right") for site in character.contacts.get(side, ())],
-            dtype=bool,
-        )
+        self._rolling = held & np.array([side in rolling for side in self._site_side], dtype=bool)
         self.lengths: dict[str, tuple[int, int, int, float, float]] = {}
         rest = {c: character.rest_positions()[c] for c in self.names if c in character.rest_positions()}
         for side in ("left", "right"):
@@ -542,25 +538,18 @@ class Planting:
         if not self.options.plant:
             return out, [], [], offsets
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
-        toes_only = np.zeros(len(self.sites), dtype=bool)
-        flat = np.zeros(len(self.sites), dtype=bool)
-        if not self.anchored:
-            for k, site in enumerate(self.sites):
-                side = "left" if site in self.character.contacts.get("left", ()) else "right"
-                toe, heel = bool(labels.get(f"{side}_toe", False)), bool(labels.get(f"{side}_heel", False))
-                toes_only[k] = toe and not heel
-                flat[k] = toe and heel
-            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
-        # toes rolling with the actor's (planned by the toe segment, .footplan): held, not pulled
-        # Offline, the toes of a flat foot are held only once the ball of the foot is (they are
-        # pulled down before): a foot landing with its toes curled flattens them instead of
-        # being locked at its landing shape by a toe tip held where it first touched.
+        toe = np.array([bool(labels.get(f"{side}_toe", False)) for side in self._site_side], dtype=bool)
+        heel = np.array([bool(labels.get(f"{side}_heel", False)) for side in self._site_side], dtype=bool)
+        toes_only = np.zeros(len(self.sites), dtype=bool) if self.anchored else toe & ~heel
         hints = None
         if not self.anchored:
-            ball_down = {
-                side: any(self.locks.locked[k] for k in idx if self._release[k]) for side, idx in self._side_sites.items()
-            }
-            waiting = flat & self._toe_segment & ~np.array([ball_down[self._site_side[k]] for k in range(len(self.sites))])
+            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
+            # The toes of a flat foot are held only once the ball of the foot is (pulled down
+            # before): a foot landing with curled toes flattens them instead of being locked in
+            # its landing shape by a toe tip held where it first touched.  Toes rolling with the
+            # actor's (their height planned by the toe segment, .footplan) are held, not pulled.
+            ball_down = {side: any(self.locks.locked[k] and self._release[k] for k in ks) for side, ks in self._side_sites.items()}
+            waiting = toe & heel & self._toe_segment & ~np.array([ball_down[side] for side in self._site_side], dtype=bool)
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only

@@ -229,12 +229,11 @@ def knee_between(
     An actor's straight leg gives no plane (its knee lies on the line, and
     which side it sits on is capture noise), yet the planned ankle may need
     the character's knee to bend: the bend direction is then
-    :math:`p \propto w_\perp + \max(\epsilon - |w_\perp|, 0)\, f_\perp`, with
-    :math:`w_\perp` the original knee's offset from the line, :math:`f_\perp` the
-    unit ``forward`` hint (the foot's direction: knees bend over the toes) off the
-    line, and :math:`\epsilon = 0.05\, l_1`: a straight knee bends forward instead
-    of flipping sideways, and one bent by :math:`\epsilon` or more keeps exactly
-    its own plane (a feet-out stance's knees do not point over the toes).
+    :math:`p \propto w_\perp + \epsilon\, f_\perp`, with :math:`w_\perp` the
+    original knee's offset from the line, :math:`f_\perp` the unit ``forward``
+    hint (the foot's direction: knees bend over the toes) off the line, and
+    :math:`\epsilon = 0.05\, l_1`: a knee bent visibly keeps (mostly) its own
+    plane, a straight one bends forward instead of flipping sideways.
     """
     v = ankle - hip
     d = np.linalg.norm(v, axis=-1, keepdims=True)
@@ -297,6 +296,9 @@ def planted_positions(
         leg_lengths: Side -> (thigh, shank) lengths of the character (metres).
         heights: Canonical joint -> its height above the floor in the character's
             rest pose (metres), for the ankle and toe joints.
+        toe_sites: Side -> the :class:`ToeContact` of a foot whose toe segment
+            carries contact sites (:meth:`~physmocap.ik.planting.Planting.toe_contacts`);
+            None or a missing side: that foot's toes lie flat in contact.
     """
     out = np.array(positions, dtype=float, copy=True)
     F = out.shape[0]

@@ -28,8 +28,8 @@ becomes :math:`Q(t)\,C` (stance or not, so the actor's heel raise, toe-off and
 swing pitch are kept, relative to flat).  The toe joint is then placed
 rigidly from the corrected orientation,
 :math:`T_{toe} = T_{ankle} + Q(t) C Q_{c,0}^{-1} (x_{toe,0} - x_{ankle,0})`,
-and the toe tip keeps its direction relative to the foot (the actor's toe
-flexion).  Nothing is learnt from one file: a foot that is never flat on
+and the toe segment is levelled the same way (:func:`_level_toes`): flat where
+the actor's toes are flat, with the actor's toe flexion relative to that.  Nothing is learnt from one file: a foot that is never flat on
 both contact points is left as it was.  Units: metres.
 """
 

@@ -13,7 +13,10 @@ toe joint's own frame, :math:`o_{tip} = \ell\, \hat o_{toe}` with
 toe's frame) and :math:`\ell` the actor's foot length times the character's
 toe-to-foot length ratio.  Where the actor's toes are flat the feet are
 levelled anyway (:mod:`physmocap.ik.footlevel`), so only the toe joint's
-rotation relative to that matters, which is the actor's own.  Units: metres.
+rotation relative to that matters, which is the actor's own.  Offline
+retargeting (:func:`~physmocap.ik.retarget.retarget`) applies it after mapping
+the skeleton; the streaming retargeter does not yet (its feet are not levelled
+either).  Units: metres.
 """
 
 from __future__ import annotations

@@ -422,3 +422,22 @@ def test_two_impossible_jumps_out_and_back_are_a_spike_even_to_a_familiar_pose(w
     R[200:203, j] = R[far, j]
     _, report = clean(dataclasses.replace(walk, rotations=R))
     assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg"] == [("spike", 200, 202)]
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0])
+def test_frozen_joint_is_found_at_other_rates(walk, fps):
+    """The still threshold is a speed (``still_speed``, degrees per second), not a step per frame."""
+    m = walk.resample(fps)
+    j = _joint(m, "RightUpLeg")
+    s, n = int(round(2.5 * fps)), int(round(0.25 * fps))
+    _, report = clean(_with(m, j, list(range(s, s + n)), hold=True))
+    mine = [(g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg" and g.kind == "frozen"]
+    assert mine == [(s, s + n - 1)]
+
+
+def test_clean_options_are_validated():
+    from physmocap.clean import CleanOptions
+    from physmocap.errors import OptionError
+
+    with pytest.raises(OptionError, match="still_speed"):
+        CleanOptions(still_speed=-1.0)

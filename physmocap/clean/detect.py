@@ -39,10 +39,6 @@ from ..motion import Motion
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
 
 
-#: A frame-to-frame step (degrees) below which a joint is not moving (a capture's noise floor).
-STILL_DEG = 0.05
-
-
 @dataclass(frozen=True)
 class CleanOptions:
     """Detection thresholds.
@@ -87,6 +83,10 @@ class CleanOptions:
             than the limb moves on the neighbouring frames: a toe, finger or twist popping by
             a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
             markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
+        still_speed: A joint turning slower than this (degrees per second) is not moving (a
+            capture's noise floor): the body moves on a frame where its median joint turns
+            faster, and a frozen joint's catch-up is compared with at least this speed.
+            Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
         carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
             its world orientation jumps by at least this fraction of its local jump, and
             some child's world orientation by at least this fraction of its own (an offset
@@ -111,6 +111,7 @@ class CleanOptions:
     swap_min_distance: float = 0.05
     jump_distance: float = 0.05
     carry_ratio: float = 0.5
+    still_speed: float = 6.0
 
     def __post_init__(self) -> None:
         from ..options import check_fields
@@ -352,7 +353,7 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     """Runs where the joint's rotation is exactly constant while the body moves, or that end
     with the joint catching up: its first step after the run ``jump_ratio`` times its median
     step over the ``context_time`` after (a joint that really stops starts again smoothly;
-    one whose value stopped updating jumps to where it had got to; steps below ``STILL_DEG``
+    one whose value stopped updating jumps to where it had got to; steps slower than ``still_speed``
     count as that)."""
     F = len(rot)
     same = np.zeros(F, dtype=bool)
@@ -372,7 +373,7 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
         if values.count(v) > 1 or not inside or e - start + 1 < shortest:
             continue
-        after = max(float(np.median(step[e + 2 : e + 2 + half])), STILL_DEG) if e + 2 < F else np.inf
+        after = max(float(np.median(step[e + 2 : e + 2 + half])), opt.still_speed / fps) if e + 2 < F else np.inf
         catch_up = step[e + 1] > opt.jump_ratio * after
         if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
@@ -402,7 +403,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         for j in animated:
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
         # the body moves on a frame where the median joint moves
-        moving = np.median(steps[:, animated], axis=1) > STILL_DEG if animated else np.zeros(len(R), bool)
+        moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         for j in animated:
             glitches += _frozen(R[:, j], moving, fps, opt, names[j])
     if motion.positions is not None:

@@ -441,3 +441,18 @@ def test_clean_options_are_validated():
 
     with pytest.raises(OptionError, match="still_speed"):
         CleanOptions(still_speed=-1.0)
+    with pytest.raises(OptionError, match="match_windows"):
+        CleanOptions(match_windows=1.5)
+
+
+def test_repair_settings_come_from_the_options(walk):
+    """``offset_min_time`` decides between taking a segment's offset off and bridging it."""
+    from physmocap.clean import CleanOptions
+
+    j = _joint(walk, "LeftForeArm")
+    frames = list(range(180, 216))  # 0.3 s
+    q = Rotation.from_rotvec(np.radians(35.0) * np.array([0.6, 0.0, 0.8])).as_quat()
+    bad = _with(walk, j, frames, q)
+    _, report = clean(bad, CleanOptions(offset_min_time=1.0, match_windows=1))
+    mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
+    assert len(mine) == 1 and mine[0].corrected in ("cubic", "matched")

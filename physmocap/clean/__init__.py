@@ -54,5 +54,5 @@ class GlitchReport:
 def clean(motion: Motion, options: CleanOptions | None = None) -> tuple[Motion, GlitchReport]:
     """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`)."""
     found = detect_glitches(motion, options)
-    fixed, done = correct_glitches(motion, found)
+    fixed, done = correct_glitches(motion, found, options)
     return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

@@ -41,7 +41,7 @@ __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "
 
 @dataclass(frozen=True)
 class CleanOptions:
-    """Detection thresholds.
+    """Detection thresholds and repair settings.
 
     Attributes:
         jump_deg: Smallest frame-to-frame rotation (degrees) that can be a glitch.
@@ -87,6 +87,15 @@ class CleanOptions:
             capture's noise floor): the body moves on a frame where its median joint turns
             faster, and a frozen joint's catch-up is compared with at least this speed.
             Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
+        offset_min_time: A spike or flip lasting this many seconds or more is repaired by
+            taking its offset off (entry jump and inverse exit jump, interpolated over the
+            span: the real motion under it comes back); a shorter one is bridged.
+        match_context: The matched bridge's template spans this many times the glitch's
+            length of frames on each side of it (at least 2 frames).
+        match_own_weight: Weight of the glitched joint's own rotations on those context
+            frames in the template (its motion into and out of the span says most about it).
+        match_windows: How many best-matching windows of the clip lend their motion
+            (averaged) to the matched bridge.
         carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
             its world orientation jumps by at least this fraction of its local jump, and
             some child's world orientation by at least this fraction of its own (an offset
@@ -112,11 +121,20 @@ class CleanOptions:
     jump_distance: float = 0.05
     carry_ratio: float = 0.5
     still_speed: float = 6.0
+    offset_min_time: float = 0.15
+    match_context: float = 0.5
+    match_own_weight: float = 5.0
+    match_windows: int = 3
 
     def __post_init__(self) -> None:
         from ..options import check_fields
 
-        check_fields(self, "clean", positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"])
+        check_fields(
+            self,
+            "clean",
+            counts=["match_windows"],
+            positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"],
+        )
 
 
 @dataclass(frozen=True)

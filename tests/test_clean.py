@@ -456,3 +456,16 @@ def test_repair_settings_come_from_the_options(walk):
     _, report = clean(bad, CleanOptions(offset_min_time=1.0, match_windows=1))
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
     assert len(mine) == 1 and mine[0].corrected in ("cubic", "matched")
+
+
+def test_glitch_at_the_clips_start_holds_the_first_good_rotation(walk):
+    """Nothing before the span to bridge from: its first good rotation is held, exactly."""
+    from physmocap.clean.correct import correct_glitches
+    from physmocap.clean.detect import Glitch
+
+    m = walk.slice_frames(0, 200)
+    j = _joint(m, "LeftForeArm")
+    R = np.asarray(m.rotations)
+    fixed, done = correct_glitches(m, [Glitch("spike", "LeftForeArm", 0, 9, 30.0)])
+    assert done[0].corrected == "held"
+    assert np.array_equal(np.asarray(fixed.rotations)[:10, j], np.repeat(R[10:11, j], 10, axis=0))

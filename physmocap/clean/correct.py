@@ -9,7 +9,7 @@ good motion next to the span better (:func:`_bridge`): a cubic Hermite curve in 
 space, leaving and arriving at the joint's own speed, or the joint's motion in the windows
 of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
-what it was doing).  At the clip's ends the nearest good rotation is held (slerp).  A
+what it was doing).  At the clip's ends the nearest good rotation is held.  A
 positional glitch (bone stretch, gap) is bridged by linear interpolation of the joint's
 position; a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
@@ -37,15 +37,6 @@ REPAIRED = {
     "bone_stretch": "position",
     "gap": "position",
 }
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, n: int) -> np.ndarray:
-    """``(n, 4)`` rotations strictly between ``q0`` and ``q1`` (x-y-z-w)."""
-    from scipy.spatial.transform import Slerp
-
-    key = Rotation.from_quat(np.stack([q0, q1]))
-    s = Slerp([0.0, 1.0], key)
-    return s(np.arange(1, n + 1) / (n + 1)).as_quat()
 
 
 def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -247,8 +238,8 @@ def _repair_rotation(
             return fixed, "offset removed"
     if 0 <= a and b < F:
         return _bridge(R, j, g.start, g.end, matcher)
-    first, last = (R[a, j], R[a, j]) if a >= 0 else (R[b, j], R[b, j])
-    return _slerp(first, last, n), "slerp"
+    held = R[a, j] if a >= 0 else R[b, j]
+    return np.repeat(held[None], n, axis=0), "held"
 
 
 def correct_glitches(
@@ -256,7 +247,7 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "slerp" (at the clip's ends), "linear", "swapped back",
+    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "linear", "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``)."""
     opt = options or CleanOptions()
     names = {n: j for j, n in enumerate(motion.skeleton.names)}

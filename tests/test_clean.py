@@ -469,3 +469,11 @@ def test_glitch_at_the_clips_start_holds_the_first_good_rotation(walk):
     fixed, done = correct_glitches(m, [Glitch("spike", "LeftForeArm", 0, 9, 30.0)])
     assert done[0].corrected == "held"
     assert np.array_equal(np.asarray(fixed.rotations)[:10, j], np.repeat(R[10:11, j], 10, axis=0))
+
+
+def test_table_shows_metres_to_the_millimetre():
+    from physmocap.clean import GlitchReport
+    from physmocap.clean.detect import Glitch
+
+    g = Glitch("bone_stretch", "left_hand_end", 4, 8, 0.0091, unit="m")
+    assert " 0.009 m " in GlitchReport("x", 10, 120.0, (g,)).table()

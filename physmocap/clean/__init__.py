@@ -44,8 +44,9 @@ class GlitchReport:
         for g in self.glitches:
             frames = f"{g.start}" if g.start == g.end else f"{g.start}-{g.end}"
             movement = f"{g.movement} ({g.plane})" if g.movement else "-"
+            digits = {"m": 3, "s": 2}.get(g.unit, 1)  # millimetres, hundredths of a second, tenths of a degree
             rows.append(
-                f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.1f} {g.unit:3s}  "
+                f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.{digits}f} {g.unit:3s}  "
                 f"{g.corrected or 'reported only'}"
             )
         return "\n".join(rows) + "\n"

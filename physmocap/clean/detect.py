@@ -519,7 +519,7 @@ def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: 
 
     names = motion.skeleton.names if motion is not None else []
     ji = canonical_joints(motion) if motion is not None else {}
-    by_name = {m.joint.replace("_", " ") if m.joint != "spine" else "trunk": m for m in MOVEMENTS}
+    by_name = {m.where: m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
         related = {a.joint}
@@ -603,7 +603,6 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
         if carrier is None or carrier not in ji:
             continue
         lo, hi = movement_range(m, opt.rom_soft_margin)
-        where = m.joint.replace("_", " ") if m.joint != "spine" else "trunk"
         for start, end, direction, excess in beyond_range(angles[m.key], lo, hi):
             name = m.positive if direction == "positive" else m.negative
             out.append(
@@ -613,7 +612,7 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
                     start,
                     end,
                     excess,
-                    movement=f"{where} {name}",
+                    movement=f"{m.where} {name}",
                     plane=m.plane,
                     repairable=end - start + 1 <= longest,
                 )

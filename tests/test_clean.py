@@ -477,3 +477,15 @@ def test_table_shows_metres_to_the_millimetre():
 
     g = Glitch("bone_stretch", "left_hand_end", 4, 8, 0.0091, unit="m")
     assert " 0.009 m " in GlitchReport("x", 10, 120.0, (g,)).table()
+
+
+@pytest.mark.parametrize("field", ["rotations", "translations"])
+def test_a_non_finite_channel_is_refused_naming_joint_and_frame(walk, field):
+    """The BVH reader refuses NaN; a motion built in Python is refused by ``clean`` the same
+    way (one error naming the frame and joint), not cleaned into a file the writer refuses."""
+    from physmocap.errors import InputError
+
+    arr = np.array(getattr(walk, field), copy=True)
+    arr[17, 0, 1] = np.nan
+    with pytest.raises(InputError, match=r"frame 17: joint '.+' has a non-finite"):
+        clean(dataclasses.replace(walk, **{field: arr}))

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..motion import Motion
 from ..rotations import Rotation
-from .detect import CleanOptions, Glitch, _angle
+from .detect import CleanOptions, Glitch, _angle, animated_joints
 
 __all__ = ["correct_glitches"]
 
@@ -145,8 +145,7 @@ def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matc
     bad = np.zeros(R.shape[:2], dtype=bool)
     for g in glitches:
         bad[g.start : g.end + 1, names[g.joint]] = True
-    animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
-    return _Matcher(R, animated, bad, opt.match_context, opt.match_own_weight, opt.match_windows)
+    return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows)
 
 
 def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:

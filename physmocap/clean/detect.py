@@ -399,16 +399,23 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     return out
 
 
+def animated_joints(motion: Motion) -> list[int]:
+    """Indices of ``motion``'s joints (not end sites) whose rotation changes at some frame."""
+    R = np.asarray(motion.rotations)
+    return [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+
+
 def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
     """Every glitch found in ``motion`` (sorted by frame, then joint)."""
     opt = options or CleanOptions()
+    ji = canonical_joints(motion)  # once: mapping a long clip takes a good part of the time
     names = motion.skeleton.names
     glitches: list[Glitch] = []
     fps = float(motion.fps)
     if motion.is_rotational and motion.rotations is not None:
         R = np.asarray(motion.rotations, dtype=float)
         steps = joint_angles_step(R)
-        animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+        animated = animated_joints(motion)
         from ..ik.retarget import default_start
 
         import warnings
@@ -449,7 +456,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
                 d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
                 for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
                     glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
-    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt), motion)
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji), motion, ji)
     glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
 
@@ -508,17 +515,19 @@ def canonical_joints(motion: Motion) -> dict[str, int]:
         return {}
 
 
-def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: Motion | None = None) -> list[Glitch]:
+def _merge_anatomical(
+    glitches: list[Glitch], anatomical: list[Glitch], motion: Motion, ji: dict[str, int]
+) -> list[Glitch]:
     """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
     a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
     shoulder line the trunk angles are read from), is that glitch's anatomical
-    movement, not a second glitch: name the movement on it instead."""
+    movement, not a second glitch: name the movement on it instead (``ji``: the
+    :func:`canonical_joints` of ``motion``)."""
     import dataclasses
 
     from .anatomy import MOVEMENTS
 
-    names = motion.skeleton.names if motion is not None else []
-    ji = canonical_joints(motion) if motion is not None else {}
+    names = motion.skeleton.names
     by_name = {m.where: m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
@@ -579,8 +588,11 @@ def _lr_swaps(motion: Motion, P: np.ndarray, opt: CleanOptions) -> list[Glitch]:
     return out
 
 
-def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
-    """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion.
+def anatomical_glitches(
+    motion: Motion, options: CleanOptions | None = None, ji: dict[str, int] | None = None
+) -> list[Glitch]:
+    """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion
+    (``ji``: the :func:`canonical_joints` of ``motion`` if the caller has them).
 
     A skeleton whose limbs cannot be mapped to the canonical joints gets one warning
     naming the joints whose ranges cannot be checked; the other detectors still run."""
@@ -588,7 +600,7 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
     from .anatomy import MOVEMENTS, beyond_range, motion_angles, movement_range
 
     opt = options or CleanOptions()
-    ji = canonical_joints(motion)
+    ji = canonical_joints(motion) if ji is None else ji
     angles, _ = motion_angles(motion, ji)
     unchecked = sorted({m.joint for m in MOVEMENTS if m.key not in angles})
     if unchecked:

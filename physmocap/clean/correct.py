@@ -81,7 +81,9 @@ class _Matcher:
     exactly.
     """
 
-    def __init__(self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float, own_weight: float, best: int) -> None:
+    def __init__(
+        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float, own_weight: float, best: int
+    ) -> None:
         F = len(R)
         self.R, self.animated, self.bad = R, animated, bad
         self.context, self.own_weight, self.best = context, own_weight, best

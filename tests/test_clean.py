@@ -422,3 +422,70 @@ def test_two_impossible_jumps_out_and_back_are_a_spike_even_to_a_familiar_pose(w
     R[200:203, j] = R[far, j]
     _, report = clean(dataclasses.replace(walk, rotations=R))
     assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg"] == [("spike", 200, 202)]
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0])
+def test_frozen_joint_is_found_at_other_rates(walk, fps):
+    """The still threshold is a speed (``still_speed``, degrees per second), not a step per frame."""
+    m = walk.resample(fps)
+    j = _joint(m, "RightUpLeg")
+    s, n = int(round(2.5 * fps)), int(round(0.25 * fps))
+    _, report = clean(_with(m, j, list(range(s, s + n)), hold=True))
+    mine = [(g.start, g.end) for g in report.glitches if g.joint == "RightUpLeg" and g.kind == "frozen"]
+    assert mine == [(s, s + n - 1)]
+
+
+def test_clean_options_are_validated():
+    from physmocap.clean import CleanOptions
+    from physmocap.errors import OptionError
+
+    with pytest.raises(OptionError, match="still_speed"):
+        CleanOptions(still_speed=-1.0)
+    with pytest.raises(OptionError, match="match_windows"):
+        CleanOptions(match_windows=1.5)
+
+
+def test_repair_settings_come_from_the_options(walk):
+    """``offset_min_time`` decides between taking a segment's offset off and bridging it."""
+    from physmocap.clean import CleanOptions
+
+    j = _joint(walk, "LeftForeArm")
+    frames = list(range(180, 216))  # 0.3 s
+    q = Rotation.from_rotvec(np.radians(35.0) * np.array([0.6, 0.0, 0.8])).as_quat()
+    bad = _with(walk, j, frames, q)
+    _, report = clean(bad, CleanOptions(offset_min_time=1.0, match_windows=1))
+    mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
+    assert len(mine) == 1 and mine[0].corrected in ("cubic", "matched")
+
+
+def test_glitch_at_the_clips_start_holds_the_first_good_rotation(walk):
+    """Nothing before the span to bridge from: its first good rotation is held, exactly."""
+    from physmocap.clean.correct import correct_glitches
+    from physmocap.clean.detect import Glitch
+
+    m = walk.slice_frames(0, 200)
+    j = _joint(m, "LeftForeArm")
+    R = np.asarray(m.rotations)
+    fixed, done = correct_glitches(m, [Glitch("spike", "LeftForeArm", 0, 9, 30.0)])
+    assert done[0].corrected == "held"
+    assert np.array_equal(np.asarray(fixed.rotations)[:10, j], np.repeat(R[10:11, j], 10, axis=0))
+
+
+def test_table_shows_metres_to_the_millimetre():
+    from physmocap.clean import GlitchReport
+    from physmocap.clean.detect import Glitch
+
+    g = Glitch("bone_stretch", "left_hand_end", 4, 8, 0.0091, unit="m")
+    assert " 0.009 m " in GlitchReport("x", 10, 120.0, (g,)).table()
+
+
+@pytest.mark.parametrize("field", ["rotations", "translations"])
+def test_a_non_finite_channel_is_refused_naming_joint_and_frame(walk, field):
+    """The BVH reader refuses NaN; a motion built in Python is refused by ``clean`` the same
+    way (one error naming the frame and joint), not cleaned into a file the writer refuses."""
+    from physmocap.errors import InputError
+
+    arr = np.array(getattr(walk, field), copy=True)
+    arr[17, 0, 1] = np.nan
+    with pytest.raises(InputError, match=r"frame 17: joint '.+' has a non-finite"):
+        clean(dataclasses.replace(walk, **{field: arr}))

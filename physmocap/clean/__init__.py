@@ -44,15 +44,51 @@ class GlitchReport:
         for g in self.glitches:
             frames = f"{g.start}" if g.start == g.end else f"{g.start}-{g.end}"
             movement = f"{g.movement} ({g.plane})" if g.movement else "-"
+            digits = {"m": 3, "s": 2}.get(g.unit, 1)  # millimetres, hundredths of a second, tenths of a degree
             rows.append(
-                f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.1f} {g.unit:3s}  "
+                f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.{digits}f} {g.unit:3s}  "
                 f"{g.corrected or 'reported only'}"
             )
         return "\n".join(rows) + "\n"
 
 
+def _check_finite(motion: Motion) -> None:
+    """Refuse a motion with a non-finite rotation, translation or (confident) position,
+    naming the first joint and frame: no detector can read it and no output can hold it.
+
+    Raises:
+        InputError: ``"<source>: frame <f>: joint '<name>' has a non-finite <what>"``.
+    """
+    import numpy as np
+
+    from ..errors import InputError
+
+    arrays = {"rotation": motion.rotations, "translation": motion.translations, "position": motion.positions}
+    for what, arr in arrays.items():
+        if arr is None:
+            continue
+        a = np.asarray(arr)
+        bad = ~np.isfinite(a).all(axis=-1)
+        if what == "position" and motion.confidence is not None:
+            bad &= np.asarray(motion.confidence) > 0.0  # a lost marker's position is not read
+        if bad.any():
+            f, k = (int(i[0]) for i in np.nonzero(bad))
+            j = int(motion.translated[k]) if what == "translation" else k
+            raise InputError(
+                f"joint {motion.skeleton.names[j]!r} has a non-finite {what}; nothing cleaned",
+                path=motion.source,
+                frame=f,
+            )
+
+
 def clean(motion: Motion, options: CleanOptions | None = None) -> tuple[Motion, GlitchReport]:
-    """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`)."""
+    """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`).
+
+    Raises:
+        InputError: A rotation, translation or position is not finite (the file's reader
+            refuses those; a motion built in Python may hold them).
+    """
+    _check_finite(motion)
     found = detect_glitches(motion, options)
-    fixed, done = correct_glitches(motion, found)
+    fixed, done = correct_glitches(motion, found, options)
     return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

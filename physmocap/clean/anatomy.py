@@ -72,6 +72,11 @@ class Movement:
     plane: str
     rom: tuple[str, ...]
 
+    @property
+    def where(self) -> str:
+        """The body part a glitch's movement name starts with (``"left knee"``, ``"trunk"``)."""
+        return self.joint.replace("_", " ") if self.joint != "spine" else "trunk"
+
 
 def _sided(side: str) -> list[Movement]:
     return [

@@ -1,6 +1,6 @@
 """Repairing glitches: only the glitched joint on the glitched frames changes.
 
-A spike or flip of 0.15 s or more (``OFFSET_MIN_TIME``) has its offset taken off (the entry
+A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its offset taken off (the entry
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
@@ -9,7 +9,7 @@ good motion next to the span better (:func:`_bridge`): a cubic Hermite curve in 
 space, leaving and arriving at the joint's own speed, or the joint's motion in the windows
 of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
-what it was doing).  At the clip's ends the nearest good rotation is held (slerp).  A
+what it was doing).  At the clip's ends the nearest good rotation is held.  A
 positional glitch (bone stretch, gap) is bridged by linear interpolation of the joint's
 position; a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
@@ -24,7 +24,7 @@ import numpy as np
 
 from ..motion import Motion
 from ..rotations import Rotation
-from .detect import Glitch, _angle
+from .detect import CleanOptions, Glitch, _angle, animated_joints
 
 __all__ = ["correct_glitches"]
 
@@ -37,19 +37,6 @@ REPAIRED = {
     "bone_stretch": "position",
     "gap": "position",
 }
-
-
-#: Shortest spike or flip (seconds) repaired by taking its offset off rather than by a curve.
-OFFSET_MIN_TIME = 0.15
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, n: int) -> np.ndarray:
-    """``(n, 4)`` rotations strictly between ``q0`` and ``q1`` (x-y-z-w)."""
-    from scipy.spatial.transform import Slerp
-
-    key = Rotation.from_quat(np.stack([q0, q1]))
-    s = Slerp([0.0, 1.0], key)
-    return s(np.arange(1, n + 1) / (n + 1)).as_quat()
 
 
 def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
@@ -81,12 +68,12 @@ class _Matcher:
     A frozen joint (or any long bridged span) hides real motion no curve can guess; the
     rest of the body still shows what it was doing.  For joint :math:`j` over frames
     :math:`s..e` (:math:`n` of them) the template is every animated joint's rotation matrix
-    on :math:`s-c .. e+c` (:math:`c` = ``context`` times :math:`n` frames each side),
+    on :math:`s-c .. e+c` (:math:`c` = ``match_context`` times :math:`n` frames each side),
     without the glitched (joint, frame) pairs, joint :math:`j`'s own context frames
-    weighted ``own_weight`` (its motion into and out of the span says most about it).  A
+    weighted ``match_own_weight`` (its motion into and out of the span says most about it).  A
     window :math:`d` frames away scores :math:`\sum_{t,k} w_{tk}
     \operatorname{tr}(R_k(t)^\top R_k(t+d))` (the squared Frobenius distance up to a
-    constant: one FFT correlation over the clip); the ``best`` highest-scoring windows that
+    constant: one FFT correlation over the clip); the ``match_windows`` highest-scoring windows that
     do not overlap the template or each other, and whose joint :math:`j` is clean, lend
     their joint :math:`j` increments :math:`\log(q_j(s-1+d)^{-1} q_j(t+d))`, averaged,
     applied from the last good rotation :math:`q_j(s-1)`; the mismatch left at
@@ -95,7 +82,7 @@ class _Matcher:
     """
 
     def __init__(
-        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float = 0.5, own_weight: float = 5.0, best: int = 3
+        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float, own_weight: float, best: int
     ) -> None:
         F = len(R)
         self.R, self.animated, self.bad = R, animated, bad
@@ -153,15 +140,14 @@ class _Matcher:
         return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
 
 
-def _matcher(motion: Motion, glitches: list[Glitch]) -> _Matcher:
+def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matcher:
     """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out."""
     R = np.asarray(motion.rotations, dtype=float)
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     bad = np.zeros(R.shape[:2], dtype=bool)
     for g in glitches:
         bad[g.start : g.end + 1, names[g.joint]] = True
-    animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
-    return _Matcher(R, animated, bad)
+    return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows)
 
 
 def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
@@ -237,7 +223,9 @@ def _twin(name: str, names: dict[str, int]) -> int | None:
     return None
 
 
-def _repair_rotation(R: np.ndarray, j: int, g: Glitch, fps: float, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
+def _repair_rotation(
+    R: np.ndarray, j: int, g: Glitch, fps: float, matcher: _Matcher | None, opt: CleanOptions
+) -> tuple[np.ndarray, str]:
     """Joint ``j``'s rotations over glitch ``g`` in ``R (F, J, 4)`` repaired, and how.
 
     A glitch over a few frames is bridged best (the offset read off one jump carries that
@@ -245,21 +233,24 @@ def _repair_rotation(R: np.ndarray, j: int, g: Glitch, fps: float, matcher: _Mat
     worth more than any bridge.  At the clip's ends the nearest good rotation is held."""
     F, n = len(R), g.end - g.start + 1
     a, b = g.start - 1, g.end + 1
-    if g.kind in ("spike", "flip") and n >= OFFSET_MIN_TIME * fps:
+    if g.kind in ("spike", "flip") and n >= opt.offset_min_time * fps:
         fixed = _remove_offset(R[:, j], a, b)
         if fixed is not None:
             return fixed, "offset removed"
     if 0 <= a and b < F:
         return _bridge(R, j, g.start, g.end, matcher)
-    first, last = (R[a, j], R[a, j]) if a >= 0 else (R[b, j], R[b, j])
-    return _slerp(first, last, n), "slerp"
+    held = R[a, j] if a >= 0 else R[b, j]
+    return np.repeat(held[None], n, axis=0), "held"
 
 
-def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, list[Glitch]]:
+def correct_glitches(
+    motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None
+) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "slerp" (at the clip's ends), "linear", "swapped back",
-    or "" for reported only)."""
+    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "linear", "swapped back",
+    or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``)."""
+    opt = options or CleanOptions()
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     rot = None if motion.rotations is None else np.array(motion.rotations, copy=True)
     pos = None if motion.positions is None else np.array(motion.positions, copy=True)
@@ -288,8 +279,8 @@ def correct_glitches(motion: Motion, glitches: list[Glitch]) -> tuple[Motion, li
         j = names[g.joint]
         if how == "rotation":
             if 0 <= a and b < F:
-                matcher = matcher or _matcher(motion, glitches)
-            arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher)
+                matcher = matcher or _matcher(motion, glitches, opt)
+            arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
             out.append(dataclasses.replace(g, corrected=curve))
             continue
         first = arr[a, j] if a >= 0 else arr[b, j]  # the good value before, or after at the start

@@ -39,13 +39,9 @@ from ..motion import Motion
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
 
 
-#: A frame-to-frame step (degrees) below which a joint is not moving (a capture's noise floor).
-STILL_DEG = 0.05
-
-
 @dataclass(frozen=True)
 class CleanOptions:
-    """Detection thresholds.
+    """Detection thresholds and repair settings.
 
     Attributes:
         jump_deg: Smallest frame-to-frame rotation (degrees) that can be a glitch.
@@ -87,6 +83,19 @@ class CleanOptions:
             than the limb moves on the neighbouring frames: a toe, finger or twist popping by
             a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
             markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
+        still_speed: A joint turning slower than this (degrees per second) is not moving (a
+            capture's noise floor): the body moves on a frame where its median joint turns
+            faster, and a frozen joint's catch-up is compared with at least this speed.
+            Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
+        offset_min_time: A spike or flip lasting this many seconds or more is repaired by
+            taking its offset off (entry jump and inverse exit jump, interpolated over the
+            span: the real motion under it comes back); a shorter one is bridged.
+        match_context: The matched bridge's template spans this many times the glitch's
+            length of frames on each side of it (at least 2 frames).
+        match_own_weight: Weight of the glitched joint's own rotations on those context
+            frames in the template (its motion into and out of the span says most about it).
+        match_windows: How many best-matching windows of the clip lend their motion
+            (averaged) to the matched bridge.
         carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
             its world orientation jumps by at least this fraction of its local jump, and
             some child's world orientation by at least this fraction of its own (an offset
@@ -111,11 +120,21 @@ class CleanOptions:
     swap_min_distance: float = 0.05
     jump_distance: float = 0.05
     carry_ratio: float = 0.5
+    still_speed: float = 6.0
+    offset_min_time: float = 0.15
+    match_context: float = 0.5
+    match_own_weight: float = 5.0
+    match_windows: int = 3
 
     def __post_init__(self) -> None:
         from ..options import check_fields
 
-        check_fields(self, "clean", positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"])
+        check_fields(
+            self,
+            "clean",
+            counts=["match_windows"],
+            positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"],
+        )
 
 
 @dataclass(frozen=True)
@@ -352,7 +371,7 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     """Runs where the joint's rotation is exactly constant while the body moves, or that end
     with the joint catching up: its first step after the run ``jump_ratio`` times its median
     step over the ``context_time`` after (a joint that really stops starts again smoothly;
-    one whose value stopped updating jumps to where it had got to; steps below ``STILL_DEG``
+    one whose value stopped updating jumps to where it had got to; steps slower than ``still_speed``
     count as that)."""
     F = len(rot)
     same = np.zeros(F, dtype=bool)
@@ -372,7 +391,7 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
         if values.count(v) > 1 or not inside or e - start + 1 < shortest:
             continue
-        after = max(float(np.median(step[e + 2 : e + 2 + half])), STILL_DEG) if e + 2 < F else np.inf
+        after = max(float(np.median(step[e + 2 : e + 2 + half])), opt.still_speed / fps) if e + 2 < F else np.inf
         catch_up = step[e + 1] > opt.jump_ratio * after
         if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
@@ -380,16 +399,23 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     return out
 
 
+def animated_joints(motion: Motion) -> list[int]:
+    """Indices of ``motion``'s joints (not end sites) whose rotation changes at some frame."""
+    R = np.asarray(motion.rotations)
+    return [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+
+
 def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
     """Every glitch found in ``motion`` (sorted by frame, then joint)."""
     opt = options or CleanOptions()
+    ji = canonical_joints(motion)  # once: mapping a long clip takes a good part of the time
     names = motion.skeleton.names
     glitches: list[Glitch] = []
     fps = float(motion.fps)
     if motion.is_rotational and motion.rotations is not None:
         R = np.asarray(motion.rotations, dtype=float)
         steps = joint_angles_step(R)
-        animated = [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
+        animated = animated_joints(motion)
         from ..ik.retarget import default_start
 
         import warnings
@@ -402,7 +428,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         for j in animated:
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
         # the body moves on a frame where the median joint moves
-        moving = np.median(steps[:, animated], axis=1) > STILL_DEG if animated else np.zeros(len(R), bool)
+        moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         for j in animated:
             glitches += _frozen(R[:, j], moving, fps, opt, names[j])
     if motion.positions is not None:
@@ -430,7 +456,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
                 d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
                 for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
                     glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
-    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt), motion)
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji), motion, ji)
     glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
 
@@ -489,18 +515,20 @@ def canonical_joints(motion: Motion) -> dict[str, int]:
         return {}
 
 
-def _merge_anatomical(glitches: list[Glitch], anatomical: list[Glitch], motion: Motion | None = None) -> list[Glitch]:
+def _merge_anatomical(
+    glitches: list[Glitch], anatomical: list[Glitch], motion: Motion, ji: dict[str, int]
+) -> list[Glitch]:
     """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
     a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
     shoulder line the trunk angles are read from), is that glitch's anatomical
-    movement, not a second glitch: name the movement on it instead."""
+    movement, not a second glitch: name the movement on it instead (``ji``: the
+    :func:`canonical_joints` of ``motion``)."""
     import dataclasses
 
     from .anatomy import MOVEMENTS
 
-    names = motion.skeleton.names if motion is not None else []
-    ji = canonical_joints(motion) if motion is not None else {}
-    by_name = {m.joint.replace("_", " ") if m.joint != "spine" else "trunk": m for m in MOVEMENTS}
+    names = motion.skeleton.names
+    by_name = {m.where: m for m in MOVEMENTS}
     out = list(glitches)
     for a in anatomical:
         related = {a.joint}
@@ -560,8 +588,11 @@ def _lr_swaps(motion: Motion, P: np.ndarray, opt: CleanOptions) -> list[Glitch]:
     return out
 
 
-def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
-    """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion.
+def anatomical_glitches(
+    motion: Motion, options: CleanOptions | None = None, ji: dict[str, int] | None = None
+) -> list[Glitch]:
+    """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion
+    (``ji``: the :func:`canonical_joints` of ``motion`` if the caller has them).
 
     A skeleton whose limbs cannot be mapped to the canonical joints gets one warning
     naming the joints whose ranges cannot be checked; the other detectors still run."""
@@ -569,7 +600,7 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
     from .anatomy import MOVEMENTS, beyond_range, motion_angles, movement_range
 
     opt = options or CleanOptions()
-    ji = canonical_joints(motion)
+    ji = canonical_joints(motion) if ji is None else ji
     angles, _ = motion_angles(motion, ji)
     unchecked = sorted({m.joint for m in MOVEMENTS if m.key not in angles})
     if unchecked:
@@ -584,7 +615,6 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
         if carrier is None or carrier not in ji:
             continue
         lo, hi = movement_range(m, opt.rom_soft_margin)
-        where = m.joint.replace("_", " ") if m.joint != "spine" else "trunk"
         for start, end, direction, excess in beyond_range(angles[m.key], lo, hi):
             name = m.positive if direction == "positive" else m.negative
             out.append(
@@ -594,7 +624,7 @@ def anatomical_glitches(motion: Motion, options: CleanOptions | None = None) -> 
                     start,
                     end,
                     excess,
-                    movement=f"{where} {name}",
+                    movement=f"{m.where} {name}",
                     plane=m.plane,
                     repairable=end - start + 1 <= longest,
                 )

@@ -46,18 +46,10 @@ def _mask(glitches: list[Glitch], frames: int) -> np.ndarray:
 
 
 def _anatomy_plot(figure_mod, motion: Motion, glitches: list[Glitch], path: Path) -> Path | None:
-    import warnings
-
-    from ..errors import MappingError
-    from ..ik.retarget import map_motion
     from .anatomy import MOVEMENTS, motion_angles, movement_range
+    from .detect import canonical_joints
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            angles, _ = motion_angles(motion, map_motion(motion))
-    except MappingError:
-        return None
+    angles, _ = motion_angles(motion, canonical_joints(motion))
     shown = [m for m in MOVEMENTS if m.key in angles]
     if not shown:
         return None
@@ -71,8 +63,7 @@ def _anatomy_plot(figure_mod, motion: Motion, glitches: list[Glitch], path: Path
         ax.plot(t, angles[m.key], lw=0.8, color="#333333")
         ax.axhline(lo, ls="--", lw=0.6, color="#888888")
         ax.axhline(hi, ls="--", lw=0.6, color="#888888")
-        where = m.joint.replace("_", " ") if m.joint != "spine" else "trunk"
-        mine = [g for g in glitches if g.movement.startswith(where + " ")]
+        mine = [g for g in glitches if g.movement.startswith(m.where + " ")]
         shade_spans(ax, _mask(mine, motion.num_frames), t, color="#d62728", alpha=0.3)
         ax.set_title(f"{m.key.replace('_', ' ')} ({m.plane})", fontsize=8)
         ax.tick_params(labelsize=7)

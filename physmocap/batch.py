@@ -93,15 +93,21 @@ class FileResult:
     seconds: float = field(default=0.0, compare=False)
 
 
-def _inputs(source: str) -> tuple[list[ManifestEntry], Path]:
+def _inputs(source: str, outdir: Path) -> tuple[list[ManifestEntry], Path]:
     """Entries for the files of a folder (recursively), a glob or a manifest, and the root
-    their mirrored outputs start from."""
+    their mirrored outputs start from.  A folder or glob skips the files under ``outdir``
+    (an output folder inside the input folder: its outputs and summaries are not inputs)."""
     p = Path(source)
+    out = outdir.resolve()
+
+    def _ours(f: Path) -> bool:
+        return f.resolve().is_relative_to(out)
+
     if p.is_dir():
-        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in INPUT_SUFFIXES)
+        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in INPUT_SUFFIXES and not _ours(f))
         return [ManifestEntry(0, f, None, {}) for f in files], p
     if any(ch in source for ch in "*?["):
-        files = sorted(Path(f) for f in globlib.glob(source, recursive=True) if Path(f).is_file())
+        files = sorted(Path(f) for f in globlib.glob(source, recursive=True) if Path(f).is_file() and not _ours(Path(f)))
         root = Path(os.path.commonpath([str(f.parent) for f in files])) if files else Path(".")
         return [ManifestEntry(0, f, None, {}) for f in files], root
     if p.is_file() and p.suffix.lower() in MANIFEST_SUFFIXES:
@@ -260,7 +266,7 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[J
         InputError: No input found, or a manifest that cannot be read.
         OptionError: A manifest's bad option, or two jobs writing the same output.
     """
-    entries, root = _inputs(source)
+    entries, root = _inputs(source, Path(outdir))
     if not entries:
         raise InputError("no input files found (looked for " + ", ".join(INPUT_SUFFIXES) + ")", path=source)
     jobs: list[Job] = []

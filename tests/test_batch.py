@@ -61,6 +61,16 @@ def test_batch_resumes_and_is_the_same_with_more_workers(folder):
     assert _files(folder / "one") != first
 
 
+def test_output_folder_inside_the_input_folder_is_not_read_back(folder):
+    out = folder / "in" / "out"
+    args = ["batch", str(folder / "in"), "-o", str(out), "--end", "40", "--quiet", "--jobs", "1", "--format", "csv"]
+    assert main(args) == 1  # broken.bvh
+    first = _files(out)
+    assert main(args) == 1  # its own CSV outputs and summary.csv are not taken as inputs
+    assert _files(out) == first
+    assert json.loads((out / "summary.json").read_text())["totals"]["files"] == 3
+
+
 def test_batch_on_ray_gives_the_same_files(folder):
     pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
     assert _batch(folder, "local", "--jobs", "1") == 1

@@ -30,7 +30,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
-from .errors import InputError, OptionError, PhysmocapError
+from .errors import InputError, OptionError, OutputError, PhysmocapError
+from .fileio import check_output_dir, read_text
 
 __all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_job", "run_batch", "SUMMARY_FIELDS"]
 
@@ -38,6 +39,8 @@ __all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_j
 INPUT_SUFFIXES = (".bvh", ".c3d", ".trc", ".mcap", ".csv", ".jsonl")
 #: Manifest suffixes: one input a line (.txt), or a table with per-file options (.csv, .jsonl).
 MANIFEST_SUFFIXES = (".txt", ".csv", ".jsonl")
+#: Largest manifest read (bytes): a line per file, so a million files fit.
+MAX_MANIFEST_BYTES = 256 << 20
 #: Output suffixes a manifest's ``output`` may have.
 OUTPUT_SUFFIXES = (".npz", ".bvh", ".csv", ".mcap")
 #: Per-file options that name files (relative to the manifest); ``character`` only when it
@@ -112,6 +115,8 @@ def _inputs(source: str, outdir: Path) -> tuple[list[ManifestEntry], Path]:
         return [ManifestEntry(0, f, None, {}) for f in files], root
     if p.is_file() and p.suffix.lower() in MANIFEST_SUFFIXES:
         entries = read_manifest(p)
+        if not entries:
+            raise InputError("the manifest lists no input", path=p)
         root = Path(os.path.commonpath([str(e.input.parent) for e in entries])) if entries else p.parent
         return entries, root
     raise InputError(
@@ -142,10 +147,9 @@ def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | Non
         from .cli.retarget import retarget_option_parser
 
         parser = retarget_option_parser()
-    try:
-        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's CSV may start with a byte-order mark
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the manifest: {exc}", path=p) from None
+    # a spreadsheet's CSV may start with a byte-order mark: read_text drops it, and names the
+    # line of a byte that is not UTF-8
+    text = read_text(p, "manifest", limit=MAX_MANIFEST_BYTES)
     suffix = p.suffix.lower()
     rows = _txt_rows(text) if suffix == ".txt" else _csv_rows(text, p) if suffix == ".csv" else _jsonl_rows(text, p)
     return [_entry(line, row, p, parser) for line, row in rows]
@@ -159,7 +163,15 @@ def _txt_rows(text: str) -> list[tuple[int, dict[str, Any]]]:
 
 def _csv_rows(text: str, path: Path) -> list[tuple[int, dict[str, Any]]]:
     """``(line, {column: cell})`` per non-blank row; empty cells left out."""
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(io.StringIO(text), strict=True)
+    try:
+        return _csv_table(reader, path)
+    except csv.Error as exc:  # an unterminated quote...
+        raise InputError(f"not a well-formed CSV row: {exc}", path=path, line=reader.line_num) from None
+
+
+def _csv_table(reader: Any, path: Path) -> list[tuple[int, dict[str, Any]]]:
+    """The rows of :func:`_csv_rows` from a ``csv.reader`` (raises ``csv.Error``)."""
     names = [h.strip() for h in next(reader, [])]
     if "input" not in names:
         raise InputError("a CSV manifest starts with a header row naming an 'input' column", path=path, line=1)
@@ -271,14 +283,41 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[J
         raise InputError("no input files found (looked for " + ", ".join(INPUT_SUFFIXES) + ")", path=source)
     jobs: list[Job] = []
     seen: dict[str, int] = {}
+    folders: set[Path] = set()
     for e in entries:
+        if e.line:
+            _check_entry(e, source, folders)
         target = e.output.resolve() if e.output is not None else _mirrored(e.input, root, Path(outdir), suffix)
+        if target == e.input.resolve():
+            raise OptionError(f"the output {target} is the input itself", path=source, line=e.line or None)
         if str(target) in seen:
             where = f"lines {seen[str(target)]} and {e.line}" if e.line else "two inputs"
             raise OptionError(f"{where} write the same output {target}", path=source)
         seen[str(target)] = e.line
         jobs.append(Job(input=str(e.input.resolve()), output=str(target), options=dict(e.options)))
     return jobs
+
+
+def _check_entry(entry: ManifestEntry, manifest: str, folders: set[Path]) -> None:
+    """A manifest line's input must exist and its own output must be writable (the nearest
+    existing folder of it accepts a file; ``folders``: those already checked).
+
+    Raises:
+        InputError: The input is missing.  OutputError: The output cannot be written.
+    """
+    if not entry.input.is_file():
+        raise InputError(f"input {str(entry.input)!r} not found", path=manifest, line=entry.line)
+    if entry.output is None:
+        return
+    folder = entry.output.resolve().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if folder not in folders:
+        try:
+            check_output_dir(folder, "output's folder")
+        except OutputError as exc:
+            raise OutputError(f"output {str(entry.output)!r}: {exc}", path=manifest, line=entry.line) from None
+        folders.add(folder)
 
 
 def _mirrored(inp: Path, root: Path, out: Path, suffix: str) -> Path:

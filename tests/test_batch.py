@@ -126,6 +126,15 @@ def test_jsonl_manifest_redoes_only_the_file_whose_options_changed(folder):
         ("m.csv", "input,start,end\na.bvh,30,10\n", "m.csv:2: --start 30 --end 10: the range is empty"),
         ("m.csv", "output\nx.npz\n", "m.csv:1: a CSV manifest starts with a header row naming an 'input' column"),
         ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 write the same output"),
+        ("m.csv", "input\nnope.bvh\n", "m.csv:2: input "),
+        ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh"}\n', "m.jsonl:1: the output "),
+        ("m.jsonl", '{"input": "a.bvh", "output": "/proc/x.npz"}\n', "m.jsonl:1: output '/proc/x.npz'"),
+        ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh/x.npz"}\n', "m.jsonl:1: output "),
+        ("m.csv", 'input,"end\na.bvh,3\n', "not a well-formed CSV row: unexpected end of data"),
+        ("m.csv", "input\n", "m.csv: the manifest lists no input"),
+        ("m.jsonl", "\n# nothing\n", "m.jsonl: the manifest lists no input"),
+        ("m.jsonl", '["a.bvh"]\n', "m.jsonl:1: expected a JSON object, found list"),
+        ("m.jsonl", '{"input": "a.bvh"', "m.jsonl:1: not a JSON object"),
     ],
 )
 def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
@@ -134,6 +143,14 @@ def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (folder / "out").exists()
+
+
+def test_manifest_not_utf8_names_the_line(folder, capsys):
+    manifest = folder / "in" / "m.csv"
+    manifest.write_bytes(b"input\na.bvh\nb\xff.bvh\n")
+    assert main(["batch", str(manifest), "-o", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "m.csv:3: not UTF-8" in err and "Traceback" not in err
 
 
 def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):

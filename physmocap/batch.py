@@ -24,6 +24,7 @@ import glob as globlib
 import hashlib
 import io
 import json
+import math
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -359,20 +360,29 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
         res.status = "done"
         res.frames, res.fps = int(traj.num_frames), float(traj.fps)
         res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
-        res.penetration_max_mm = round(float(metrics.penetration(ch.model, traj.qpos)["max_mm"]), 3)
+        res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
         if traj.contacts is not None:
-            res.skating_mean_cm_s = round(float(metrics.character_skating(traj)["mean_cm_s"]), 3)
+            res.skating_mean_cm_s = _figure(metrics.character_skating(traj)["mean_cm_s"], 3)
         if fid is not None:
-            res.worst_segment_median_deg = round(float(fid.worst_segment_median_deg), 2)
-            res.facing_p95_deg = None if fid.facing_p95_deg is None else round(float(fid.facing_p95_deg), 2)
-            res.path_mean_cm = None if fid.path_mean_cm is None else round(float(fid.path_mean_cm), 2)
-            res.saturated_share = round(float(fid.saturated_share), 4)
+            res.worst_segment_median_deg = _figure(fid.worst_segment_median_deg, 2)
+            res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
+            res.path_mean_cm = _figure(fid.path_mean_cm, 2)
+            res.saturated_share = _figure(fid.saturated_share, 4)
     except PhysmocapError as exc:
         res.error = str(exc)
     except Exception as exc:  # noqa: BLE001 - one file's failure must not stop the dataset
         res.error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
     res.seconds = time.perf_counter() - start
     return res
+
+
+def _figure(value: Any, digits: int) -> float | None:
+    """A quality figure rounded for the summary; None when not measured or not finite (a
+    NaN or infinity never reaches summary.json, which is strict JSON)."""
+    if value is None:
+        return None
+    v = float(value)
+    return round(v, digits) if math.isfinite(v) else None
 
 
 def _load_state(outdir: Path) -> dict[str, dict]:

@@ -166,3 +166,13 @@ def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
     assert first.options == {"character": "robot", "source_map": str(tmp_path / "maps" / "s.toml"), "fps": 30.0,
                              "no_floor": True}
     assert second.options == {"character": str(tmp_path / "chars" / "c.xml"), "up": "z"}
+
+
+def test_non_finite_figures_never_reach_the_summary(folder, monkeypatch):
+    import physmocap.metrics
+
+    monkeypatch.setattr(physmocap.metrics, "penetration", lambda model, qpos: {"max_mm": float("nan")})
+    assert _batch(folder, "out", "--jobs", "1") == 1
+    text = (folder / "out" / "summary.json").read_text()
+    rows = {r["input"]: r for r in json.loads(text)["files"]}
+    assert rows[os.path.join("..", "in", "a.bvh")]["penetration_max_mm"] is None and "NaN" not in text

@@ -127,6 +127,7 @@ def test_jsonl_manifest_redoes_only_the_file_whose_options_changed(folder):
         ("m.csv", "output\nx.npz\n", "m.csv:1: a CSV manifest starts with a header row naming an 'input' column"),
         ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 write the same output"),
         ("m.csv", "input\nnope.bvh\n", "m.csv:2: input "),
+        ("m.jsonl", '{"input": "a.bvh", "fps": "nan"}\n', "m.jsonl:1: --fps: the frame rate must be a number in (0, 2000]"),
         ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh"}\n', "m.jsonl:1: the output "),
         ("m.jsonl", '{"input": "a.bvh", "output": "/proc/x.npz"}\n', "m.jsonl:1: output '/proc/x.npz'"),
         ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh/x.npz"}\n', "m.jsonl:1: output "),

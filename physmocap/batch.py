@@ -322,8 +322,9 @@ def _check_entry(entry: ManifestEntry, manifest: str, folders: set[Path]) -> Non
 
 
 def _mirrored(inp: Path, root: Path, out: Path, suffix: str) -> Path:
-    """``out/<inp relative to root>`` with ``suffix`` (absolute)."""
-    f, r = inp.resolve(), root.resolve()
+    """``out/<inp relative to root>`` with ``suffix`` (absolute).  Paths are made absolute
+    without following links: a folder of links to clips elsewhere mirrors the links' names."""
+    f, r = Path(os.path.abspath(inp)), Path(os.path.abspath(root))
     rel = f.relative_to(r) if f.is_relative_to(r) else Path(f.name)
     return (out / rel).with_suffix(suffix).resolve()
 

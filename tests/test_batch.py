@@ -177,3 +177,12 @@ def test_non_finite_figures_never_reach_the_summary(folder, monkeypatch):
     text = (folder / "out" / "summary.json").read_text()
     rows = {r["input"]: r for r in json.loads(text)["files"]}
     assert rows[os.path.join("..", "in", "a.bvh")]["penetration_max_mm"] is None and "NaN" not in text
+
+
+def test_a_folder_of_links_mirrors_the_links_names(folder):
+    links = folder / "links"
+    links.mkdir()
+    for name in ("x.bvh", "y.bvh"):  # two links to one clip: two outputs
+        (links / name).symlink_to(folder / "in" / "a.bvh")
+    assert main(["batch", str(links), "-o", str(folder / "out"), "--end", "20", "--quiet", "--jobs", "1"]) == 0
+    assert (folder / "out" / "x.npz").exists() and (folder / "out" / "y.npz").exists()

@@ -358,7 +358,6 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
             write_outputs(traj, [Path(job.output)], ns, quiet=True)
         ch = traj.character
         fid = traj.fidelity
-        res.status = "done"
         res.frames, res.fps = int(traj.num_frames), float(traj.fps)
         res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
         res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
@@ -369,6 +368,7 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
             res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
             res.path_mean_cm = _figure(fid.path_mean_cm, 2)
             res.saturated_share = _figure(fid.saturated_share, 4)
+        res.status = "done"  # only once every figure is measured: a failing metric fails the file
     except PhysmocapError as exc:
         res.error = str(exc)
     except Exception as exc:  # noqa: BLE001 - one file's failure must not stop the dataset

@@ -186,3 +186,16 @@ def test_a_folder_of_links_mirrors_the_links_names(folder):
         (links / name).symlink_to(folder / "in" / "a.bvh")
     assert main(["batch", str(links), "-o", str(folder / "out"), "--end", "20", "--quiet", "--jobs", "1"]) == 0
     assert (folder / "out" / "x.npz").exists() and (folder / "out" / "y.npz").exists()
+
+
+def test_a_failing_metric_fails_the_file(folder, monkeypatch):
+    import physmocap.metrics
+
+    def boom(model, qpos):
+        raise RuntimeError("metric broke")
+
+    monkeypatch.setattr(physmocap.metrics, "penetration", boom)
+    assert _batch(folder, "out", "--jobs", "1") == 1
+    rows = {r["input"]: r for r in json.loads((folder / "out" / "summary.json").read_text())["files"]}
+    assert rows[os.path.join("..", "in", "a.bvh")]["status"] == "failed"
+    assert "metric broke" in rows[os.path.join("..", "in", "a.bvh")]["error"]

@@ -263,7 +263,7 @@ def _parse_value(action: argparse.Action, value: Any, parser: argparse.ArgumentP
         return flag
     if isinstance(value, (dict, list, bool)):
         raise OptionError(f"{name} takes one value, got {value!r}")
-    return getattr(parser.parse_args([name, str(value)]), action.dest)
+    return getattr(parser.parse_args([f"{name}={value}"]), action.dest)  # "=": a value may start with "-"
 
 
 def _is_path(value: str) -> bool:

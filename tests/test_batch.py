@@ -167,6 +167,8 @@ def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
     assert first.options == {"character": "robot", "source_map": str(tmp_path / "maps" / "s.toml"), "fps": 30.0,
                              "no_floor": True}
     assert second.options == {"character": str(tmp_path / "chars" / "c.xml"), "up": "z"}
+    (tmp_path / "m.csv").write_text("input,source-map\na.bvh,-s.toml\n")  # a value that starts with "-"
+    assert read_manifest(tmp_path / "m.csv")[0].options == {"source_map": str(tmp_path / "-s.toml")}
 
 
 def test_non_finite_figures_never_reach_the_summary(folder, monkeypatch):

@@ -24,13 +24,15 @@ import glob as globlib
 import hashlib
 import io
 import json
+import math
 import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 
-from .errors import InputError, OptionError, PhysmocapError
+from .errors import InputError, OptionError, OutputError, PhysmocapError
+from .fileio import check_output_dir, read_text
 
 __all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_job", "run_batch", "SUMMARY_FIELDS"]
 
@@ -38,6 +40,8 @@ __all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_j
 INPUT_SUFFIXES = (".bvh", ".c3d", ".trc", ".mcap", ".csv", ".jsonl")
 #: Manifest suffixes: one input a line (.txt), or a table with per-file options (.csv, .jsonl).
 MANIFEST_SUFFIXES = (".txt", ".csv", ".jsonl")
+#: Largest manifest read (bytes): a line per file, so a million files fit.
+MAX_MANIFEST_BYTES = 256 << 20
 #: Output suffixes a manifest's ``output`` may have.
 OUTPUT_SUFFIXES = (".npz", ".bvh", ".csv", ".mcap")
 #: Per-file options that name files (relative to the manifest); ``character`` only when it
@@ -93,19 +97,27 @@ class FileResult:
     seconds: float = field(default=0.0, compare=False)
 
 
-def _inputs(source: str) -> tuple[list[ManifestEntry], Path]:
+def _inputs(source: str, outdir: Path) -> tuple[list[ManifestEntry], Path]:
     """Entries for the files of a folder (recursively), a glob or a manifest, and the root
-    their mirrored outputs start from."""
+    their mirrored outputs start from.  A folder or glob skips the files under ``outdir``
+    (an output folder inside the input folder: its outputs and summaries are not inputs)."""
     p = Path(source)
+    out = outdir.resolve()
+
+    def _ours(f: Path) -> bool:
+        return f.resolve().is_relative_to(out)
+
     if p.is_dir():
-        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in INPUT_SUFFIXES)
+        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix.lower() in INPUT_SUFFIXES and not _ours(f))
         return [ManifestEntry(0, f, None, {}) for f in files], p
     if any(ch in source for ch in "*?["):
-        files = sorted(Path(f) for f in globlib.glob(source, recursive=True) if Path(f).is_file())
+        files = sorted(Path(f) for f in globlib.glob(source, recursive=True) if Path(f).is_file() and not _ours(Path(f)))
         root = Path(os.path.commonpath([str(f.parent) for f in files])) if files else Path(".")
         return [ManifestEntry(0, f, None, {}) for f in files], root
     if p.is_file() and p.suffix.lower() in MANIFEST_SUFFIXES:
         entries = read_manifest(p)
+        if not entries:
+            raise InputError("the manifest lists no input", path=p)
         root = Path(os.path.commonpath([str(e.input.parent) for e in entries])) if entries else p.parent
         return entries, root
     raise InputError(
@@ -136,10 +148,9 @@ def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | Non
         from .cli.retarget import retarget_option_parser
 
         parser = retarget_option_parser()
-    try:
-        text = p.read_text(encoding="utf-8-sig")  # a spreadsheet's CSV may start with a byte-order mark
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the manifest: {exc}", path=p) from None
+    # a spreadsheet's CSV may start with a byte-order mark: read_text drops it, and names the
+    # line of a byte that is not UTF-8
+    text = read_text(p, "manifest", limit=MAX_MANIFEST_BYTES)
     suffix = p.suffix.lower()
     rows = _txt_rows(text) if suffix == ".txt" else _csv_rows(text, p) if suffix == ".csv" else _jsonl_rows(text, p)
     return [_entry(line, row, p, parser) for line, row in rows]
@@ -153,7 +164,15 @@ def _txt_rows(text: str) -> list[tuple[int, dict[str, Any]]]:
 
 def _csv_rows(text: str, path: Path) -> list[tuple[int, dict[str, Any]]]:
     """``(line, {column: cell})`` per non-blank row; empty cells left out."""
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(io.StringIO(text), strict=True)
+    try:
+        return _csv_table(reader, path)
+    except csv.Error as exc:  # an unterminated quote...
+        raise InputError(f"not a well-formed CSV row: {exc}", path=path, line=reader.line_num) from None
+
+
+def _csv_table(reader: Any, path: Path) -> list[tuple[int, dict[str, Any]]]:
+    """The rows of :func:`_csv_rows` from a ``csv.reader`` (raises ``csv.Error``)."""
     names = [h.strip() for h in next(reader, [])]
     if "input" not in names:
         raise InputError("a CSV manifest starts with a header row naming an 'input' column", path=path, line=1)
@@ -244,7 +263,7 @@ def _parse_value(action: argparse.Action, value: Any, parser: argparse.ArgumentP
         return flag
     if isinstance(value, (dict, list, bool)):
         raise OptionError(f"{name} takes one value, got {value!r}")
-    return getattr(parser.parse_args([name, str(value)]), action.dest)
+    return getattr(parser.parse_args([f"{name}={value}"]), action.dest)  # "=": a value may start with "-"
 
 
 def _is_path(value: str) -> bool:
@@ -260,13 +279,18 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[J
         InputError: No input found, or a manifest that cannot be read.
         OptionError: A manifest's bad option, or two jobs writing the same output.
     """
-    entries, root = _inputs(source)
+    entries, root = _inputs(source, Path(outdir))
     if not entries:
         raise InputError("no input files found (looked for " + ", ".join(INPUT_SUFFIXES) + ")", path=source)
     jobs: list[Job] = []
     seen: dict[str, int] = {}
+    folders: set[Path] = set()
     for e in entries:
+        if e.line:
+            _check_entry(e, source, folders)
         target = e.output.resolve() if e.output is not None else _mirrored(e.input, root, Path(outdir), suffix)
+        if target == e.input.resolve():
+            raise OptionError(f"the output {target} is the input itself", path=source, line=e.line or None)
         if str(target) in seen:
             where = f"lines {seen[str(target)]} and {e.line}" if e.line else "two inputs"
             raise OptionError(f"{where} write the same output {target}", path=source)
@@ -275,9 +299,32 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[J
     return jobs
 
 
+def _check_entry(entry: ManifestEntry, manifest: str, folders: set[Path]) -> None:
+    """A manifest line's input must exist and its own output must be writable (the nearest
+    existing folder of it accepts a file; ``folders``: those already checked).
+
+    Raises:
+        InputError: The input is missing.  OutputError: The output cannot be written.
+    """
+    if not entry.input.is_file():
+        raise InputError(f"input {str(entry.input)!r} not found", path=manifest, line=entry.line)
+    if entry.output is None:
+        return
+    folder = entry.output.resolve().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if folder not in folders:
+        try:
+            check_output_dir(folder, "output's folder")
+        except OutputError as exc:
+            raise OutputError(f"output {str(entry.output)!r}: {exc}", path=manifest, line=entry.line) from None
+        folders.add(folder)
+
+
 def _mirrored(inp: Path, root: Path, out: Path, suffix: str) -> Path:
-    """``out/<inp relative to root>`` with ``suffix`` (absolute)."""
-    f, r = inp.resolve(), root.resolve()
+    """``out/<inp relative to root>`` with ``suffix`` (absolute).  Paths are made absolute
+    without following links: a folder of links to clips elsewhere mirrors the links' names."""
+    f, r = Path(os.path.abspath(inp)), Path(os.path.abspath(root))
     rel = f.relative_to(r) if f.is_relative_to(r) else Path(f.name)
     return (out / rel).with_suffix(suffix).resolve()
 
@@ -311,23 +358,32 @@ def run_job(job: Job, options: dict[str, Any]) -> FileResult:
             write_outputs(traj, [Path(job.output)], ns, quiet=True)
         ch = traj.character
         fid = traj.fidelity
-        res.status = "done"
         res.frames, res.fps = int(traj.num_frames), float(traj.fps)
         res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
-        res.penetration_max_mm = round(float(metrics.penetration(ch.model, traj.qpos)["max_mm"]), 3)
+        res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
         if traj.contacts is not None:
-            res.skating_mean_cm_s = round(float(metrics.character_skating(traj)["mean_cm_s"]), 3)
+            res.skating_mean_cm_s = _figure(metrics.character_skating(traj)["mean_cm_s"], 3)
         if fid is not None:
-            res.worst_segment_median_deg = round(float(fid.worst_segment_median_deg), 2)
-            res.facing_p95_deg = None if fid.facing_p95_deg is None else round(float(fid.facing_p95_deg), 2)
-            res.path_mean_cm = None if fid.path_mean_cm is None else round(float(fid.path_mean_cm), 2)
-            res.saturated_share = round(float(fid.saturated_share), 4)
+            res.worst_segment_median_deg = _figure(fid.worst_segment_median_deg, 2)
+            res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
+            res.path_mean_cm = _figure(fid.path_mean_cm, 2)
+            res.saturated_share = _figure(fid.saturated_share, 4)
+        res.status = "done"  # only once every figure is measured: a failing metric fails the file
     except PhysmocapError as exc:
         res.error = str(exc)
     except Exception as exc:  # noqa: BLE001 - one file's failure must not stop the dataset
         res.error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
     res.seconds = time.perf_counter() - start
     return res
+
+
+def _figure(value: Any, digits: int) -> float | None:
+    """A quality figure rounded for the summary; None when not measured or not finite (a
+    NaN or infinity never reaches summary.json, which is strict JSON)."""
+    if value is None:
+        return None
+    v = float(value)
+    return round(v, digits) if math.isfinite(v) else None
 
 
 def _load_state(outdir: Path) -> dict[str, dict]:

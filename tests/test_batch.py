@@ -61,6 +61,16 @@ def test_batch_resumes_and_is_the_same_with_more_workers(folder):
     assert _files(folder / "one") != first
 
 
+def test_output_folder_inside_the_input_folder_is_not_read_back(folder):
+    out = folder / "in" / "out"
+    args = ["batch", str(folder / "in"), "-o", str(out), "--end", "40", "--quiet", "--jobs", "1", "--format", "csv"]
+    assert main(args) == 1  # broken.bvh
+    first = _files(out)
+    assert main(args) == 1  # its own CSV outputs and summary.csv are not taken as inputs
+    assert _files(out) == first
+    assert json.loads((out / "summary.json").read_text())["totals"]["files"] == 3
+
+
 def test_batch_on_ray_gives_the_same_files(folder):
     pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
     assert _batch(folder, "local", "--jobs", "1") == 1
@@ -116,6 +126,16 @@ def test_jsonl_manifest_redoes_only_the_file_whose_options_changed(folder):
         ("m.csv", "input,start,end\na.bvh,30,10\n", "m.csv:2: --start 30 --end 10: the range is empty"),
         ("m.csv", "output\nx.npz\n", "m.csv:1: a CSV manifest starts with a header row naming an 'input' column"),
         ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 write the same output"),
+        ("m.csv", "input\nnope.bvh\n", "m.csv:2: input "),
+        ("m.jsonl", '{"input": "a.bvh", "fps": "nan"}\n', "m.jsonl:1: --fps: the frame rate must be a number in (0, 2000]"),
+        ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh"}\n', "m.jsonl:1: the output "),
+        ("m.jsonl", '{"input": "a.bvh", "output": "/proc/x.npz"}\n', "m.jsonl:1: output '/proc/x.npz'"),
+        ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh/x.npz"}\n', "m.jsonl:1: output "),
+        ("m.csv", 'input,"end\na.bvh,3\n', "not a well-formed CSV row: unexpected end of data"),
+        ("m.csv", "input\n", "m.csv: the manifest lists no input"),
+        ("m.jsonl", "\n# nothing\n", "m.jsonl: the manifest lists no input"),
+        ("m.jsonl", '["a.bvh"]\n', "m.jsonl:1: expected a JSON object, found list"),
+        ("m.jsonl", '{"input": "a.bvh"', "m.jsonl:1: not a JSON object"),
     ],
 )
 def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
@@ -124,6 +144,14 @@ def test_manifest_errors_name_the_line(folder, capsys, name, text, message):
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (folder / "out").exists()
+
+
+def test_manifest_not_utf8_names_the_line(folder, capsys):
+    manifest = folder / "in" / "m.csv"
+    manifest.write_bytes(b"input\na.bvh\nb\xff.bvh\n")
+    assert main(["batch", str(manifest), "-o", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "m.csv:3: not UTF-8" in err and "Traceback" not in err
 
 
 def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
@@ -139,3 +167,37 @@ def test_txt_manifest_and_path_options_are_relative_to_the_manifest(tmp_path):
     assert first.options == {"character": "robot", "source_map": str(tmp_path / "maps" / "s.toml"), "fps": 30.0,
                              "no_floor": True}
     assert second.options == {"character": str(tmp_path / "chars" / "c.xml"), "up": "z"}
+    (tmp_path / "m.csv").write_text("input,source-map\na.bvh,-s.toml\n")  # a value that starts with "-"
+    assert read_manifest(tmp_path / "m.csv")[0].options == {"source_map": str(tmp_path / "-s.toml")}
+
+
+def test_non_finite_figures_never_reach_the_summary(folder, monkeypatch):
+    import physmocap.metrics
+
+    monkeypatch.setattr(physmocap.metrics, "penetration", lambda model, qpos: {"max_mm": float("nan")})
+    assert _batch(folder, "out", "--jobs", "1") == 1
+    text = (folder / "out" / "summary.json").read_text()
+    rows = {r["input"]: r for r in json.loads(text)["files"]}
+    assert rows[os.path.join("..", "in", "a.bvh")]["penetration_max_mm"] is None and "NaN" not in text
+
+
+def test_a_folder_of_links_mirrors_the_links_names(folder):
+    links = folder / "links"
+    links.mkdir()
+    for name in ("x.bvh", "y.bvh"):  # two links to one clip: two outputs
+        (links / name).symlink_to(folder / "in" / "a.bvh")
+    assert main(["batch", str(links), "-o", str(folder / "out"), "--end", "20", "--quiet", "--jobs", "1"]) == 0
+    assert (folder / "out" / "x.npz").exists() and (folder / "out" / "y.npz").exists()
+
+
+def test_a_failing_metric_fails_the_file(folder, monkeypatch):
+    import physmocap.metrics
+
+    def boom(model, qpos):
+        raise RuntimeError("metric broke")
+
+    monkeypatch.setattr(physmocap.metrics, "penetration", boom)
+    assert _batch(folder, "out", "--jobs", "1") == 1
+    rows = {r["input"]: r for r in json.loads((folder / "out" / "summary.json").read_text())["files"]}
+    assert rows[os.path.join("..", "in", "a.bvh")]["status"] == "failed"
+    assert "metric broke" in rows[os.path.join("..", "in", "a.bvh")]["error"]

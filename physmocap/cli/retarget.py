@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from ..errors import OptionError
@@ -89,9 +90,13 @@ def config_from_args(args: argparse.Namespace):
         OptionError: A frame range, iteration count or option value retarget refuses.
     """
     from ..ik.config import RetargetConfig
+    from ..motion import MAX_FPS
     from ..options import check_frame_range
 
     check_frame_range(args.start, args.end)
+    fps = getattr(args, "fps", None)
+    if fps is not None and not (math.isfinite(fps) and 0 < fps <= MAX_FPS):
+        raise OptionError(f"--fps: the frame rate must be a number in (0, {MAX_FPS:g}] frames/s, got {fps:g}")
     options = {}
     if args.max_iterations is not None:
         if args.max_iterations < 1:

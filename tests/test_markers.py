@@ -210,3 +210,19 @@ def test_inspect_markers_and_the_emitted_marker_set(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(["retarget", str(path), "-o", str(tmp_path / "o.npz"), "--marker-set", str(tmp_path / "set.toml"), "--quiet"]) == 0
+
+
+def test_c3d_cut_short_warns_with_the_frames_declared_and_held(tmp_path):
+    """ezc3d reads a C3D cut inside its data and rewrites its header to match: the raw header
+    still tells what was lost."""
+    from physmocap.sources.c3d import read_c3d_markers
+
+    real = shared_file("cmu_01_01_markers.c3d").read_bytes()
+    half = tmp_path / "half.c3d"
+    half.write_bytes(real[: len(real) // 2])
+    with pytest.warns(UserWarning, match=r"half\.c3d: the header declares 2751 frames but the file holds \d+"):
+        rec = read_c3d_markers(half)
+    assert 0 < rec.num_frames < 2751
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_c3d_markers(shared_file("cmu_01_01_markers.c3d")).num_frames == 2751

@@ -9,6 +9,7 @@ actor's canonical joint centres (:mod:`physmocap.markers`).
 from __future__ import annotations
 
 import os
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +54,10 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if data.ndim != 3 or data.shape[1] == 0 or data.shape[2] == 0:
         raise InputError("C3D file holds no marker samples", path=p)
     M = data.shape[1]
+    declared = _declared_frames(p, M)
+    if declared is not None and declared > data.shape[2]:
+        warn(f"{p}: the header declares {declared} frames but the file holds {data.shape[2]} (truncated?); "
+             "read what is there")
     labels = (labels + [f"marker{k}" for k in range(len(labels), M)])[:M]
     if units is not None:
         scale = unit_scale(units, p)
@@ -69,6 +74,24 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if np.all(bad):
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual)", path=p)
     return MarkerRecording(labels=tuple(str(x) for x in labels), positions=pos, fps=rate, source=p, first_frame=first)
+
+
+def _declared_frames(p: Path, markers: int) -> int | None:
+    """Frames the C3D header declares (``last - first + 1``, header words 4 and 5), or None
+    when the header cannot be read or its byte order does not match ``markers`` (ezc3d
+    silently rewrites its copy of the header to the frames it could read)."""
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(10)
+    except OSError:
+        return None
+    if len(head) < 10:
+        return None
+    for order in ("<", ">"):
+        count, _, first, last = struct.unpack(order + "4H", head[2:10])
+        if count == markers and 0 < first <= last:
+            return last - first + 1
+    return None
 
 
 def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,

@@ -226,3 +226,19 @@ def test_c3d_cut_short_warns_with_the_frames_declared_and_held(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert read_c3d_markers(shared_file("cmu_01_01_markers.c3d")).num_frames == 2751
+
+
+def test_trc_ragged_rows_are_named_by_line(tmp_path):
+    labels, P, _ = _standing_markers(6)
+    path = tmp_path / "ragged.trc"
+    _write_trc(path, labels, P * 1000)
+    lines = path.read_text().splitlines()
+    lines[6] = "\t".join(lines[6].split("\t")[:8])  # line 7 stops after marker 2
+    lines[8] += "\t1\t2\t3"  # line 9 holds a marker more than line 4 names
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.warns(UserWarning) as caught:
+        rec = read_trc_markers(path)
+    text = [str(w.message) for w in caught]
+    assert any("ragged.trc: 1 row(s) end early (line 7)" in t for t in text), text
+    assert any("ragged.trc: 1 row(s) hold more values" in t and "(line 9)" in t for t in text), text
+    assert rec.num_frames == 6 and np.isnan(rec.positions[1, 2:]).all() and np.isfinite(rec.positions[1, :2]).all()

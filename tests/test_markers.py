@@ -242,3 +242,18 @@ def test_trc_ragged_rows_are_named_by_line(tmp_path):
     assert any("ragged.trc: 1 row(s) end early (line 7)" in t for t in text), text
     assert any("ragged.trc: 1 row(s) hold more values" in t and "(line 9)" in t for t in text), text
     assert rec.num_frames == 6 and np.isnan(rec.positions[1, 2:]).all() and np.isfinite(rec.positions[1, :2]).all()
+
+
+def test_frames_without_head_or_trunk_markers_leak_no_numpy_warning():
+    from pathlib import Path
+
+    from physmocap.markers.joints import up_axis
+
+    labels, P, _ = _standing_markers(8)
+    top = [labels.index(k) for k in ("LFHD", "RFHD", "LBHD", "RBHD", "C7", "CLAV")]
+    P = P.copy()
+    P[:3, top] = np.nan  # the first frames see none of the head and trunk markers
+    rec = MarkerRecording(tuple(labels), P, 100.0, source=Path("gap.trc"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(up_axis(rec, detect_marker_set(rec.labels)), [0.0, 0.0, 1.0])

@@ -94,3 +94,17 @@ def test_single_limb_markers_take_the_side_they_are_on():
     segs = segment_markers(rec, ms)
     assert not any(s.startswith("left_") for s in segs.values())
     assert segs[rec.labels.index("ARMl")] == "right_upper_arm"
+
+
+@pytest.mark.parametrize("command", ["solve", "convert"])
+@pytest.mark.parametrize("frames", [["--start", "10"], ["--start", "4", "--end", "11"], ["--end", "40"]])
+def test_a_frame_range_outside_the_markers_is_one_error_and_no_file(tmp_path, capsys, command, frames):
+    path = tmp_path / "take.trc"
+    labels, P, _ = _standing_markers(10)
+    _write_trc(path, labels, P * 1000)
+    out = tmp_path / ("a.bvh" if command == "solve" else "a.mcap")
+    args = [command, str(path), "-o", str(out)] if command == "solve" else [command, str(path), str(out)]
+    assert main(args + frames) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: frame range" in err and "not inside the recording, which has frames 0 to 9" in err
+    assert "Traceback" not in err and not out.exists()

@@ -257,3 +257,26 @@ def test_frames_without_head_or_trunk_markers_leak_no_numpy_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert np.array_equal(up_axis(rec, detect_marker_set(rec.labels)), [0.0, 0.0, 1.0])
+
+
+def _c3d_copy(path, labels=None, points=None, frames: int = 200) -> None:
+    """The CMU take's first ``frames`` frames written again with ezc3d, with other labels or points."""
+    ezc3d = pytest.importorskip("ezc3d")
+    real = ezc3d.c3d(str(shared_file("cmu_01_01_markers.c3d")))
+    pts = np.asarray(real["data"]["points"])[:, :, :frames].copy()
+    out = ezc3d.c3d()
+    out["parameters"]["POINT"]["RATE"]["value"] = [120]
+    out["parameters"]["POINT"]["LABELS"]["value"] = list(real["parameters"]["POINT"]["LABELS"]["value"]) if labels is None else labels
+    out["data"]["points"] = pts if points is None else points(pts)
+    out.write(str(path))
+
+
+def test_c3d_without_labels_or_valid_samples_is_one_clear_error(tmp_path, capsys):
+    nolabels, nan = tmp_path / "nolabels.c3d", tmp_path / "nan.c3d"
+    _c3d_copy(nolabels, labels=[""] * 42)
+    _c3d_copy(nan, points=lambda p: np.where(np.arange(4)[:, None, None] < 3, np.nan, p))
+    for path, needle in ((nolabels, "no point labels"), (nan, "every marker sample is invalid")):
+        assert main(["solve", str(path), "-o", str(tmp_path / "out.bvh")]) == 2
+        err = capsys.readouterr().err
+        assert f"physmocap: error: {path}: {needle}" in err and "Traceback" not in err
+        assert not (tmp_path / "out.bvh").exists()

@@ -58,7 +58,10 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if declared is not None and declared > data.shape[2]:
         warn(f"{p}: the header declares {declared} frames but the file holds {data.shape[2]} (truncated?); "
              "read what is there")
-    labels = (labels + [f"marker{k}" for k in range(len(labels), M)])[:M]
+    labels = [str(x).strip() for x in labels[:M]]
+    if not any(labels):
+        raise InputError("no point labels (POINT:LABELS is empty): the markers cannot be told apart", path=p)
+    labels = [lab or f"marker{k}" for k, lab in enumerate(labels)] + [f"marker{k}" for k in range(len(labels), M)]
     if units is not None:
         scale = unit_scale(units, p)
     elif unit not in UNITS:
@@ -73,7 +76,7 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     pos[bad] = np.nan
     if np.all(bad):
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual)", path=p)
-    return MarkerRecording(labels=tuple(str(x) for x in labels), positions=pos, fps=rate, source=p, first_frame=first)
+    return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p, first_frame=first)
 
 
 def _declared_frames(p: Path, markers: int) -> int | None:

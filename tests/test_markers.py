@@ -280,3 +280,22 @@ def test_c3d_without_labels_or_valid_samples_is_one_clear_error(tmp_path, capsys
         err = capsys.readouterr().err
         assert f"physmocap: error: {path}: {needle}" in err and "Traceback" not in err
         assert not (tmp_path / "out.bvh").exists()
+
+
+def test_trc_labels_stay_above_their_columns(tmp_path):
+    labels, P, _ = _standing_markers(4)
+    path = tmp_path / "labels.trc"
+    _write_trc(path, labels, P * 1000)
+    lines = path.read_text().splitlines()
+    names = lines[3].split("\t")
+    names[2 + 3 * 2] = ""  # the third marker's label left blank: the later ones keep their columns
+    lines[3] = "\t".join(names)
+    path.write_text("\n".join(lines) + "\n")
+    rec = read_trc_markers(path)
+    assert rec.labels[2] == "marker2" and rec.labels[3:] == tuple(labels[3:])
+    assert np.allclose(rec.positions[:, 3], P[:, 3])
+    names[2 + 3 * 2 + 1] = "STRAY"
+    lines[3] = "\t".join(names)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"labels\.trc: line 4: label 'STRAY' is in column 10"):
+        read_trc_markers(path)

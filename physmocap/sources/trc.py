@@ -70,10 +70,16 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
                          "(or give the unit with --in-units)", path=p)
     else:
         scale = UNITS[unit]
-    names = _split(lines[3], sep)
-    labels = [n for n in names[2:] if n]
-    if not labels:
+    names = _split(lines[3], sep)[2:]
+    while names and not names[-1]:
+        names.pop()
+    if not names:
         raise InputError("line 4: no marker labels", path=p)
+    stray = next((k for k, n in enumerate(names) if n and k % 3), None)
+    if stray is not None:
+        raise InputError(f"line 4: label {names[stray][:40]!r} is in column {stray + 3}, not at the first of a "
+                         "marker's three columns (a label is missing or a column is extra before it)", path=p)
+    labels = [names[k] or f"marker{k // 3}" for k in range(0, len(names), 3)]
     M = len(labels)
     rows: list[list[float]] = []
     short: list[int] = []

@@ -108,3 +108,17 @@ def test_a_frame_range_outside_the_markers_is_one_error_and_no_file(tmp_path, ca
     err = capsys.readouterr().err
     assert f"{path}: frame range" in err and "not inside the recording, which has frames 0 to 9" in err
     assert "Traceback" not in err and not out.exists()
+
+
+def test_marker_set_file_errors_name_the_file(tmp_path, capsys):
+    path = tmp_path / "take.trc"
+    labels, P, _ = _standing_markers(10)
+    _write_trc(path, labels, P * 1000)
+    for name, body, needle in (("role.toml", 'FOO = "LKNE"', "unknown marker role 'FOO'"),
+                               ("label.toml", 'LKNE = "NOPE"', "marker 'NOPE' (for LKNE) is not in the recording")):
+        ms = tmp_path / name
+        ms.write_text(f"[markers]\n{body}\n")
+        assert main(["solve", str(path), "--marker-set", str(ms), "-o", str(tmp_path / "a.bvh")]) == 2
+        err = capsys.readouterr().err
+        assert f"physmocap: error: {ms}: {needle}" in err and "Traceback" not in err
+    assert not (tmp_path / "a.bvh").exists()

@@ -122,3 +122,16 @@ def test_marker_set_file_errors_name_the_file(tmp_path, capsys):
         err = capsys.readouterr().err
         assert f"physmocap: error: {ms}: {needle}" in err and "Traceback" not in err
     assert not (tmp_path / "a.bvh").exists()
+
+
+def test_markers_that_place_no_joint_are_one_error_and_no_file(tmp_path, capsys):
+    labels, P, _ = _standing_markers(30)
+    keep = [labels.index(k) for k in ("LFHD", "RFHD", "LKNE")]
+    path = tmp_path / "head.trc"
+    _write_trc(path, [labels[i] for i in keep], P[:, keep] * 1000)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["solve", str(path), "-o", str(tmp_path / "a.bvh")]) == 2
+    err = capsys.readouterr().err
+    assert f"physmocap: error: {path}: the markers place none of the joints" in err and "Traceback" not in err
+    assert not (tmp_path / "a.bvh").exists()

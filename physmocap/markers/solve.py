@@ -362,6 +362,10 @@ def calibrate_actor(
         if "pelvis" not in centres and "left_hip" in centres and "right_hip" in centres:
             centres["pelvis"] = 0.5 * (centres["left_hip"] + centres["right_hip"])
             names = ["pelvis"] + names
+        if not names:
+            raise InputError("the markers place none of the joints the actor is fitted to (pelvis or both hips, "
+                             f"knees, ankles, shoulders, elbows, wrists); they give only {', '.join(sorted(centres)) or 'none'}: "
+                             "too few markers are labelled or mapped (see physmocap inspect, --marker-set)", path=rec.source)
         C = np.stack([centres[n] for n in names], 1)
         seen = np.all(np.isfinite(C), 2)
         good = np.flatnonzero(seen.mean(1) >= 0.8)

@@ -34,6 +34,7 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
         raise InputError("reading C3D needs ezc3d: pip install ezc3d", path=p) from None
     if not p.is_file():
         raise InputError("file not found", path=p)
+    _check_parameter_section(p)
     try:
         c = ezc3d.c3d(str(p))
     except Exception as exc:  # noqa: BLE001 - ezc3d raises plain RuntimeError/ValueError on corrupt files
@@ -77,6 +78,31 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if np.all(bad):
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual)", path=p)
     return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p, first_frame=first)
+
+
+def _check_parameter_section(p: Path) -> None:
+    """An :class:`InputError` when the file ends inside its parameter section: ezc3d loops
+    forever on such a file.  The header's first byte is the section's first 512-byte block;
+    the section's own third byte the number of blocks it spans."""
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(2)
+            start = 512 * (head[0] - 1) if head and head[0] > 0 else 0
+            fh.seek(start)
+            section = fh.read(4)
+        size = p.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=p) from None
+    if size == 0:
+        raise InputError("empty file", path=p)
+    if len(head) < 2 or head[1] != 0x50:
+        raise InputError("not a C3D file (its second byte is not the C3D key 0x50)", path=p)
+    if len(section) < 4:
+        raise InputError(f"truncated C3D file: {size} bytes end before the parameter section (byte {start})", path=p)
+    end = start + 512 * section[2]
+    if size < end:
+        raise InputError(f"truncated C3D file: {size} bytes end inside the parameter section (bytes {start} to {end})",
+                         path=p)
 
 
 def _declared_frames(p: Path, markers: int) -> int | None:

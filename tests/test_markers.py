@@ -64,6 +64,15 @@ def _write_trc(path, labels, P_mm, fps=100.0, declared=None, sep="\t", units="mm
     path.write_text("\n".join(lines) + "\n")
 
 
+def _set_trc_cell(path, line: int, column: int, text: str) -> None:
+    """Replace one tab-separated cell of a TRC file written by :func:`_write_trc` (0-based)."""
+    lines = path.read_text().splitlines()
+    cells = lines[line].split("\t")
+    cells[column] = text
+    lines[line] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
 def _standing_markers(F: int = 60) -> tuple[list[str], np.ndarray, dict[str, np.ndarray]]:
     """A full-body marker set with medial markers (so knee/ankle/elbow centres are exact
     midpoints), in metres, Z-up, walking along +X; and the true joint centres."""
@@ -127,11 +136,7 @@ def test_trc_bad_cell_names_line_and_marker(tmp_path):
     labels, P, _ = _standing_markers(5)
     path = tmp_path / "bad.trc"
     _write_trc(path, labels, P * 1000)
-    lines = path.read_text().splitlines()
-    cells = lines[7].split("\t")
-    cells[2 + 3 * 3 + 1] = "oops"
-    lines[7] = "\t".join(cells)
-    path.write_text("\n".join(lines) + "\n")
+    _set_trc_cell(path, 7, 2 + 3 * 3 + 1, "oops")
     with pytest.raises(InputError, match=rf"line 8: marker {labels[3]} Y is not a number"):
         read_trc_markers(path)
 
@@ -286,16 +291,10 @@ def test_trc_labels_stay_above_their_columns(tmp_path):
     labels, P, _ = _standing_markers(4)
     path = tmp_path / "labels.trc"
     _write_trc(path, labels, P * 1000)
-    lines = path.read_text().splitlines()
-    names = lines[3].split("\t")
-    names[2 + 3 * 2] = ""  # the third marker's label left blank: the later ones keep their columns
-    lines[3] = "\t".join(names)
-    path.write_text("\n".join(lines) + "\n")
+    _set_trc_cell(path, 3, 2 + 3 * 2, "")  # the third marker's label left blank: the later ones keep their columns
     rec = read_trc_markers(path)
     assert rec.labels[2] == "marker2" and rec.labels[3:] == tuple(labels[3:])
     assert np.allclose(rec.positions[:, 3], P[:, 3])
-    names[2 + 3 * 2 + 1] = "STRAY"
-    lines[3] = "\t".join(names)
-    path.write_text("\n".join(lines) + "\n")
+    _set_trc_cell(path, 3, 2 + 3 * 2 + 1, "STRAY")
     with pytest.raises(InputError, match=r"labels\.trc: line 4: label 'STRAY' is in column 10"):
         read_trc_markers(path)

@@ -135,3 +135,13 @@ def test_markers_that_place_no_joint_are_one_error_and_no_file(tmp_path, capsys)
     err = capsys.readouterr().err
     assert f"physmocap: error: {path}: the markers place none of the joints" in err and "Traceback" not in err
     assert not (tmp_path / "a.bvh").exists()
+
+
+def test_segments_without_markers_are_warned(tmp_path):
+    labels, P, _ = _standing_markers(30)
+    keep = [i for i, lab in enumerate(labels) if not lab.startswith(("LKNE", "LANK", "LHEE", "LTOE"))]
+    path = tmp_path / "no_left_leg.trc"
+    _write_trc(path, [labels[i] for i in keep], P[:, keep] * 1000)
+    with pytest.warns(UserWarning, match=r"no_left_leg\.trc: no marker on 5 segment\(s\): left_thigh, left_shank, "
+                      r"left_foot, left_hand, right_hand; they keep the actor.s rest pose"):
+        assert main(["solve", str(path), "-o", str(tmp_path / "a.bvh"), "--quiet"]) == 0

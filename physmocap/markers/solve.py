@@ -336,6 +336,10 @@ def calibrate_actor(
     warn_fallbacks(cal, rec.source)
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)
     seg_of = {i: s for i, s in seg_of.items() if s in SEGMENT_BODY}
+    bare = [s for s in SEGMENT_BODY if s not in set(seg_of.values())]
+    if bare:
+        warn(f"{rec.source}: no marker on {len(bare)} segment(s): {', '.join(bare)}; they keep the actor's rest "
+             "pose")
     # segments with too few markers for a frame still take their markers (the IK needs no frame)
     M = len(rec.labels)
     R = _to_z_up(up_axis(rec, ms))

@@ -64,6 +64,17 @@ def _write_trc(path, labels, P_mm, fps=100.0, declared=None, sep="\t", units="mm
     path.write_text("\n".join(lines) + "\n")
 
 
+def solve_fails_cleanly(capsys, path, out, needle: str) -> None:
+    """``physmocap solve path -o out`` exits 2 with one error naming ``path`` and saying
+    ``needle``, no traceback and no ``out``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["solve", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"physmocap: error: {path}: {needle}" in err and "Traceback" not in err
+    assert not out.exists()
+
+
 def _set_trc_cell(path, line: int, column: int, text: str) -> None:
     """Replace one tab-separated cell of a TRC file written by :func:`_write_trc` (0-based)."""
     lines = path.read_text().splitlines()
@@ -281,10 +292,7 @@ def test_c3d_without_labels_or_valid_samples_is_one_clear_error(tmp_path, capsys
     _c3d_copy(nolabels, labels=[""] * 42)
     _c3d_copy(nan, points=lambda p: np.where(np.arange(4)[:, None, None] < 3, np.nan, p))
     for path, needle in ((nolabels, "no point labels"), (nan, "every marker sample is invalid")):
-        assert main(["solve", str(path), "-o", str(tmp_path / "out.bvh")]) == 2
-        err = capsys.readouterr().err
-        assert f"physmocap: error: {path}: {needle}" in err and "Traceback" not in err
-        assert not (tmp_path / "out.bvh").exists()
+        solve_fails_cleanly(capsys, path, tmp_path / "out.bvh", needle)
 
 
 def test_trc_labels_stay_above_their_columns(tmp_path):

@@ -55,12 +55,11 @@ ANGLES = {"knee": ("hip", "knee", "ankle"), "elbow": ("shoulder", "elbow", "wris
 
 
 def kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R, t minimising |R a + t - b| over rows (N, 3)."""
-    ma, mb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((b - mb).T @ (a - ma))
-    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))])
-    R = U @ D @ Vt
-    return R, mb - R @ ma
+    """R, t minimising |R a + t - b| over rows (N, 3): the calibration's rigid fit, one frame."""
+    from physmocap.markers.functional import _kabsch
+
+    R, t = _kabsch(a, b[None], np.ones((1, len(a))))
+    return R[0], t[0]
 
 
 def angle(a, b, c) -> np.ndarray:

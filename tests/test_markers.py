@@ -64,6 +64,26 @@ def _write_trc(path, labels, P_mm, fps=100.0, declared=None, sep="\t", units="mm
     path.write_text("\n".join(lines) + "\n")
 
 
+def solve_fails_cleanly(capsys, path, out, needle: str) -> None:
+    """``physmocap solve path -o out`` exits 2 with one error naming ``path`` and saying
+    ``needle``, no traceback and no ``out``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["solve", str(path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"physmocap: error: {path}: {needle}" in err and "Traceback" not in err
+    assert not out.exists()
+
+
+def _set_trc_cell(path, line: int, column: int, text: str) -> None:
+    """Replace one tab-separated cell of a TRC file written by :func:`_write_trc` (0-based)."""
+    lines = path.read_text().splitlines()
+    cells = lines[line].split("\t")
+    cells[column] = text
+    lines[line] = "\t".join(cells)
+    path.write_text("\n".join(lines) + "\n")
+
+
 def _standing_markers(F: int = 60) -> tuple[list[str], np.ndarray, dict[str, np.ndarray]]:
     """A full-body marker set with medial markers (so knee/ankle/elbow centres are exact
     midpoints), in metres, Z-up, walking along +X; and the true joint centres."""
@@ -127,11 +147,7 @@ def test_trc_bad_cell_names_line_and_marker(tmp_path):
     labels, P, _ = _standing_markers(5)
     path = tmp_path / "bad.trc"
     _write_trc(path, labels, P * 1000)
-    lines = path.read_text().splitlines()
-    cells = lines[7].split("\t")
-    cells[2 + 3 * 3 + 1] = "oops"
-    lines[7] = "\t".join(cells)
-    path.write_text("\n".join(lines) + "\n")
+    _set_trc_cell(path, 7, 2 + 3 * 3 + 1, "oops")
     with pytest.raises(InputError, match=rf"line 8: marker {labels[3]} Y is not a number"):
         read_trc_markers(path)
 
@@ -210,3 +226,83 @@ def test_inspect_markers_and_the_emitted_marker_set(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main(["retarget", str(path), "-o", str(tmp_path / "o.npz"), "--marker-set", str(tmp_path / "set.toml"), "--quiet"]) == 0
+
+
+def test_c3d_cut_short_warns_with_the_frames_declared_and_held(tmp_path):
+    """ezc3d reads a C3D cut inside its data and rewrites its header to match: the raw header
+    still tells what was lost."""
+    from physmocap.sources.c3d import read_c3d_markers
+
+    real = shared_file("cmu_01_01_markers.c3d").read_bytes()
+    half = tmp_path / "half.c3d"
+    half.write_bytes(real[: len(real) // 2])
+    with pytest.warns(UserWarning, match=r"half\.c3d: the header declares 2751 frames but the file holds \d+"):
+        rec = read_c3d_markers(half)
+    assert 0 < rec.num_frames < 2751
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert read_c3d_markers(shared_file("cmu_01_01_markers.c3d")).num_frames == 2751
+
+
+def test_trc_ragged_rows_are_named_by_line(tmp_path):
+    labels, P, _ = _standing_markers(6)
+    path = tmp_path / "ragged.trc"
+    _write_trc(path, labels, P * 1000)
+    lines = path.read_text().splitlines()
+    lines[6] = "\t".join(lines[6].split("\t")[:8])  # line 7 stops after marker 2
+    lines[8] += "\t1\t2\t3"  # line 9 holds a marker more than line 4 names
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.warns(UserWarning) as caught:
+        rec = read_trc_markers(path)
+    text = [str(w.message) for w in caught]
+    assert any("ragged.trc: 1 row(s) end early (line 7)" in t for t in text), text
+    assert any("ragged.trc: 1 row(s) hold more values" in t and "(line 9)" in t for t in text), text
+    assert rec.num_frames == 6 and np.isnan(rec.positions[1, 2:]).all() and np.isfinite(rec.positions[1, :2]).all()
+
+
+def test_frames_without_head_or_trunk_markers_leak_no_numpy_warning():
+    from pathlib import Path
+
+    from physmocap.markers.joints import up_axis
+
+    labels, P, _ = _standing_markers(8)
+    top = [labels.index(k) for k in ("LFHD", "RFHD", "LBHD", "RBHD", "C7", "CLAV")]
+    P = P.copy()
+    P[:3, top] = np.nan  # the first frames see none of the head and trunk markers
+    rec = MarkerRecording(tuple(labels), P, 100.0, source=Path("gap.trc"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert np.array_equal(up_axis(rec, detect_marker_set(rec.labels)), [0.0, 0.0, 1.0])
+
+
+def _c3d_copy(path, labels=None, points=None, frames: int = 200) -> None:
+    """The CMU take's first ``frames`` frames written again with ezc3d, with other labels or points."""
+    ezc3d = pytest.importorskip("ezc3d")
+    real = ezc3d.c3d(str(shared_file("cmu_01_01_markers.c3d")))
+    pts = np.asarray(real["data"]["points"])[:, :, :frames].copy()
+    out = ezc3d.c3d()
+    out["parameters"]["POINT"]["RATE"]["value"] = [120]
+    out["parameters"]["POINT"]["LABELS"]["value"] = list(real["parameters"]["POINT"]["LABELS"]["value"]) if labels is None else labels
+    out["data"]["points"] = pts if points is None else points(pts)
+    out.write(str(path))
+
+
+def test_c3d_without_labels_or_valid_samples_is_one_clear_error(tmp_path, capsys):
+    nolabels, nan = tmp_path / "nolabels.c3d", tmp_path / "nan.c3d"
+    _c3d_copy(nolabels, labels=[""] * 42)
+    _c3d_copy(nan, points=lambda p: np.where(np.arange(4)[:, None, None] < 3, np.nan, p))
+    for path, needle in ((nolabels, "no point labels"), (nan, "every marker sample is invalid")):
+        solve_fails_cleanly(capsys, path, tmp_path / "out.bvh", needle)
+
+
+def test_trc_labels_stay_above_their_columns(tmp_path):
+    labels, P, _ = _standing_markers(4)
+    path = tmp_path / "labels.trc"
+    _write_trc(path, labels, P * 1000)
+    _set_trc_cell(path, 3, 2 + 3 * 2, "")  # the third marker's label left blank: the later ones keep their columns
+    rec = read_trc_markers(path)
+    assert rec.labels[2] == "marker2" and rec.labels[3:] == tuple(labels[3:])
+    assert np.allclose(rec.positions[:, 3], P[:, 3])
+    _set_trc_cell(path, 3, 2 + 3 * 2 + 1, "STRAY")
+    with pytest.raises(InputError, match=r"labels\.trc: line 4: label 'STRAY' is in column 10"):
+        read_trc_markers(path)

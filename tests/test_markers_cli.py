@@ -11,7 +11,7 @@ import pytest
 from conftest import shared_file
 from physmocap.cli import main
 from physmocap.sources import load_motion
-from test_markers import _standing_markers, _write_trc
+from test_markers import _standing_markers, _write_trc, solve_fails_cleanly
 
 
 def test_inspect_takes_the_unit_given_for_marker_files(tmp_path, capsys):
@@ -94,3 +94,49 @@ def test_single_limb_markers_take_the_side_they_are_on():
     segs = segment_markers(rec, ms)
     assert not any(s.startswith("left_") for s in segs.values())
     assert segs[rec.labels.index("ARMl")] == "right_upper_arm"
+
+
+@pytest.mark.parametrize("command", ["solve", "convert"])
+@pytest.mark.parametrize("frames", [["--start", "10"], ["--start", "4", "--end", "11"], ["--end", "40"]])
+def test_a_frame_range_outside_the_markers_is_one_error_and_no_file(tmp_path, capsys, command, frames):
+    path = tmp_path / "take.trc"
+    labels, P, _ = _standing_markers(10)
+    _write_trc(path, labels, P * 1000)
+    out = tmp_path / ("a.bvh" if command == "solve" else "a.mcap")
+    args = [command, str(path), "-o", str(out)] if command == "solve" else [command, str(path), str(out)]
+    assert main(args + frames) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: frame range" in err and "not inside the recording, which has frames 0 to 9" in err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_marker_set_file_errors_name_the_file(tmp_path, capsys):
+    path = tmp_path / "take.trc"
+    labels, P, _ = _standing_markers(10)
+    _write_trc(path, labels, P * 1000)
+    for name, body, needle in (("role.toml", 'FOO = "LKNE"', "unknown marker role 'FOO'"),
+                               ("label.toml", 'LKNE = "NOPE"', "marker 'NOPE' (for LKNE) is not in the recording")):
+        ms = tmp_path / name
+        ms.write_text(f"[markers]\n{body}\n")
+        assert main(["solve", str(path), "--marker-set", str(ms), "-o", str(tmp_path / "a.bvh")]) == 2
+        err = capsys.readouterr().err
+        assert f"physmocap: error: {ms}: {needle}" in err and "Traceback" not in err
+    assert not (tmp_path / "a.bvh").exists()
+
+
+def test_markers_that_place_no_joint_are_one_error_and_no_file(tmp_path, capsys):
+    labels, P, _ = _standing_markers(30)
+    keep = [labels.index(k) for k in ("LFHD", "RFHD", "LKNE")]
+    path = tmp_path / "head.trc"
+    _write_trc(path, [labels[i] for i in keep], P[:, keep] * 1000)
+    solve_fails_cleanly(capsys, path, tmp_path / "a.bvh", "the markers place none of the joints")
+
+
+def test_segments_without_markers_are_warned(tmp_path):
+    labels, P, _ = _standing_markers(30)
+    keep = [i for i, lab in enumerate(labels) if not lab.startswith(("LKNE", "LANK", "LHEE", "LTOE"))]
+    path = tmp_path / "no_left_leg.trc"
+    _write_trc(path, [labels[i] for i in keep], P[:, keep] * 1000)
+    with pytest.warns(UserWarning, match=r"no_left_leg\.trc: no marker on 5 segment\(s\): left_thigh, left_shank, "
+                      r"left_foot, left_hand, right_hand; they keep the actor.s rest pose"):
+        assert main(["solve", str(path), "-o", str(tmp_path / "a.bvh"), "--quiet"]) == 0

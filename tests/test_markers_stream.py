@@ -113,3 +113,14 @@ def test_replay_streams_a_marker_mcap_onto_the_robot(tmp_path, capsys):
     with np.load(out) as z:
         assert z["qpos"].shape[0] == 360 and np.all(np.isfinite(z["qpos"]))
     assert "replayed 360 frames" in capsys.readouterr().out
+
+
+def test_replay_warns_when_the_calibration_is_longer_than_the_recording(tmp_path, capsys):
+    from physmocap.export.mcap import write_markers_mcap
+
+    path = tmp_path / "short.mcap"
+    write_markers_mcap(_cmu(240), path)
+    with pytest.warns(UserWarning, match=r"short\.mcap: the recording lasts 2 s, less than the 100 s of "
+                      "--calibration-seconds; the actor is calibrated on all of it"):
+        assert main(["replay", str(path), "--calibration-seconds", "100"]) == 0
+    assert "calibrated on first 240 frames" in capsys.readouterr().out

@@ -136,19 +136,14 @@ def _convert_markers(args: argparse.Namespace, out_opts: dict) -> int:
     """A marker file (.c3d, .trc) to an MCAP marker recording (labelled points, metres, the
     file's axes: :func:`physmocap.export.mcap.write_markers_mcap`), cut to [--start, --end)."""
     from ..export.mcap import write_markers_mcap
-    from ..markers.recording import MarkerRecording
     from .solve import read_markers
 
     if out_opts or args.fps is not None or args.in_up is not None:
         raise OptionError("a marker recording is written to MCAP as it is (metres, the file's axes): "
                           "--rotation-order, --units, --up, --precision, --fps and --in-up do not apply")
-    rec = read_markers(args.input, args.in_units)
-    F = rec.num_frames
-    start = 0 if args.start is None else args.start
-    end = F if args.end is None else args.end
-    if not (0 <= start < end <= F):
-        raise OptionError(f"--start {start} --end {end}: the frame range must satisfy 0 <= start < end <= {F}")
-    rec = MarkerRecording(rec.labels, rec.positions[start:end], rec.fps, rec.source, rec.first_frame + start)
+    whole = read_markers(args.input, args.in_units)
+    F = whole.num_frames
+    rec = whole.frames(args.start, args.end)
     print(f"physmocap: read {rec.source}: {F} frames at {rec.fps:.6g} fps, {len(rec.labels)} markers", file=sys.stderr)
     out = write_markers_mcap(rec, args.output)
     print(f"physmocap: wrote {out}: {rec.num_frames} frames of labelled markers at {rec.fps:.6g} fps", file=sys.stderr)

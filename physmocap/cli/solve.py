@@ -58,7 +58,6 @@ def read_markers(path: str, units: str | float | None = None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..markers.recording import MarkerRecording
     from ..markers.solve import MarkerSolveOptions, print_report, solve_markers, write_actor_bvh
     from ..options import check_frame_range
     from .retarget import WRITERS
@@ -83,14 +82,7 @@ def run(args: argparse.Namespace) -> int:
     check_frame_range(args.start, args.end)
     if args.max_iterations < 1:
         raise OptionError("--max-iterations must be at least 1")
-    rec = read_markers(args.input, args.in_units)
-    if args.start is not None or args.end is not None:
-        F = rec.num_frames
-        s = 0 if args.start is None else args.start
-        e = F if args.end is None else min(args.end, F)
-        if not 0 <= s < F:
-            raise OptionError(f"--start {s} is outside the recording (frames 0-{F - 1})", path=args.input)
-        rec = MarkerRecording(rec.labels, rec.positions[s:e], rec.fps, rec.source, rec.first_frame + s)
+    rec = read_markers(args.input, args.in_units).frames(args.start, args.end)
     character = None
     if args.character is not None:
         from ..models import load_character

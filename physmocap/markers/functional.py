@@ -65,6 +65,9 @@ __all__ = [
 MIN_SPREAD_DEG = 25.0
 #: Fewest distinct poses (bins) a functional fit uses.
 MIN_FRAMES = 30
+#: Fewest distinct poses when the child segment has one marker (a sphere fit of one point: no
+#: rigid frame to average the skin motion over).  A heuristic, not from a paper.
+MIN_FRAMES_ONE_MARKER = 100
 #: Largest fit residual (metres) still believed.
 MAX_RESIDUAL = 0.03
 #: Largest distance (metres) a functional centre may lie from the regression estimate.
@@ -654,9 +657,10 @@ def _fit_joint(rec, joint, parent: SegmentFrames | None, child: SegmentFrames | 
         usable &= child.ok
     chosen, spread, minor = _pick_frames(np.nan_to_num(D), usable)
     if len(chosen) < MIN_FRAMES:
-        return f"the parent and child are seen together in only {len(chosen)} distinct poses", None
-    if len(child_markers) == 1 and len(chosen) < 100:
-        return f"one marker on the child segment, seen in only {len(chosen)} distinct poses (100 needed)", None
+        return f"the parent and child are seen together in only {len(chosen)} distinct poses ({MIN_FRAMES} needed)", None
+    if len(child_markers) == 1 and len(chosen) < MIN_FRAMES_ONE_MARKER:
+        return (f"one marker on the child segment, seen in only {len(chosen)} distinct poses "
+                f"({MIN_FRAMES_ONE_MARKER} needed)"), None
     if spread < MIN_SPREAD_DEG:
         return f"the joint moves only {spread:.0f} degrees (a functional fit needs {MIN_SPREAD_DEG:.0f})", None
     jkind = joint.split("_", 1)[1]

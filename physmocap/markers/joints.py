@@ -32,6 +32,7 @@ motion where it can place a centre and keeps these elsewhere.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,7 +81,9 @@ def up_axis(rec: MarkerRecording, ms: MarkerSet) -> np.ndarray:
         idx = [ms.roles[r] for r in roles if r in ms.roles]
         if not idx:
             return None
-        return np.nanmean(P[:, idx], axis=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames where none of them is seen: NaN
+            return np.nanmean(P[:, idx], axis=1)
 
     top = centroid(("LFHD", "RFHD", "LBHD", "RBHD", "C7", "CLAV"))
     low = centroid(("LANK", "RANK", "LHEE", "RHEE", "LTOE", "RTOE"))

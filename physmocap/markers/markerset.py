@@ -129,7 +129,12 @@ def recording_marker_set(rec, marker_set: "str | os.PathLike | MarkerSet | None"
 
     if isinstance(marker_set, MarkerSet):
         return marker_set
-    ms = detect_marker_set(rec.labels, load_marker_set(marker_set) if marker_set is not None else None)
+    if marker_set is None:
+        return with_sides(rec, detect_marker_set(rec.labels))
+    try:
+        ms = detect_marker_set(rec.labels, load_marker_set(marker_set))
+    except MappingError as exc:  # a role or label of the user's file: name the file, and the recording
+        raise MappingError(f"{exc.message} (recording {rec.source})", path=marker_set) from None
     return with_sides(rec, ms)
 
 

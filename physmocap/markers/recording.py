@@ -81,6 +81,22 @@ class MarkerRecording:
         """``(F, M)`` True where a marker sample is usable."""
         return np.all(np.isfinite(self.positions), axis=2)
 
+    def frames(self, start: int | None = None, end: int | None = None) -> "MarkerRecording":
+        """Frames ``[start, end)`` (``--start`` / ``--end``: end exclusive, the file's first
+        frame shifted); an :class:`~physmocap.errors.OptionError` naming the file when the
+        range is not inside the recording."""
+        from ..errors import OptionError
+
+        F = self.num_frames
+        s = 0 if start is None else int(start)
+        e = F if end is None else int(end)
+        if not 0 <= s < e <= F:
+            raise OptionError(f"frame range [{s}, {e}) is not inside the recording, which has frames 0 to {F - 1} "
+                              "(--start is inclusive, --end exclusive)", path=self.source)
+        if (s, e) == (0, F):
+            return self
+        return MarkerRecording(self.labels, self.positions[s:e], self.fps, self.source, self.first_frame + s)
+
     def gaps(self) -> dict[str, int]:
         """Marker label -> number of invalid frames (markers with any)."""
         missing = (~self.valid).sum(axis=0)

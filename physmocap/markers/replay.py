@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OptionError
+from ..errors import OptionError, warn
 from .recording import MarkerRecording
 
 __all__ = ["replay_markers", "read_marker_recording"]
@@ -52,7 +52,13 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
         raise OptionError("--compare, --source-map and --floor are for skeleton recordings, not markers")
     rec = read_marker_recording(args.input)
     character = load_character(args.character, args.map) if args.character else None
-    cal = read_marker_recording(args.calibrate) if args.calibrate else calibration_slice(rec, args.calibration_seconds)
+    if args.calibrate:
+        cal = read_marker_recording(args.calibrate)
+    else:
+        cal = calibration_slice(rec, args.calibration_seconds)
+        if args.calibration_seconds * rec.fps > rec.num_frames:
+            warn(f"{rec.source}: the recording lasts {rec.num_frames / rec.fps:.3g} s, less than the "
+                 f"{args.calibration_seconds:g} s of --calibration-seconds; the actor is calibrated on all of it")
     t0 = time.perf_counter()
     stream = MarkerStream.calibrate(cal, args.marker_set, labels=rec.labels)
     calib_s = time.perf_counter() - t0

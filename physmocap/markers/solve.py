@@ -336,6 +336,10 @@ def calibrate_actor(
     warn_fallbacks(cal, rec.source)
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)
     seg_of = {i: s for i, s in seg_of.items() if s in SEGMENT_BODY}
+    bare = [s for s in SEGMENT_BODY if s not in set(seg_of.values())]
+    if bare:
+        warn(f"{rec.source}: no marker on {len(bare)} segment(s): {', '.join(bare)}; they keep the actor's rest "
+             "pose")
     # segments with too few markers for a frame still take their markers (the IK needs no frame)
     M = len(rec.labels)
     R = _to_z_up(up_axis(rec, ms))
@@ -362,6 +366,10 @@ def calibrate_actor(
         if "pelvis" not in centres and "left_hip" in centres and "right_hip" in centres:
             centres["pelvis"] = 0.5 * (centres["left_hip"] + centres["right_hip"])
             names = ["pelvis"] + names
+        if not names:
+            raise InputError("the markers place none of the joints the actor is fitted to (pelvis or both hips, "
+                             f"knees, ankles, shoulders, elbows, wrists); they give only {', '.join(sorted(centres)) or 'none'}: "
+                             "too few markers are labelled or mapped (see physmocap inspect, --marker-set)", path=rec.source)
         C = np.stack([centres[n] for n in names], 1)
         seen = np.all(np.isfinite(C), 2)
         good = np.flatnonzero(seen.mean(1) >= 0.8)

@@ -33,7 +33,7 @@ def calibration_slice(rec: MarkerRecording, seconds: float = CALIBRATION_SECONDS
     if not (np.isfinite(seconds) and seconds > 0):
         raise InputError(f"the calibration needs a positive duration, got {seconds} s", path=rec.source)
     n = max(1, min(rec.num_frames, int(round(seconds * rec.fps))))
-    return MarkerRecording(rec.labels, rec.positions[:n], rec.fps, rec.source, rec.first_frame)
+    return rec.frames(0, n)
 
 
 @dataclass

@@ -9,6 +9,7 @@ actor's canonical joint centres (:mod:`physmocap.markers`).
 from __future__ import annotations
 
 import os
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,7 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
         raise InputError("reading C3D needs ezc3d: pip install ezc3d", path=p) from None
     if not p.is_file():
         raise InputError("file not found", path=p)
+    _check_parameter_section(p)
     try:
         c = ezc3d.c3d(str(p))
     except Exception as exc:  # noqa: BLE001 - ezc3d raises plain RuntimeError/ValueError on corrupt files
@@ -53,7 +55,14 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if data.ndim != 3 or data.shape[1] == 0 or data.shape[2] == 0:
         raise InputError("C3D file holds no marker samples", path=p)
     M = data.shape[1]
-    labels = (labels + [f"marker{k}" for k in range(len(labels), M)])[:M]
+    declared = _declared_frames(p, M)
+    if declared is not None and declared > data.shape[2]:
+        warn(f"{p}: the header declares {declared} frames but the file holds {data.shape[2]} (truncated?); "
+             "read what is there")
+    labels = [str(x).strip() for x in labels[:M]]
+    if not any(labels):
+        raise InputError("no point labels (POINT:LABELS is empty): the markers cannot be told apart", path=p)
+    labels = [lab or f"marker{k}" for k, lab in enumerate(labels)] + [f"marker{k}" for k in range(len(labels), M)]
     if units is not None:
         scale = unit_scale(units, p)
     elif unit not in UNITS:
@@ -68,7 +77,50 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     pos[bad] = np.nan
     if np.all(bad):
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual)", path=p)
-    return MarkerRecording(labels=tuple(str(x) for x in labels), positions=pos, fps=rate, source=p, first_frame=first)
+    return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p, first_frame=first)
+
+
+def _check_parameter_section(p: Path) -> None:
+    """An :class:`InputError` when the file ends inside its parameter section: ezc3d loops
+    forever on such a file.  The header's first byte is the section's first 512-byte block;
+    the section's own third byte the number of blocks it spans."""
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(2)
+            start = 512 * (head[0] - 1) if head and head[0] > 0 else 0
+            fh.seek(start)
+            section = fh.read(4)
+        size = p.stat().st_size
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=p) from None
+    if size == 0:
+        raise InputError("empty file", path=p)
+    if len(head) < 2 or head[1] != 0x50:
+        raise InputError("not a C3D file (its second byte is not the C3D key 0x50)", path=p)
+    if len(section) < 4:
+        raise InputError(f"truncated C3D file: {size} bytes end before the parameter section (byte {start})", path=p)
+    end = start + 512 * section[2]
+    if size < end:
+        raise InputError(f"truncated C3D file: {size} bytes end inside the parameter section (bytes {start} to {end})",
+                         path=p)
+
+
+def _declared_frames(p: Path, markers: int) -> int | None:
+    """Frames the C3D header declares (``last - first + 1``, header words 4 and 5), or None
+    when the header cannot be read or its byte order does not match ``markers`` (ezc3d
+    silently rewrites its copy of the header to the frames it could read)."""
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(10)
+    except OSError:
+        return None
+    if len(head) < 10:
+        return None
+    for order in ("<", ">"):
+        count, _, first, last = struct.unpack(order + "4H", head[2:10])
+        if count == markers and 0 < first <= last:
+            return last - first + 1
+    return None
 
 
 def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,

@@ -31,6 +31,12 @@ def _split(line: str, sep: str) -> list[str]:
     return [c.strip() for c in line.rstrip("\r\n").split(sep)]
 
 
+def _lines(numbers: list[int], shown: int = 5) -> str:
+    """Line numbers for a message: the first ``shown``, then how many more."""
+    text = ", ".join(str(n) for n in numbers[:shown])
+    return text + (f" and {len(numbers) - shown} more" if len(numbers) > shown else "")
+
+
 def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) -> MarkerRecording:
     """The labelled markers of a TRC file (metres, the file's axes).
 
@@ -64,21 +70,30 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
                          "(or give the unit with --in-units)", path=p)
     else:
         scale = UNITS[unit]
-    names = _split(lines[3], sep)
-    labels = [n for n in names[2:] if n]
-    if not labels:
+    names = _split(lines[3], sep)[2:]
+    while names and not names[-1]:
+        names.pop()
+    if not names:
         raise InputError("line 4: no marker labels", path=p)
+    stray = next((k for k, n in enumerate(names) if n and k % 3), None)
+    if stray is not None:
+        raise InputError(f"line 4: label {names[stray][:40]!r} is in column {stray + 3}, not at the first of a "
+                         "marker's three columns (a label is missing or a column is extra before it)", path=p)
+    labels = [names[k] or f"marker{k // 3}" for k in range(0, len(names), 3)]
     M = len(labels)
     rows: list[list[float]] = []
-    short = 0
+    short: list[int] = []
+    long: list[int] = []
     for ln, line in enumerate(lines[5:], start=6):
         if not line.strip() or not line.replace(sep, "").strip():
             continue
         cells = _split(line, sep)
         vals = cells[2 : 2 + 3 * M]
         if len(vals) < 3 * M:
-            short += 1
+            short.append(ln)
             vals = vals + [""] * (3 * M - len(vals))
+        if any(cells[2 + 3 * M :]):
+            long.append(ln)
         row = []
         for k, cell in enumerate(vals):
             if cell == "" or cell.lower() == "nan":
@@ -98,7 +113,10 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
     if declared and declared.isdigit() and int(declared) != len(rows):
         warn(f"{p}: the header declares {declared} frames but the file holds {len(rows)}; read what is there")
     if short:
-        warn(f"{p}: {short} row(s) end early; their missing markers are gaps")
+        warn(f"{p}: {len(short)} row(s) end early (line {_lines(short)}); their missing markers are gaps")
+    if long:
+        warn(f"{p}: {len(long)} row(s) hold more values than the {M} markers of line 4 (line {_lines(long)}); "
+             "the extra values are ignored")
     pos = np.array(rows, dtype=float).reshape(len(rows), M, 3) * scale
     pos[np.all(pos == 0.0, axis=2)] = np.nan
     if not np.isfinite(pos).any():

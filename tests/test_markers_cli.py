@@ -132,6 +132,7 @@ def test_markers_that_place_no_joint_are_one_error_and_no_file(tmp_path, capsys)
     solve_fails_cleanly(capsys, path, tmp_path / "a.bvh", "the markers place none of the joints")
 
 
+@pytest.mark.filterwarnings("ignore:.*joint centres from the anatomical regression")
 def test_segments_without_markers_are_warned(tmp_path):
     labels, P, _ = _standing_markers(30)
     keep = [i for i, lab in enumerate(labels) if not lab.startswith(("LKNE", "LANK", "LHEE", "LTOE"))]

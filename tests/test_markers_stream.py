@@ -115,6 +115,8 @@ def test_replay_streams_a_marker_mcap_onto_the_robot(tmp_path, capsys):
     assert "replayed 360 frames" in capsys.readouterr().out
 
 
+@pytest.mark.filterwarnings("ignore:.*joint centres from the anatomical regression")
+@pytest.mark.filterwarnings("ignore:.*marker\\(s\\) belong to no segment")
 def test_replay_warns_when_the_calibration_is_longer_than_the_recording(tmp_path, capsys):
     from physmocap.export.mcap import write_markers_mcap
 

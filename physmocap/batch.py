@@ -34,7 +34,7 @@ from typing import Any, Iterable
 from .errors import InputError, OptionError, OutputError, PhysmocapError
 from .fileio import check_output_dir, read_text
 
-__all__ = ["Job", "FileResult", "ManifestEntry", "plan", "read_manifest", "run_job", "run_batch", "SUMMARY_FIELDS"]
+__all__ = ["Job", "FileResult", "ManifestEntry", "OptionTable", "plan", "read_manifest", "run_job", "run_batch", "SUMMARY_FIELDS"]
 
 #: Input suffixes a folder or glob picks up.
 INPUT_SUFFIXES = (".bvh", ".c3d", ".trc", ".mcap", ".csv", ".jsonl")
@@ -127,7 +127,7 @@ def _inputs(source: str, outdir: Path) -> tuple[list[ManifestEntry], Path]:
     )
 
 
-def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | None = None) -> list[ManifestEntry]:
+def read_manifest(path: str | os.PathLike, table: "OptionTable | None" = None) -> list[ManifestEntry]:
     """The entries of a manifest, paths relative to its folder made absolute.
 
     ``.txt``: one input a line (blank lines and ``#`` comments skipped).  ``.csv``: a header
@@ -136,24 +136,20 @@ def read_manifest(path: str | os.PathLike, parser: argparse.ArgumentParser | Non
     and ``#`` comments skipped; ``null`` is not given).  Option names are ``retarget``'s
     command-line options (``no-plant``, ``max-iterations``, ``start``...; a leading ``--``
     and ``_`` for ``-`` accepted); flags take true/false, 1/0 or yes/no.  Values are parsed
-    by ``retarget``'s own option parser (``parser``, default
-    :func:`~physmocap.cli.retarget.retarget_option_parser`).
+    by ``retarget``'s own options (``table``, default :meth:`OptionTable.build`).
 
     Raises:
         InputError: The manifest cannot be read, a line is not well-formed or has no input.
         OptionError: An unknown option or a bad value (naming the manifest and line).
     """
     p = Path(path)
-    if parser is None:
-        from .cli.retarget import retarget_option_parser
-
-        parser = retarget_option_parser()
+    table = table or OptionTable.build()
     # a spreadsheet's CSV may start with a byte-order mark: read_text drops it, and names the
     # line of a byte that is not UTF-8
     text = read_text(p, "manifest", limit=MAX_MANIFEST_BYTES)
     suffix = p.suffix.lower()
     rows = _txt_rows(text) if suffix == ".txt" else _csv_rows(text, p) if suffix == ".csv" else _jsonl_rows(text, p)
-    return [_entry(line, row, p, parser) for line, row in rows]
+    return [_entry(line, row, p, table) for line, row in rows]
 
 
 def _txt_rows(text: str) -> list[tuple[int, dict[str, Any]]]:
@@ -202,7 +198,7 @@ def _jsonl_rows(text: str, path: Path) -> list[tuple[int, dict[str, Any]]]:
     return rows
 
 
-def _entry(line: int, row: dict[str, Any], manifest: Path, parser: argparse.ArgumentParser) -> ManifestEntry:
+def _entry(line: int, row: dict[str, Any], manifest: Path, table: "OptionTable") -> ManifestEntry:
     """One manifest row as an entry: paths resolved against the manifest's folder, options
     parsed and checked as ``retarget`` does (:func:`parse_file_options`)."""
     base = manifest.parent
@@ -218,14 +214,64 @@ def _entry(line: int, row: dict[str, Any], manifest: Path, parser: argparse.Argu
         raise OptionError(f"output {out!r}: the suffix must be one of {', '.join(OUTPUT_SUFFIXES)}",
                           path=manifest, line=line)
     try:
-        options = parse_file_options(row, parser, base)
+        options = parse_file_options(row, table, base)
     except OptionError as exc:
         raise OptionError(exc.message, path=manifest, line=line) from None
     return ManifestEntry(line, base / inp, output, options)
 
 
-def parse_file_options(row: dict[str, Any], parser: argparse.ArgumentParser, base: Path) -> dict[str, Any]:
-    """Per-file options (``retarget``'s option names) parsed by ``parser`` and validated by
+class _TableParser(argparse.ArgumentParser):
+    """An argument parser that keeps every action ``add_argument`` returns (in
+    :attr:`actions`) and raises :class:`OptionError` instead of exiting."""
+
+    def __init__(self) -> None:
+        self.actions: list[argparse.Action] = []  # first: argparse's own __init__ may add arguments
+        super().__init__(prog="retarget", add_help=False)
+
+    def add_argument(self, *args: Any, **kwargs: Any) -> argparse.Action:
+        action = super().add_argument(*args, **kwargs)
+        self.actions.append(action)
+        return action
+
+    def error(self, message: str):  # type: ignore[override]
+        raise OptionError(message)
+
+
+@dataclass(frozen=True)
+class OptionTable:
+    """``retarget``'s per-file options: the parser that reads their values and, by argparse
+    destination, the action each ``add_argument`` call returned (:meth:`build`)."""
+
+    parser: argparse.ArgumentParser
+    actions: dict[str, argparse.Action]
+
+    @classmethod
+    def build(cls) -> "OptionTable":
+        """The table built by the functions that declare ``retarget``'s options
+        (:func:`~physmocap.cli.retarget.add_retarget_options`,
+        :func:`~physmocap.cli.retarget.add_bvh_output_options`); ``--quiet`` is not per file."""
+        from .cli.retarget import add_bvh_output_options, add_retarget_options
+
+        parser = _TableParser()
+        add_retarget_options(parser)
+        add_bvh_output_options(parser)
+        return cls(parser, {a.dest: a for a in parser.actions if a.option_strings and a.dest != "quiet"})
+
+    def lookup(self, key: Any) -> argparse.Action:
+        """The action of a manifest's option name (``no-plant``, ``--no-plant``, ``no_plant``).
+
+        Raises:
+            OptionError: Not a per-file option.
+        """
+        action = self.actions.get(str(key).strip().lstrip("-").replace("-", "_"))
+        if action is None:
+            known = ", ".join(sorted(a.option_strings[-1].lstrip("-") for a in self.actions.values()))
+            raise OptionError(f"unknown option {key!r}; per-file options are input, output and {known}")
+        return action
+
+
+def parse_file_options(row: dict[str, Any], table: OptionTable, base: Path) -> dict[str, Any]:
+    """Per-file options (``retarget``'s option names) parsed by ``table`` and validated by
     :func:`~physmocap.cli.retarget.config_from_args`, the configuration ``retarget`` builds:
     argparse destination -> value, only the options given.  The paths of
     :data:`PATH_OPTIONS` are taken relative to ``base``.
@@ -235,18 +281,14 @@ def parse_file_options(row: dict[str, Any], parser: argparse.ArgumentParser, bas
     """
     from .cli.retarget import config_from_args
 
-    actions = {a.dest: a for a in parser._actions if a.option_strings and a.dest != "quiet"}  # noqa: SLF001
     given: dict[str, Any] = {}
     for key, value in row.items():
-        action = actions.get(str(key).strip().lstrip("-").replace("-", "_"))
-        if action is None:
-            known = ", ".join(sorted(a.option_strings[-1].lstrip("-") for a in actions.values()))
-            raise OptionError(f"unknown option {key!r}; per-file options are input, output and {known}")
-        given[action.dest] = _parse_value(action, value, parser)
+        action = table.lookup(key)
+        given[action.dest] = _parse_value(action, value, table.parser)
     for dest in PATH_OPTIONS:
         if isinstance(given.get(dest), str) and (dest != "character" or _is_path(given[dest])):
             given[dest] = str(base / given[dest])
-    full = parser.parse_args([])
+    full = table.parser.parse_args([])
     vars(full).update(given)
     config_from_args(full)  # the checks retarget makes before reading anything
     return given

@@ -313,13 +313,16 @@ def _is_path(value: str) -> bool:
     return bool(Path(value).suffix) or "/" in value or os.sep in value
 
 
-def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[Job]:
+def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz", options: dict[str, Any] | None = None) -> list[Job]:
     """The jobs for every input of ``source``: outputs mirrored under ``outdir`` unless a
-    manifest names them, with the manifest's per-file options.
+    manifest names them, with the manifest's per-file options.  A manifest line's own
+    ``character`` or ``map`` is loaded here (with the batch's ``options`` for the one it does
+    not give), once per pair.
 
     Raises:
         InputError: No input found, or a manifest that cannot be read.
         OptionError: A manifest's bad option, or two jobs writing the same output.
+        PhysmocapError: A manifest line's character cannot be loaded (naming the line).
     """
     entries, root = _inputs(source, Path(outdir))
     if not entries:
@@ -327,9 +330,11 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz") -> list[J
     jobs: list[Job] = []
     seen: dict[str, int] = {}
     folders: set[Path] = set()
+    characters = _CharacterCheck(options or {})
     for e in entries:
         if e.line:
             _check_entry(e, source, folders)
+            characters.check(e, source)
         target = e.output.resolve() if e.output is not None else _mirrored(e.input, root, Path(outdir), suffix)
         if target == e.input.resolve():
             raise OptionError(f"the output {target} is the input itself", path=source, line=e.line or None)
@@ -361,6 +366,35 @@ def _check_entry(entry: ManifestEntry, manifest: str, folders: set[Path]) -> Non
         except OutputError as exc:
             raise OutputError(f"output {str(entry.output)!r}: {exc}", path=manifest, line=entry.line) from None
         folders.add(folder)
+
+
+class _CharacterCheck:
+    """Loads the character a manifest line asks for (its ``character`` and ``map``, the
+    batch's for the one it does not give), each pair once, so that a name that is not
+    bundled or a file that cannot be loaded is an error naming the line before any file runs."""
+
+    def __init__(self, options: dict[str, Any]) -> None:
+        self.options = options
+        self.loaded: set[tuple[str | None, str | None]] = set()
+
+    def check(self, entry: ManifestEntry, manifest: str) -> None:
+        """Load the line's character unless it gives neither ``character`` nor ``map``.
+
+        Raises:
+            PhysmocapError: The character cannot be loaded (its own error, naming the line).
+        """
+        if "character" not in entry.options and "map" not in entry.options:
+            return  # the batch's own character, checked once by the caller
+        pair = tuple(entry.options.get(k, self.options.get(k)) for k in ("character", "map"))
+        if pair in self.loaded:
+            return
+        from .models import load_character
+
+        try:
+            load_character(*pair)
+        except PhysmocapError as exc:
+            raise type(exc)(f"character: {exc}", path=manifest, line=entry.line) from None
+        self.loaded.add(pair)
 
 
 def _mirrored(inp: Path, root: Path, out: Path, suffix: str) -> Path:

@@ -53,6 +53,37 @@ def _batch(folder, *extra):
     return main(["batch", str(folder / "in"), "-o", str(folder / "out"), "--end", "40", "--quiet", *extra])
 
 
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("input,character\na.bvh,\nsub/b.bvh,nope\n", "m.csv:3: character: nope: no such character; bundled characters are"),
+        ("input,character\na.bvh,chars/bad.xml\n", "m.csv:2: character: "),
+        ("input,map\na.bvh,none.map.toml\n", "m.csv:2: character: "),
+    ],
+)
+def test_a_manifest_character_that_cannot_be_loaded_is_a_line_error(folder, capsys, text, message):
+    (folder / "in" / "chars").mkdir()
+    (folder / "in" / "chars" / "bad.xml").write_text("<mujoco><worldbody><body>\n")
+    (folder / "in" / "m.csv").write_text(text)
+    assert main(["batch", str(folder / "in" / "m.csv"), "-o", str(folder / "out"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (folder / "out").exists()  # before any file runs
+
+
+def test_the_batch_character_that_cannot_be_loaded_is_one_error(folder, capsys):
+    assert _batch(folder, "--character", "nope") == 2
+    err = capsys.readouterr().err
+    assert "nope: no such character" in err and "Traceback" not in err
+    assert not (folder / "out").exists()
+
+
+def test_a_manifest_character_is_loaded_with_the_batch_map_it_does_not_give(folder):
+    (folder / "in" / "m.csv").write_text("input,character\na.bvh,robot\nsub/b.bvh,robot\n")
+    assert main(["batch", str(folder / "in" / "m.csv"), "-o", str(folder / "out"), "--end", "20", "--quiet",
+                 "--jobs", "1"]) == 0
+
+
 def test_the_per_file_option_table_is_retargets_options():
     from physmocap.batch import OptionTable
     from physmocap.cli.retarget import retarget_option_parser

@@ -50,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise OptionError("--jobs must be at least 1")
     config_from_args(args)  # a bad option is one error now, not one per file
+    _check_character(args)
     options = {k: v for k, v in sorted(vars(args).items()) if k not in OWN}
-    jobs = plan(args.source, args.output, "." + args.format)
+    jobs = plan(args.source, args.output, "." + args.format, options)
     results = run_batch(
         jobs, args.output, options, workers=args.jobs, force=args.force, ray=args.ray,
         progress=False if args.quiet else None,
@@ -63,3 +64,16 @@ def run(args: argparse.Namespace) -> int:
     for r in failed:
         print(f"failed: {r.input}: {r.error}", file=sys.stderr)
     return 0 if not failed else 1
+
+
+def _check_character(args: argparse.Namespace) -> None:
+    """Load the batch's character (``--character``, ``--map``) once: one that cannot be
+    loaded is one error now, not a failure per file.
+
+    Raises:
+        PhysmocapError: The character's own error.
+    """
+    from ..models import load_character
+
+    load_character(args.character, args.map)
+

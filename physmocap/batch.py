@@ -19,6 +19,7 @@ another machine rebuilds exactly the same call.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import glob as globlib
 import hashlib
@@ -26,10 +27,12 @@ import io
 import json
 import math
 import os
+import signal
 import time
 from dataclasses import asdict, dataclass, field
+from multiprocessing.connection import Connection, wait
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterator
 
 from .errors import InputError, OptionError, OutputError, PhysmocapError
 from .fileio import check_output_dir, read_text
@@ -49,10 +52,12 @@ OUTPUT_SUFFIXES = (".npz", ".bvh", ".csv", ".mcap")
 PATH_OPTIONS = ("map", "source_map", "marker_set", "contacts", "character")
 #: Columns of summary.csv, in order.
 SUMMARY_FIELDS = (
-    "input", "output", "status", "error", "frames", "fps", "limit_violations", "penetration_max_mm",
+    "input", "output", "status", "error", "frame", "frames", "fps", "limit_violations", "penetration_max_mm",
     "skating_mean_cm_s", "worst_segment_median_deg", "facing_p95_deg", "path_mean_cm", "saturated_share",
 )
 STATE_FILE = ".physmocap-batch.json"
+#: Seconds a worker process is given to exit once told to (or once its pipe closed).
+WORKER_EXIT_SECONDS = 10.0
 
 
 @dataclass(frozen=True)
@@ -85,6 +90,7 @@ class FileResult:
     output: str
     status: str  # "done" (now or by an earlier run of the same batch) or "failed"
     error: str = ""
+    frame: int | None = None  # where a failure happened, when known (see run_job)
     frames: int = 0
     fps: float = 0.0
     limit_violations: int | None = None
@@ -415,42 +421,83 @@ def job_options(job: Job, options: dict[str, Any]) -> dict[str, Any]:
     return {**options, **job.options}
 
 
-def run_job(job: Job, options: dict[str, Any]) -> FileResult:
+#: What a job's caller is told as its file is retargeted: ``(frames done, frames in all)``.
+FrameCallback = Callable[[int, int], None]
+
+
+def run_job(job: Job, options: dict[str, Any], on_frames: FrameCallback | None = None) -> FileResult:
     """Retarget one file with the ``retarget`` command's options (the batch's, the job's own
-    on top); never raises."""
+    on top); never raises.  ``on_frames(done, total)`` is called as the frames are retargeted.
+
+    A failure's ``frame`` is the one its error names (a reader's: a source frame) or else, for
+    a failure while retargeting, the frame being retargeted (0: the first one retargeted,
+    after ``--start`` and ``--fps``)."""
     import warnings
 
-    from . import metrics
     from .cli.retarget import retarget_from_args, write_outputs
+    from .progress import observe
 
     start = time.perf_counter()
     res = FileResult(job.input, job.output, "failed")
+    solving = _SolveTracker(on_frames)
     try:
         ns = argparse.Namespace(**{**job_options(job, options), "input": job.input, "quiet": True})
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), observe(solving):
             warnings.simplefilter("ignore")
             traj = retarget_from_args(ns)
             write_outputs(traj, [Path(job.output)], ns, quiet=True)
-        ch = traj.character
-        fid = traj.fidelity
-        res.frames, res.fps = int(traj.num_frames), float(traj.fps)
-        res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
-        res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
-        if traj.contacts is not None:
-            res.skating_mean_cm_s = _figure(metrics.character_skating(traj)["mean_cm_s"], 3)
-        if fid is not None:
-            res.worst_segment_median_deg = _figure(fid.worst_segment_median_deg, 2)
-            res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
-            res.path_mean_cm = _figure(fid.path_mean_cm, 2)
-            res.saturated_share = _figure(fid.saturated_share, 4)
+        _measure(traj, res)
         res.status = "done"  # only once every figure is measured: a failing metric fails the file
     except PhysmocapError as exc:
-        res.error = str(exc)
+        res.error, res.frame = str(exc), exc.frame if exc.frame is not None else solving.frame
     except Exception as exc:  # noqa: BLE001 - one file's failure must not stop the dataset
-        res.error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
+        res.error, res.frame = f"{type(exc).__name__}: {exc}".splitlines()[0][:300], solving.frame
     res.seconds = time.perf_counter() - start
     return res
+
+
+class _SolveTracker:
+    """A :func:`~physmocap.progress.observe` callback following the ``retarget`` bar: passes
+    its counts on, and knows the frame being retargeted (None before or after the solve)."""
+
+    def __init__(self, on_frames: FrameCallback | None) -> None:
+        self.on_frames = on_frames
+        self.done, self.total = 0, 0
+
+    def __call__(self, bar: Any) -> None:
+        if bar.label != "retarget":
+            return
+        self.done, self.total = bar.done, bar.total
+        if self.on_frames is not None:
+            self.on_frames(bar.done, bar.total)
+
+    @property
+    def frame(self) -> int | None:
+        return _solving_frame(self.done, self.total)
+
+
+def _solving_frame(done: int, total: int) -> int | None:
+    """The frame being retargeted after ``done`` of ``total`` (None when not retargeting)."""
+    return done if 0 <= done < total else None
+
+
+def _measure(traj: Any, res: FileResult) -> None:
+    """Fill ``res``'s frame count and quality figures from the trajectory."""
+    from . import metrics
+
+    ch = traj.character
+    fid = traj.fidelity
+    res.frames, res.fps = int(traj.num_frames), float(traj.fps)
+    res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
+    res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
+    if traj.contacts is not None:
+        res.skating_mean_cm_s = _figure(metrics.character_skating(traj)["mean_cm_s"], 3)
+    if fid is not None:
+        res.worst_segment_median_deg = _figure(fid.worst_segment_median_deg, 2)
+        res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
+        res.path_mean_cm = _figure(fid.path_mean_cm, 2)
+        res.saturated_share = _figure(fid.saturated_share, 4)
 
 
 def _figure(value: Any, digits: int) -> float | None:
@@ -485,37 +532,207 @@ def _done(job: Job, key: str, state: dict[str, dict]) -> bool:
     )
 
 
-def _execute(jobs: list[Job], options: dict[str, Any], workers: int, ray: str | None) -> Iterable[FileResult]:
-    """Results as they complete (local process pool, or Ray tasks)."""
-    if ray is not None:
+def _death(exitcode: int | None) -> str:
+    """The error of a job whose worker process died (a negative exit code is a signal)."""
+    if exitcode is None:
+        return "worker process died (exit code unknown)"
+    if exitcode < 0:
         try:
-            import ray as ray_mod
-        except ImportError:
-            raise OptionError("--ray needs Ray: pip install 'physmocap[cluster]'") from None
-        started = not ray_mod.is_initialized()
-        if started:
-            ray_mod.init(address=None if ray == "local" else ray, include_dashboard=False, log_to_driver=False)
-        try:
-            task = ray_mod.remote(run_job)
-            pending = [task.remote(j, options) for j in jobs]
-            while pending:
-                ready, pending = ray_mod.wait(pending, num_returns=1)
-                yield ray_mod.get(ready[0])
-        finally:
-            if started:
-                ray_mod.shutdown()
-        return
-    if workers <= 1:
-        for j in jobs:
-            yield run_job(j, options)
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+            name = f", {signal.Signals(-exitcode).name}"
+        except ValueError:
+            name = ""
+        return f"worker process died (signal {-exitcode}{name})"
+    return f"worker process died (exit code {exitcode})"
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = [pool.submit(run_job, j, options) for j in jobs]
-        for f in as_completed(futures):
-            yield f.result()
+
+def _worker_loop(conn: Connection, func: Callable[..., FileResult]) -> None:
+    """A pool process: for each ``(job, options)`` received, run ``func(job, options,
+    on_frames)``, sending ``("frames", done, total)`` as it goes and ``("result", FileResult)``
+    at the end; stops on None or when the batch has gone.  Ctrl-C is the batch's to handle."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        job, options = task
+        result = func(job, options, lambda done, total: conn.send(("frames", done, total)))
+        conn.send(("result", result))
+
+
+@dataclass
+class _Worker:
+    """A pool process, the parent's end of its pipe, and the job it runs (None: idle)."""
+
+    process: Any
+    conn: Connection
+    job: Job | None = None
+    done: int = 0
+    total: int = 0
+
+
+class _Pool:
+    """``workers`` processes (``spawn``), each running one job at a time.  A process that
+    dies fails its own job (:func:`_death`, with the frame it had reached) and is replaced;
+    the other jobs go on."""
+
+    def __init__(self, workers: int, func: Callable[..., FileResult], options: dict[str, Any],
+                 on_frames: Callable[[int], None]) -> None:
+        import multiprocessing
+
+        self.context = multiprocessing.get_context("spawn")
+        self.workers, self.func, self.options, self.on_frames = workers, func, options, on_frames
+        self.pool: list[_Worker] = []
+
+    def run(self, jobs: list[Job]) -> Iterator[FileResult]:
+        """The jobs' results as they complete; every process is gone when this ends."""
+        queue = list(reversed(jobs))
+        try:
+            for _ in range(min(self.workers, len(jobs))):
+                self._assign(self._start(), queue)
+            while self.pool:
+                yield from self._step(queue)
+        finally:
+            self._stop()
+
+    def _start(self) -> _Worker:
+        parent, child = self.context.Pipe()
+        process = self.context.Process(target=_worker_loop, args=(child, self.func), daemon=True)
+        process.start()
+        child.close()  # the parent sees EOF once the process is gone
+        worker = _Worker(process, parent)
+        self.pool.append(worker)
+        return worker
+
+    def _assign(self, worker: _Worker, queue: list[Job]) -> None:
+        """Give ``worker`` the next job, or let it go when none is left."""
+        if not queue:
+            self._retire(worker)
+            return
+        job = queue.pop()
+        try:
+            worker.conn.send((job, self.options))
+        except OSError:  # gone since its last result: the job goes to a new process
+            queue.append(job)
+            self._discard(worker)
+            self._assign(self._start(), queue)
+            return
+        worker.job, worker.done, worker.total = job, 0, 0
+
+    def _retire(self, worker: _Worker) -> None:
+        with contextlib.suppress(OSError):
+            worker.conn.send(None)
+        worker.process.join(timeout=WORKER_EXIT_SECONDS)
+        self._discard(worker)
+
+    def _discard(self, worker: _Worker) -> None:
+        if worker.process.is_alive():
+            worker.process.terminate()
+            worker.process.join()
+        worker.conn.close()
+        self.pool.remove(worker)
+
+    def _step(self, queue: list[Job]) -> Iterator[FileResult]:
+        """Wait for any worker's message or exit, and deal with it."""
+        ready = set(wait([w.conn for w in self.pool] + [w.process.sentinel for w in self.pool]))
+        for worker in list(self.pool):
+            if worker.conn in ready or worker.process.sentinel in ready:
+                yield from self._serve(worker, queue)
+
+    def _serve(self, worker: _Worker, queue: list[Job]) -> Iterator[FileResult]:
+        """Read what ``worker`` sent; a result frees it for the next job, an exit fails its job."""
+        try:
+            while worker.conn.poll():
+                message = worker.conn.recv()
+                if message[0] == "frames":
+                    self.on_frames(max(message[1] - worker.done, 0))
+                    worker.done, worker.total = message[1], message[2]
+                else:
+                    worker.job = None
+                    yield message[1]
+                    self._assign(worker, queue)
+                    return
+            if worker.process.is_alive():
+                return
+        except (EOFError, OSError):  # the pipe closed: the process is gone or going
+            worker.process.join(timeout=WORKER_EXIT_SECONDS)
+        yield from self._replace(worker, queue)
+
+    def _replace(self, worker: _Worker, queue: list[Job]) -> Iterator[FileResult]:
+        """``worker`` died: fail its job (if it had one), and start another process if jobs remain."""
+        job = worker.job
+        self._discard(worker)
+        if job is not None:
+            yield FileResult(job.input, job.output, "failed", error=_death(worker.process.exitcode),
+                             frame=_solving_frame(worker.done, worker.total))
+        if queue:
+            self._assign(self._start(), queue)
+
+    def _stop(self) -> None:
+        """End every process still there (an interrupted batch: at once)."""
+        for worker in list(self.pool):
+            with contextlib.suppress(OSError):
+                worker.conn.close()
+            if worker.process.is_alive():
+                worker.process.terminate()
+            worker.process.join()
+        self.pool.clear()
+
+
+def _ray_connect(address: str) -> tuple[Any, bool]:
+    """The ``ray`` module, connected to ``address`` ('local' starts Ray here, 'auto' joins
+    the running cluster), and whether this call connected it (the caller shuts it down).
+
+    Raises:
+        OptionError: Ray is missing.
+    """
+    try:
+        import ray
+    except ImportError:
+        raise OptionError("--ray needs Ray: pip install 'physmocap[cluster]'") from None
+    if ray.is_initialized():
+        return ray, False
+    ray.init(address=None if address == "local" else address, include_dashboard=False, log_to_driver=False)
+    return ray, True
+
+
+def _ray_results(jobs: list[Job], options: dict[str, Any], ray: Any, func: Callable[..., FileResult]) -> Iterator[FileResult]:
+    """The jobs' results as Ray tasks complete."""
+    task = ray.remote(func)
+    pending = [task.remote(j, options) for j in jobs]
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1)
+        yield ray.get(ready[0])
+
+
+def _execute(jobs: list[Job], options: dict[str, Any], workers: int, ray: Any,
+             on_frames: Callable[[int], None]) -> Iterator[FileResult]:
+    """Results as they complete: in this process (one worker), on a :class:`_Pool`, or as
+    Ray tasks (``ray``: the connected module); ``on_frames(n)``: n more frames retargeted
+    (Ray: a file's frames once it is done)."""
+    if ray is not None:
+        for res in _ray_results(jobs, options, ray, run_job):
+            on_frames(res.frames)
+            yield res
+    elif workers <= 1:
+        for j in jobs:
+            counter = _FrameCounter(on_frames)
+            yield run_job(j, options, counter)
+    else:
+        yield from _Pool(workers, run_job, options, on_frames).run(jobs)
+
+
+class _FrameCounter:
+    """An ``on_frames(done, total)`` callback that passes on the frames added since its last call."""
+
+    def __init__(self, on_frames: Callable[[int], None]) -> None:
+        self.on_frames, self.done = on_frames, 0
+
+    def __call__(self, done: int, total: int) -> None:
+        self.on_frames(max(done - self.done, 0))
+        self.done = done
 
 
 def run_batch(
@@ -529,8 +746,15 @@ def run_batch(
     progress: bool | None = None,
 ) -> list[FileResult]:
     """Run the jobs, skip those already done (same output, newer than the input, same options
-    with the job's own), write the summaries; results sorted by input, then output."""
-    from .fileio import atomic_open
+    with the job's own), write the summaries; results sorted by input, then output.
+
+    With ``ray`` (an address: see :func:`_ray_connect`) the jobs are Ray tasks; otherwise
+    ``workers`` processes (:class:`_Pool`; one: this process).  A file whose process dies
+    is a failure like any other.
+
+    Raises:
+        OptionError: Ray is wanted but cannot be reached.
+    """
     from .progress import Progress
 
     out = Path(outdir)
@@ -544,19 +768,32 @@ def run_batch(
         if j not in todo:
             kept = {k: v for k, v in state[j.output]["result"].items() if k in FileResult.__dataclass_fields__}
             results[j.output] = FileResult(**{**kept, "seconds": 0.0})
-    with Progress(len(todo), "batch", enabled=progress) as bar:
-        for res in _execute(todo, options, workers, ray):
-            results[res.output] = res
-            if res.status == "done":
-                state[res.output] = {"key": keys[res.output], "result": asdict(res)}
-            else:
-                state.pop(res.output, None)
-            with atomic_open(out / STATE_FILE) as fh:  # after every file: a killed batch resumes
-                json.dump(state, fh, sort_keys=True, indent=0)
-            bar.update(1)
+    ray_mod, connected = _ray_connect(ray) if ray is not None and todo else (None, False)
+    try:
+        with Progress(len(todo), "batch", enabled=progress, unit="files", tally="frames") as bar:
+            _run(todo, options, workers, ray_mod, bar, state, keys, results, out)
+    finally:
+        if connected:
+            ray_mod.shutdown()
     ordered = [results[j.output] for j in sorted(jobs, key=lambda j: (j.input, j.output))]
     _write_summaries(ordered, out)
     return ordered
+
+
+def _run(todo: list[Job], options: dict[str, Any], workers: int, ray: Any, bar: Any, state: dict[str, dict],
+         keys: dict[str, str], results: dict[str, FileResult], out: Path) -> None:
+    """Run the jobs, keeping ``results`` and the resumable state up to date after every file."""
+    from .fileio import atomic_open
+
+    for res in _execute(todo, options, workers, ray, lambda n: bar.update(0, tally=n)):
+        results[res.output] = res
+        if res.status == "done":
+            state[res.output] = {"key": keys[res.output], "result": asdict(res)}
+        else:
+            state.pop(res.output, None)
+        with atomic_open(out / STATE_FILE) as fh:  # after every file: a killed batch resumes
+            json.dump(state, fh, sort_keys=True, indent=0)
+        bar.update(1)
 
 
 def _relative(path: str, root: Path) -> str:

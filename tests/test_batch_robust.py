@@ -12,6 +12,7 @@ import socket
 
 import pytest
 
+import physmocap.batch
 from physmocap.batch import run_job
 from physmocap.cli import main
 from physmocap.resources import resolve_input
@@ -51,6 +52,55 @@ def _rows(out):
 
 def _batch(folder, *extra):
     return main(["batch", str(folder / "in"), "-o", str(folder / "out"), "--end", "40", "--quiet", *extra])
+
+
+def test_a_dying_worker_fails_its_own_file_and_the_others_complete(folder, monkeypatch, capsys):
+    for name in ("crash.bvh", "kill.bvh"):
+        shutil.copy(folder / "in" / "a.bvh", folder / "in" / name)
+    monkeypatch.setattr(physmocap.batch, "run_job", _exits_or_is_killed)
+    # 4 files on 2 processes: both deaths need a new process for the files after them
+    assert _batch(folder, "--jobs", "2") == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "2 of 4 files done (78 frames)" in err
+    rows = _rows(folder / "out")
+    assert rows["crash.bvh"]["status"] == "failed" and rows["crash.bvh"]["frame"] is None
+    assert rows["crash.bvh"]["error"] == "worker process died (exit code 3)"
+    assert rows["kill.bvh"]["status"] == "failed" and rows["kill.bvh"]["frame"] == 5
+    assert rows["kill.bvh"]["error"] == "worker process died (signal 9, SIGKILL)"
+    assert f"failed: {folder / 'in' / 'kill.bvh'}: worker process died (signal 9, SIGKILL) (frame 5)" in err
+    assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"
+    assert rows["a.bvh"]["frames"] == rows["b.bvh"]["frames"] == 39
+    assert (folder / "out" / "a.npz").exists() and (folder / "out" / "sub" / "b.npz").exists()
+
+
+def test_a_failure_while_retargeting_records_its_frame(folder, monkeypatch, capsys):
+    from physmocap.ik.frame import FrameRetargeter
+
+    solve, calls = FrameRetargeter.solve, []
+
+    def fails_once(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 8:  # frame 7 of the first file (a.bvh)
+            raise RuntimeError("solver broke")
+        return solve(self, *args, **kwargs)
+
+    monkeypatch.setattr(FrameRetargeter, "solve", fails_once)
+    assert _batch(folder, "--jobs", "1") == 1
+    rows = _rows(folder / "out")
+    assert (rows["a.bvh"]["status"], rows["a.bvh"]["frame"]) == ("failed", 7)
+    assert rows["a.bvh"]["error"] == "RuntimeError: solver broke"
+    assert (rows["b.bvh"]["status"], rows["b.bvh"]["frame"]) == ("done", None)
+    header = (folder / "out" / "summary.csv").read_text().splitlines()[0]
+    assert header.startswith("input,output,status,error,frame,frames,")
+    assert "RuntimeError: solver broke (frame 7)" in capsys.readouterr().err
+
+
+def test_progress_counts_files_and_frames(folder, monkeypatch, capsys):
+    monkeypatch.setenv("PHYSMOCAP_PROGRESS", "1")
+    args = ["batch", str(folder / "in"), "-o", str(folder / "out"), "--end", "40", "--jobs", "1"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert "batch: 2/2 files, 78 frames in " in err and "retarget" not in err
 
 
 @pytest.mark.parametrize(

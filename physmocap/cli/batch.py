@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(results) - len(failed)} of {len(results)} files done ({frames} frames); summary in "
           f"{os.path.join(args.output, 'summary.csv')}", file=sys.stderr)
     for r in failed:
-        print(f"failed: {r.input}: {r.error}", file=sys.stderr)
+        print(f"failed: {r.input}: {_failure(r)}", file=sys.stderr)
     return 0 if not failed else 1
 
 
@@ -77,3 +77,9 @@ def _check_character(args: argparse.Namespace) -> None:
 
     load_character(args.character, args.map)
 
+
+def _failure(result) -> str:
+    """A failed file's error, with its frame when known and not already named."""
+    if result.frame is None or f"frame {result.frame}:" in result.error:
+        return result.error
+    return f"{result.error} (frame {result.frame})"

@@ -58,6 +58,8 @@ SUMMARY_FIELDS = (
 STATE_FILE = ".physmocap-batch.json"
 #: Seconds a worker process is given to exit once told to (or once its pipe closed).
 WORKER_EXIT_SECONDS = 10.0
+#: Seconds to wait for a Ray address to answer before giving up.
+RAY_CONNECT_SECONDS = 5.0
 
 
 @dataclass(frozen=True)
@@ -684,9 +686,12 @@ class _Pool:
 def _ray_connect(address: str) -> tuple[Any, bool]:
     """The ``ray`` module, connected to ``address`` ('local' starts Ray here, 'auto' joins
     the running cluster), and whether this call connected it (the caller shuts it down).
+    HOST:PORT or ray://HOST:PORT (or the ``RAY_ADDRESS`` that 'auto' takes) is probed first,
+    so that an address where nothing listens fails within :data:`RAY_CONNECT_SECONDS`
+    instead of Ray's own minutes of retries.
 
     Raises:
-        OptionError: Ray is missing.
+        OptionError: Ray is missing, the address is malformed or unreachable, or Ray refuses it.
     """
     try:
         import ray
@@ -694,17 +699,58 @@ def _ray_connect(address: str) -> tuple[Any, bool]:
         raise OptionError("--ray needs Ray: pip install 'physmocap[cluster]'") from None
     if ray.is_initialized():
         return ray, False
-    ray.init(address=None if address == "local" else address, include_dashboard=False, log_to_driver=False)
+    target = os.environ.get("RAY_ADDRESS", "") if address == "auto" else address  # what 'auto' joins first
+    if target not in ("", "local", "auto"):
+        _probe(target, f"--ray {address}" + (f" (RAY_ADDRESS={target})" if target != address else ""))
+    try:
+        ray.init(address=None if address == "local" else address, include_dashboard=False, log_to_driver=False)
+    except Exception as exc:  # noqa: BLE001 - Ray raises ConnectionError, RuntimeError, ValueError...
+        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise OptionError(f"--ray {address}: cannot connect to Ray: {detail}") from None
     return ray, True
 
 
+def _probe(address: str, option: str) -> None:
+    """Check that something listens at a Ray address (HOST:PORT, ray://HOST:PORT); errors
+    start with ``option`` (how the user gave it).
+
+    Raises:
+        OptionError: The address is malformed, or nothing answers there within the timeout.
+    """
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise OptionError(f"{option}: expected local, auto, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_SECONDS).close()
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise OptionError(f"{option}: no Ray cluster answers there ({reason}); start one with "
+                          "'ray start --head' or give the address it prints") from None
+
+
 def _ray_results(jobs: list[Job], options: dict[str, Any], ray: Any, func: Callable[..., FileResult]) -> Iterator[FileResult]:
-    """The jobs' results as Ray tasks complete."""
-    task = ray.remote(func)
-    pending = [task.remote(j, options) for j in jobs]
+    """The jobs' results as Ray tasks complete (no retry: a file whose worker dies fails, as
+    on the local pool; re-running the batch retries it)."""
+    task = ray.remote(max_retries=0)(func)
+    pending = {task.remote(j, options): j for j in jobs}
     while pending:
-        ready, pending = ray.wait(pending, num_returns=1)
-        yield ray.get(ready[0])
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        job = pending.pop(ready[0])
+        try:
+            yield ray.get(ready[0])
+        except ray.exceptions.RayError as exc:
+            yield FileResult(job.input, job.output, "failed", error=_ray_failure(ray, exc))
+
+
+def _ray_failure(ray: Any, exc: Exception) -> str:
+    """The error of a Ray task that returned no result."""
+    died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError, ray.exceptions.NodeDiedError)
+    first = (str(exc).strip().splitlines() or [""])[0][:200]
+    if isinstance(exc, died):
+        return f"worker process died (Ray {type(exc).__name__}: {first})"
+    return f"Ray {type(exc).__name__}: {first}"
 
 
 def _execute(jobs: list[Job], options: dict[str, Any], workers: int, ray: Any,

@@ -9,6 +9,8 @@ import os
 import shutil
 import signal
 import socket
+import sys
+import time
 
 import pytest
 
@@ -152,3 +154,42 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.parametrize("via_environment", [False, True])
+def test_an_unreachable_ray_address_is_one_error_within_seconds(folder, monkeypatch, capsys, via_environment):
+    pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
+    address = f"127.0.0.1:{_free_port()}"  # nothing listens there
+    if via_environment:  # 'auto' joins RAY_ADDRESS first
+        monkeypatch.setenv("RAY_ADDRESS", address)
+    start = time.monotonic()
+    assert _batch(folder, "--ray", "auto" if via_environment else address) == 2
+    assert time.monotonic() - start < 30  # Ray's own retries take minutes
+    err = capsys.readouterr().err
+    option = f"--ray auto (RAY_ADDRESS={address})" if via_environment else f"--ray {address}"
+    assert f"{option}: no Ray cluster answers there" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_ray_refusing_to_connect_is_one_error(folder, monkeypatch, capsys):
+    ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
+
+    def refuse(*args, **kwargs):
+        raise ConnectionError("Could not find any running Ray instance.\nPlease specify the one to connect to.")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert _batch(folder, "--ray", "auto") == 2
+    err = capsys.readouterr().err
+    assert "--ray auto: cannot connect to Ray: Could not find any running Ray instance." in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_dying_ray_worker_fails_its_own_file(folder, monkeypatch):
+    ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # Ray's workers cannot import tests/
+    shutil.copy(folder / "in" / "a.bvh", folder / "in" / "crash.bvh")
+    monkeypatch.setattr(physmocap.batch, "run_job", _exits_or_is_killed)
+    assert _batch(folder, "--ray", "local") == 1
+    rows = _rows(folder / "out")
+    assert rows["crash.bvh"]["status"] == "failed"
+    assert rows["crash.bvh"]["error"].startswith("worker process died (Ray WorkerCrashedError")
+    assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"

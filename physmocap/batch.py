@@ -5,10 +5,10 @@
   ``.txt``, one input a line; ``.csv`` or ``.jsonl`` with ``input``, optional ``output`` and
   per-file ``retarget`` options) may name each file's output and options.
 * :func:`run_job` retargets one file in the current process and returns a
-  :class:`FileResult` (never raises: a failure is recorded with its error).
-* :func:`run_batch` runs the jobs on a process pool (``jobs`` workers, ``spawn`` start) or
-  as Ray tasks, skips files already done (output newer than its input, same options,
-  per-file ones included),
+  :class:`FileResult` (never raises: a failure is recorded with its error and frame).
+* :func:`run_batch` runs the jobs on worker processes (``jobs`` of them, ``spawn`` start;
+  one that dies fails its own file and is replaced) or as Ray tasks, skips files already
+  done (output newer than its input, same options, per-file ones included),
   and writes ``summary.csv`` and ``summary.json`` (sorted by input, no timings: the same
   whatever the workers) and ``timings.csv``.
 

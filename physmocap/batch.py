@@ -548,9 +548,10 @@ def _death(exitcode: int | None) -> str:
 
 
 def _worker_loop(conn: Connection, func: Callable[..., FileResult]) -> None:
-    """A pool process: for each ``(job, options)`` received, run ``func(job, options,
-    on_frames)``, sending ``("frames", done, total)`` as it goes and ``("result", FileResult)``
-    at the end; stops on None or when the batch has gone.  Ctrl-C is the batch's to handle."""
+    """A pool process: for each ``(job, options)`` received, say ``("started",)``, run
+    ``func(job, options, on_frames)``, sending ``("frames", done, total)`` as it goes and
+    ``("result", FileResult)`` at the end; stops on None or when the batch has gone.  Ctrl-C
+    is the batch's to handle."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         try:
@@ -560,17 +561,20 @@ def _worker_loop(conn: Connection, func: Callable[..., FileResult]) -> None:
         if task is None:
             return
         job, options = task
+        conn.send(("started",))
         result = func(job, options, lambda done, total: conn.send(("frames", done, total)))
         conn.send(("result", result))
 
 
 @dataclass
 class _Worker:
-    """A pool process, the parent's end of its pipe, and the job it runs (None: idle)."""
+    """A pool process, the parent's end of its pipe, the job it was given (None: idle),
+    whether it has started it, and the frames of it retargeted so far."""
 
     process: Any
     conn: Connection
     job: Job | None = None
+    started: bool = False
     done: int = 0
     total: int = 0
 
@@ -578,7 +582,8 @@ class _Worker:
 class _Pool:
     """``workers`` processes (``spawn``), each running one job at a time.  A process that
     dies fails its own job (:func:`_death`, with the frame it had reached) and is replaced;
-    the other jobs go on."""
+    the other jobs go on.  One that dies before starting the job it was given (killed while
+    idle) hands it on to the next process, once."""
 
     def __init__(self, workers: int, func: Callable[..., FileResult], options: dict[str, Any],
                  on_frames: Callable[[int], None]) -> None:
@@ -587,6 +592,7 @@ class _Pool:
         self.context = multiprocessing.get_context("spawn")
         self.workers, self.func, self.options, self.on_frames = workers, func, options, on_frames
         self.pool: list[_Worker] = []
+        self.handed_on: set[Job] = set()
 
     def run(self, jobs: list[Job]) -> Iterator[FileResult]:
         """The jobs' results as they complete; every process is gone when this ends."""
@@ -621,7 +627,7 @@ class _Pool:
             self._discard(worker)
             self._assign(self._start(), queue)
             return
-        worker.job, worker.done, worker.total = job, 0, 0
+        worker.job, worker.started, worker.done, worker.total = job, False, 0, 0
 
     def _retire(self, worker: _Worker) -> None:
         with contextlib.suppress(OSError):
@@ -648,7 +654,9 @@ class _Pool:
         try:
             while worker.conn.poll():
                 message = worker.conn.recv()
-                if message[0] == "frames":
+                if message[0] == "started":
+                    worker.started = True
+                elif message[0] == "frames":
                     self.on_frames(max(message[1] - worker.done, 0))
                     worker.done, worker.total = message[1], message[2]
                 else:
@@ -666,7 +674,10 @@ class _Pool:
         """``worker`` died: fail its job (if it had one), and start another process if jobs remain."""
         job = worker.job
         self._discard(worker)
-        if job is not None:
+        if job is not None and not worker.started and job not in self.handed_on:
+            self.handed_on.add(job)  # not this job's doing
+            queue.append(job)
+        elif job is not None:
             yield FileResult(job.input, job.output, "failed", error=_death(worker.process.exitcode),
                              frame=_solving_frame(worker.done, worker.total))
         if queue:

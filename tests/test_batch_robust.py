@@ -39,6 +39,17 @@ def _exits_or_is_killed(job, options, on_frames=None):
     return run_job(job, options, frames)
 
 
+def _dies_once_before_starting(conn, func):
+    """A pool process's entry for these tests: the first process (no marker file yet) takes
+    its first job and exits before starting it, as one killed while idle would."""
+    marker = os.environ["PHYSMOCAP_TEST_MARKER"]
+    if not os.path.exists(marker):
+        open(marker, "w").close()
+        conn.recv()
+        os._exit(4)
+    physmocap.batch._worker_loop(conn, func)
+
+
 @pytest.fixture()
 def folder(tmp_path):
     src = resolve_input("example")
@@ -73,6 +84,15 @@ def test_a_dying_worker_fails_its_own_file_and_the_others_complete(folder, monke
     assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"
     assert rows["a.bvh"]["frames"] == rows["b.bvh"]["frames"] == 39
     assert (folder / "out" / "a.npz").exists() and (folder / "out" / "sub" / "b.npz").exists()
+
+
+def test_a_job_whose_process_dies_before_starting_it_goes_to_the_next_process(folder, monkeypatch):
+    monkeypatch.setenv("PHYSMOCAP_TEST_MARKER", str(folder / "died"))  # read by the test's own entry only
+    monkeypatch.setattr(physmocap.batch, "_worker_loop", _dies_once_before_starting)
+    assert _batch(folder, "--jobs", "2") == 0
+    assert (folder / "died").exists()
+    rows = _rows(folder / "out")
+    assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"
 
 
 def test_a_failure_while_retargeting_records_its_frame(folder, monkeypatch, capsys):

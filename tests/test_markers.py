@@ -122,7 +122,7 @@ def test_trc_in_any_units_and_axes_gives_the_true_joint_centres(tmp_path, up, un
     _write_trc(path, [f"Sub:{lab}" for lab in labels], Pf * scale, sep=sep, units=units)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        motion = load_motion(path)
+        motion = load_motion(path, solve=False)  # the joint centres (the default is the solved actor)
     W = motion.world_positions()
     idx = {n: i for i, n in enumerate(motion.skeleton.names)}
     for joint in ("left_knee", "right_ankle", "left_elbow"):

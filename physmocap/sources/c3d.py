@@ -2,8 +2,8 @@
 
 Point labels (``POINT:LABELS`` and ``LABELS2``...), units (``POINT:UNITS``), rate
 (``POINT:RATE``); a sample is invalid where its residual is negative, its coordinates
-are not finite or all exactly zero.  Analog channels are ignored.  The markers become the
-actor's canonical joint centres (:mod:`physmocap.markers`).
+are not finite or all exactly zero.  Analog channels are ignored.  ``load_motion`` gives the
+solved actor skeleton (:mod:`physmocap.markers`; its joint centres with ``solve=False``).
 """
 
 from __future__ import annotations
@@ -124,9 +124,9 @@ def _declared_frames(p: Path, markers: int) -> int | None:
 
 
 def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = False, **options: Any) -> Motion:
-    """A C3D file as the actor's canonical joint centres, or with ``solve`` the solved actor
-    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
+             solve: bool = True, **options: Any) -> Motion:
+    """A C3D file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
+    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
     return marker_motion(read_c3d_markers(path, units), marker_set, solve=solve, **options)

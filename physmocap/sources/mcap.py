@@ -726,7 +726,9 @@ def read_mcap(
         units: For foreign recordings: the length unit (default metres).
         up: For foreign recordings: the world's up axis, ``"Z"`` (default) or ``"Y"``.
         **options: Passed to the positional pipeline for PosesInFrame
-            recordings (:func:`physmocap.sources.positions.positional_motion`).
+            recordings (:func:`physmocap.sources.positions.positional_motion`); for a marker
+            recording, to :func:`physmocap.markers.motion.marker_motion` (the solved actor by
+            default, the joint centres with ``solve=False``).
 
     Raises:
         InputError: not an MCAP file, truncated or corrupt, no skeleton

@@ -5,7 +5,8 @@ Line 1 ``PathFileType``; line 2 the header names, line 3 their values (``DataRat
 label above its three columns; line 5 the ``X1 Y1 Z1`` row; then one row per frame.
 Empty cells are missing samples.  A file that declares more frames than it holds is read
 as far as it goes, with a warning; a cell that is not a number is an error naming its
-line and marker.  The markers become canonical joint centres (:mod:`physmocap.markers`).
+line and marker.  ``load_motion`` gives the solved actor
+skeleton (:mod:`physmocap.markers`; its joint centres with ``solve=False``).
 """
 
 from __future__ import annotations
@@ -125,9 +126,9 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
 
 
 def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = False, **options: Any) -> Motion:
-    """A TRC file as the actor's canonical joint centres, or with ``solve`` the solved actor
-    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
+             solve: bool = True, **options: Any) -> Motion:
+    """A TRC file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
+    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
     return marker_motion(read_trc_markers(path, units), marker_set, solve=solve, **options)

@@ -54,6 +54,7 @@ __all__ = [
     "FUNCTIONAL_JOINTS",
     "SegmentFrames",
     "Calibration",
+    "kabsch",
     "kabsch_frames",
     "sphere_fit",
     "score_fit",
@@ -76,6 +77,13 @@ MAX_SHIFT = 0.12
 BIN = 0.05
 #: Most frames one fit uses (evenly drawn from the bins when more).
 MAX_FRAMES = 800
+#: Fewest frames, every point of a segment seen, that its mean constellation (the local shape
+#: every frame's Kabsch fit aligns to) is averaged over; a recording shorter than this cannot
+#: be calibrated.  An engineering choice, not from a paper: with 5 mm of soft-tissue motion
+#: per marker (:data:`STA_SIGMA`) the mean of 10 frames places each point to about
+#: 5 / sqrt(10) = 1.6 mm if the frames were independent (successive frames are not, so this
+#: is a floor, not a target).
+MIN_CONSTELLATION_FRAMES = 10
 #: Joints whose centre a single plane of motion cannot place (ball joints, and the wrist's two
 #: axes): fitted only when the motion also spans :data:`MIN_SECOND_PLANE_DEG` across its main
 #: plane.  Piazza et al. (2004, J. Biomech. 37:349) found functional hip centres degrade
@@ -216,9 +224,17 @@ class Calibration(JointCentres):
 
 
 # -- rigid frames ------------------------------------------------------------------
-def _kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame, R, t minimising sum_k w_k |R A_k + t - X_k|^2.  A ``(K, 3)``, X ``(F, K, 3)``
-    (NaN allowed where w is 0), w ``(F, K)``."""
+def kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""Weighted least-squares rigid fit per frame (Kabsch / SVD, Arun et al. 1987).
+
+    Args:
+        A: ``(K, 3)`` points in the local frame (metres).
+        X: ``(F, K, 3)`` the same points seen per frame (metres; NaN allowed where ``w`` is 0).
+        w: ``(F, K)`` non-negative weights.
+    Returns:
+        ``(R, t)``: ``(F, 3, 3)`` proper rotations and ``(F, 3)`` translations (metres)
+        minimising :math:`\sum_k w_k \| R A_k + t - X_k \|^2` per frame.
+    """
     Xz = np.where(w[..., None] > 0, X, 0.0)
     sw = w.sum(1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -240,8 +256,8 @@ def _kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np
 def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_points: int = 3) -> SegmentFrames | None:
     """A segment's frames from ``(F, K, 3)`` point trajectories (NaN = unseen).
 
-    The constellation is the Procrustes mean over the frames where every point is seen
-    (points seen too rarely are dropped first); each frame is then the weighted Kabsch fit
+    The constellation is the Procrustes mean over the frames where every point is seen (at
+    least :data:`MIN_CONSTELLATION_FRAMES`; points seen too rarely are dropped first); each frame is then the weighted Kabsch fit
     of the seen points (at least ``min_points``, not collinear).  None if no frame can be built.
     """
     P = np.asarray(points, dtype=float)
@@ -251,7 +267,7 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
     keep = np.arange(P.shape[1])
     while len(keep) >= min_points:
         full = np.all(seen[:, keep], axis=1)
-        if full.sum() >= 10:
+        if full.sum() >= MIN_CONSTELLATION_FRAMES:
             break
         worst = keep[np.argmin(seen[:, keep].sum(0))]
         keep = keep[keep != worst]
@@ -266,12 +282,12 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
     if np.linalg.svd(ref, compute_uv=False)[1] < 1e-3:  # collinear points: no frame
         return None
     for _ in range(3):  # Procrustes mean
-        R, t = _kabsch(ref, S, np.ones(S.shape[:2]))
+        R, t = kabsch(ref, S, np.ones(S.shape[:2]))
         aligned = np.einsum("fji,fkj->fki", R, S - t[:, None])
         ref = aligned.mean(0)
         ref = ref - ref.mean(0)
     w = seen.astype(float)
-    R, t = _kabsch(ref, P, w)
+    R, t = kabsch(ref, P, w)
     n = seen.sum(1)
     ok = n >= min_points
     # collinear seen points (e.g. two markers and a centre on one line) do not fix a rotation

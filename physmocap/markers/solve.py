@@ -315,6 +315,17 @@ def solve_markers(
     )
 
 
+def check_calibration_length(rec: MarkerRecording) -> None:
+    """An :class:`~physmocap.errors.InputError` when the recording has fewer frames than a
+    segment's mean marker constellation needs (:data:`.functional.MIN_CONSTELLATION_FRAMES`)."""
+    from .functional import MIN_CONSTELLATION_FRAMES
+
+    if rec.num_frames < MIN_CONSTELLATION_FRAMES:
+        raise InputError(f"too short to calibrate ({rec.num_frames} frame{'s' if rec.num_frames != 1 else ''}, need "
+                         f"{MIN_CONSTELLATION_FRAMES}): each segment's marker shape is averaged over at least "
+                         f"{MIN_CONSTELLATION_FRAMES} frames", path=rec.source)
+
+
 def calibrate_actor(
     rec: MarkerRecording,
     marker_set: str | os.PathLike | MarkerSet | None = None,
@@ -332,6 +343,7 @@ def calibrate_actor(
     valid = rec.valid
     if not valid.any():
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual): nothing to solve", path=rec.source)
+    check_calibration_length(rec)
     cal = functional_joint_centres(rec, ms)
     warn_fallbacks(cal, rec.source)
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)

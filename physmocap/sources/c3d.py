@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..markers.recording import UNITS, MarkerRecording, unit_scale
+from ..markers.recording import UNITS, MarkerRecording, unique_labels, unit_scale
 from ..motion import Motion
 
 __all__ = ["read_c3d_markers", "read_c3d"]
@@ -63,6 +63,7 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if not any(labels):
         raise InputError("no point labels (POINT:LABELS is empty): the markers cannot be told apart", path=p)
     labels = [lab or f"marker{k}" for k, lab in enumerate(labels)] + [f"marker{k}" for k in range(len(labels), M)]
+    labels = unique_labels(labels, f"{p}: POINT:LABELS")
     if units is not None:
         scale = unit_scale(units, p)
     elif unit not in UNITS:

@@ -62,16 +62,42 @@ __all__ = [
     "segment_markers",
 ]
 
-#: Minimum angular spread (degrees) of the child segment's motion for a functional fit.
+# Where each threshold below comes from: a cited finding where one bears on it, else the
+# engineering reason for the value (changing one changes the README's marker figures).
+#: Minimum angular spread (degrees, 98th percentile of the pairwise angles between the child's
+#: directions) of a joint's motion for a functional fit.  Range of motion is among what the
+#: functional-method studies examine (Hicks & Richards 2005, Gait Posture 22:138: flexion-
+#: extension and abduction-adduction ranges; Piazza et al. 2004, J. Biomech. 37:349: reduced
+#: hip motion, the 20-30 degrees quoted for :data:`TWO_PLANE_JOINTS`); 25 is the middle of that
+#: range.  The exact value is an engineering choice: no paper gives one
+#: cut-off for all joints, and this spread is measured on the child's direction, not as a
+#: goniometric angle.
 MIN_SPREAD_DEG = 25.0
-#: Fewest distinct poses (bins) a functional fit uses.
+#: Fewest distinct poses (cells of the :data:`BIN` grid, about 3 degrees) a functional fit
+#: uses.  An engineering choice, not from a paper: 30 poses give SCoRE 90 equations for its 6
+#: unknowns (the sphere fit 30 per marker for 3), so the glitch-frame rejection (three times
+#: the median gap) has a median to work with and no single pose decides the centre.
 MIN_FRAMES = 30
 #: Fewest distinct poses when the child segment has one marker (a sphere fit of one point: no
-#: rigid frame to average the skin motion over).  A heuristic, not from a paper.
+#: rigid frame to average the skin motion over).  An engineering choice, not from a paper:
+#: :data:`MIN_FRAMES` times about 3, since one marker's soft-tissue motion (:data:`STA_SIGMA`)
+#: enters the fit unaveraged where three markers would average it.
 MIN_FRAMES_ONE_MARKER = 100
-#: Largest fit residual (metres) still believed.
+#: Largest fit residual (metres) still believed: SCoRE's half distance between the centre
+#: seen from the parent and from the child, the sphere fit's RMS radial scatter.  The first is
+#: the "joint gap error" of J. Biomech. Eng. 138(1):011004 (2016), which reports 12-19 mm for
+#: functional hip centres over activities of daily living (13-34 mm for anatomical ones), and
+#: soft-tissue motion at the hip reaches 20 mm or more (Ann. Biomed. Eng.,
+#: doi:10.1007/s10439-015-1522-1, citing the skin-motion studies).  A residual of 3 cm is
+#: beyond both: the fit then follows skin or a wrong marker, not a joint.  The margin above
+#: 19-20 mm is an engineering choice.
 MAX_RESIDUAL = 0.03
-#: Largest distance (metres) a functional centre may lie from the regression estimate.
+#: Largest distance (metres) a functional centre may lie from the regression estimate.  The
+#: regression's own error is a few centimetres (Hicks & Richards 2005: 2.16 cm mean for the
+#: predictive hip centre against ultrasound, 1.34 cm for the functional one; J. Biomech. Eng.
+#: 2016 above: anatomical joint gap errors up to 34 mm); a functional centre 12 cm away (about
+#: 3.5 times the largest of those) is a fit gone wrong, not a better estimate.  The factor is an
+#: engineering choice: it only catches gross failures, the residual and rank tests the rest.
 MAX_SHIFT = 0.12
 #: Bin size (radians) of the pose grid used to pick frames.
 BIN = 0.05
@@ -323,8 +349,13 @@ def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: flo
     return x, int(good.sum())
 
 
-#: Largest statistical uncertainty (metres) of a fitted centre along a direction for that
-#: direction to count as determined by the motion (else the regression's component is kept).
+#: Largest statistical uncertainty (metres, one standard error from the fit's own residual) of a
+#: fitted centre along a direction for that direction to count as determined by the motion
+#: (else the regression's component is kept).  An engineering choice, not from a paper: 2 mm
+#: is a tenth of the 2 cm the regression itself is typically off (:data:`MAX_SHIFT`'s sources),
+#: so a direction kept from the fit is far better known than the one it replaces; a looser
+#: bound lets the near-singular directions of a hinge or a small motion move the centre by
+#: skin wobble.
 MAX_STD = 0.002
 
 

@@ -7,7 +7,7 @@ physmocap joint centres with the vendor's joints:
 
 * ``regression``: anatomical regression only (physmocap.markers.joints);
 * ``functional``: functional centres where the take exercises the joint (what
-  ``load_motion(take.c3d)`` returns; physmocap.markers.functional);
+  ``load_motion(take.c3d, solve=False)`` returns; physmocap.markers.functional);
 * ``solved``: the joint centres of the actor skeleton solved by marker-driven IK
   (``physmocap solve``; physmocap.markers.solve), with the marker residuals.
 
@@ -56,9 +56,9 @@ ANGLES = {"knee": ("hip", "knee", "ankle"), "elbow": ("shoulder", "elbow", "wris
 
 def kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """R, t minimising |R a + t - b| over rows (N, 3): the calibration's rigid fit, one frame."""
-    from physmocap.markers.functional import _kabsch
+    from physmocap.markers.functional import kabsch as rigid_fit
 
-    R, t = _kabsch(a, b[None], np.ones((1, len(a))))
+    R, t = rigid_fit(a, b[None], np.ones((1, len(a))))
     return R[0], t[0]
 
 

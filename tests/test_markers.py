@@ -122,7 +122,7 @@ def test_trc_in_any_units_and_axes_gives_the_true_joint_centres(tmp_path, up, un
     _write_trc(path, [f"Sub:{lab}" for lab in labels], Pf * scale, sep=sep, units=units)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        motion = load_motion(path)
+        motion = load_motion(path, solve=False)  # the joint centres (the default is the solved actor)
     W = motion.world_positions()
     idx = {n: i for i, n in enumerate(motion.skeleton.names)}
     for joint in ("left_knee", "right_ankle", "left_elbow"):
@@ -148,7 +148,7 @@ def test_trc_bad_cell_names_line_and_marker(tmp_path):
     path = tmp_path / "bad.trc"
     _write_trc(path, labels, P * 1000)
     _set_trc_cell(path, 7, 2 + 3 * 3 + 1, "oops")
-    with pytest.raises(InputError, match=rf"line 8: marker {labels[3]} Y is not a number"):
+    with pytest.raises(InputError, match=rf"bad\.trc:8: marker {labels[3]} Y is not a number"):
         read_trc_markers(path)
 
 
@@ -304,5 +304,5 @@ def test_trc_labels_stay_above_their_columns(tmp_path):
     assert rec.labels[2] == "marker2" and rec.labels[3:] == tuple(labels[3:])
     assert np.allclose(rec.positions[:, 3], P[:, 3])
     _set_trc_cell(path, 3, 2 + 3 * 2 + 1, "STRAY")
-    with pytest.raises(InputError, match=r"labels\.trc: line 4: label 'STRAY' is in column 10"):
+    with pytest.raises(InputError, match=r"labels\.trc:4: label 'STRAY' is in column 10"):
         read_trc_markers(path)

@@ -42,14 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _is_marker_recording(path: str) -> bool:
     """A .c3d / .trc file, or an MCAP file holding a marker channel."""
-    suffix = Path(path).suffix.lower()
-    if suffix in (".c3d", ".trc"):
-        return True
-    if suffix == ".mcap" and Path(path).is_file():
-        from ..sources.mcap import has_markers
+    from .retarget import is_marker_file
 
-        return has_markers(path)
-    return False
+    return is_marker_file(path)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -42,6 +42,10 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
     p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    p.add_argument("--joint-centres", action="store_true",
+                   help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
+                   "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
+                   "and no joint ranges before the character's")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -156,9 +160,24 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             announce(f"wrote {out}")
 
 
+def is_marker_file(path: str) -> bool:
+    """A .c3d or .trc file, or an .mcap file holding a marker channel (labelled points)."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".c3d", ".trc"):
+        return True
+    if suffix == ".mcap" and Path(path).is_file():
+        from ..sources.mcap import has_markers
+
+        return has_markers(path)
+    return False
+
+
 def retarget_from_args(args: argparse.Namespace):
     """Load the input and the character and retarget with the options of
-    :func:`add_retarget_options`; returns the trajectory."""
+    :func:`add_retarget_options`; returns the trajectory.  A marker file is solved into the
+    actor's skeleton first (:func:`physmocap.markers.motion.solved_motion`, calibrated and
+    solved on the whole take; ``--start``/``--end`` then cut the retarget), or read as its
+    joint centres with ``--joint-centres``."""
     from ..ik.retarget import retarget
     from ..models import load_character
     from ..sources import load_motion
@@ -169,6 +188,10 @@ def retarget_from_args(args: argparse.Namespace):
         read_opts["units"] = args.in_units
     if getattr(args, "marker_set", None):
         read_opts["marker_set"] = args.marker_set
+    if getattr(args, "joint_centres", False):
+        if not is_marker_file(args.input):
+            raise OptionError("--joint-centres is for marker files (.c3d, .trc, marker .mcap)", path=args.input)
+        read_opts["solve"] = False
     motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)
     return retarget(

@@ -54,6 +54,7 @@ __all__ = [
     "FUNCTIONAL_JOINTS",
     "SegmentFrames",
     "Calibration",
+    "kabsch",
     "kabsch_frames",
     "sphere_fit",
     "score_fit",
@@ -61,21 +62,54 @@ __all__ = [
     "segment_markers",
 ]
 
-#: Minimum angular spread (degrees) of the child segment's motion for a functional fit.
+# Where each threshold below comes from: a cited finding where one bears on it, else the
+# engineering reason for the value (changing one changes the README's marker figures).
+#: Minimum angular spread (degrees, 98th percentile of the pairwise angles between the child's
+#: directions) of a joint's motion for a functional fit.  Range of motion is among what the
+#: functional-method studies examine (Hicks & Richards 2005, Gait Posture 22:138: flexion-
+#: extension and abduction-adduction ranges; Piazza et al. 2004, J. Biomech. 37:349: reduced
+#: hip motion, the 20-30 degrees quoted for :data:`TWO_PLANE_JOINTS`); 25 is the middle of that
+#: range.  The exact value is an engineering choice: no paper gives one
+#: cut-off for all joints, and this spread is measured on the child's direction, not as a
+#: goniometric angle.
 MIN_SPREAD_DEG = 25.0
-#: Fewest distinct poses (bins) a functional fit uses.
+#: Fewest distinct poses (cells of the :data:`BIN` grid, about 3 degrees) a functional fit
+#: uses.  An engineering choice, not from a paper: 30 poses give SCoRE 90 equations for its 6
+#: unknowns (the sphere fit 30 per marker for 3), so the glitch-frame rejection (three times
+#: the median gap) has a median to work with and no single pose decides the centre.
 MIN_FRAMES = 30
 #: Fewest distinct poses when the child segment has one marker (a sphere fit of one point: no
-#: rigid frame to average the skin motion over).  A heuristic, not from a paper.
+#: rigid frame to average the skin motion over).  An engineering choice, not from a paper:
+#: :data:`MIN_FRAMES` times about 3, since one marker's soft-tissue motion (:data:`STA_SIGMA`)
+#: enters the fit unaveraged where three markers would average it.
 MIN_FRAMES_ONE_MARKER = 100
-#: Largest fit residual (metres) still believed.
+#: Largest fit residual (metres) still believed: SCoRE's half distance between the centre
+#: seen from the parent and from the child, the sphere fit's RMS radial scatter.  The first is
+#: the "joint gap error" of J. Biomech. Eng. 138(1):011004 (2016), which reports 12-19 mm for
+#: functional hip centres over activities of daily living (13-34 mm for anatomical ones), and
+#: soft-tissue motion at the hip reaches 20 mm or more (Ann. Biomed. Eng.,
+#: doi:10.1007/s10439-015-1522-1, citing the skin-motion studies).  A residual of 3 cm is
+#: beyond both: the fit then follows skin or a wrong marker, not a joint.  The margin above
+#: 19-20 mm is an engineering choice.
 MAX_RESIDUAL = 0.03
-#: Largest distance (metres) a functional centre may lie from the regression estimate.
+#: Largest distance (metres) a functional centre may lie from the regression estimate.  The
+#: regression's own error is a few centimetres (Hicks & Richards 2005: 2.16 cm mean for the
+#: predictive hip centre against ultrasound, 1.34 cm for the functional one; J. Biomech. Eng.
+#: 2016 above: anatomical joint gap errors up to 34 mm); a functional centre 12 cm away (about
+#: 3.5 times the largest of those) is a fit gone wrong, not a better estimate.  The factor is an
+#: engineering choice: it only catches gross failures, the residual and rank tests the rest.
 MAX_SHIFT = 0.12
 #: Bin size (radians) of the pose grid used to pick frames.
 BIN = 0.05
 #: Most frames one fit uses (evenly drawn from the bins when more).
 MAX_FRAMES = 800
+#: Fewest frames, every point of a segment seen, that its mean constellation (the local shape
+#: every frame's Kabsch fit aligns to) is averaged over; a recording shorter than this cannot
+#: be calibrated.  An engineering choice, not from a paper: with 5 mm of soft-tissue motion
+#: per marker (:data:`STA_SIGMA`) the mean of 10 frames places each point to about
+#: 5 / sqrt(10) = 1.6 mm if the frames were independent (successive frames are not, so this
+#: is a floor, not a target).
+MIN_CONSTELLATION_FRAMES = 10
 #: Joints whose centre a single plane of motion cannot place (ball joints, and the wrist's two
 #: axes): fitted only when the motion also spans :data:`MIN_SECOND_PLANE_DEG` across its main
 #: plane.  Piazza et al. (2004, J. Biomech. 37:349) found functional hip centres degrade
@@ -216,9 +250,17 @@ class Calibration(JointCentres):
 
 
 # -- rigid frames ------------------------------------------------------------------
-def _kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame, R, t minimising sum_k w_k |R A_k + t - X_k|^2.  A ``(K, 3)``, X ``(F, K, 3)``
-    (NaN allowed where w is 0), w ``(F, K)``."""
+def kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""Weighted least-squares rigid fit per frame (Kabsch / SVD, Arun et al. 1987).
+
+    Args:
+        A: ``(K, 3)`` points in the local frame (metres).
+        X: ``(F, K, 3)`` the same points seen per frame (metres; NaN allowed where ``w`` is 0).
+        w: ``(F, K)`` non-negative weights.
+    Returns:
+        ``(R, t)``: ``(F, 3, 3)`` proper rotations and ``(F, 3)`` translations (metres)
+        minimising :math:`\sum_k w_k \| R A_k + t - X_k \|^2` per frame.
+    """
     Xz = np.where(w[..., None] > 0, X, 0.0)
     sw = w.sum(1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -240,8 +282,8 @@ def _kabsch(A: np.ndarray, X: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np
 def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_points: int = 3) -> SegmentFrames | None:
     """A segment's frames from ``(F, K, 3)`` point trajectories (NaN = unseen).
 
-    The constellation is the Procrustes mean over the frames where every point is seen
-    (points seen too rarely are dropped first); each frame is then the weighted Kabsch fit
+    The constellation is the Procrustes mean over the frames where every point is seen (at
+    least :data:`MIN_CONSTELLATION_FRAMES`; points seen too rarely are dropped first); each frame is then the weighted Kabsch fit
     of the seen points (at least ``min_points``, not collinear).  None if no frame can be built.
     """
     P = np.asarray(points, dtype=float)
@@ -251,7 +293,7 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
     keep = np.arange(P.shape[1])
     while len(keep) >= min_points:
         full = np.all(seen[:, keep], axis=1)
-        if full.sum() >= 10:
+        if full.sum() >= MIN_CONSTELLATION_FRAMES:
             break
         worst = keep[np.argmin(seen[:, keep].sum(0))]
         keep = keep[keep != worst]
@@ -266,12 +308,12 @@ def kabsch_frames(points: np.ndarray, names: tuple[str, ...] | list[str], min_po
     if np.linalg.svd(ref, compute_uv=False)[1] < 1e-3:  # collinear points: no frame
         return None
     for _ in range(3):  # Procrustes mean
-        R, t = _kabsch(ref, S, np.ones(S.shape[:2]))
+        R, t = kabsch(ref, S, np.ones(S.shape[:2]))
         aligned = np.einsum("fji,fkj->fki", R, S - t[:, None])
         ref = aligned.mean(0)
         ref = ref - ref.mean(0)
     w = seen.astype(float)
-    R, t = _kabsch(ref, P, w)
+    R, t = kabsch(ref, P, w)
     n = seen.sum(1)
     ok = n >= min_points
     # collinear seen points (e.g. two markers and a centre on one line) do not fix a rotation
@@ -307,8 +349,13 @@ def _regularised_solve(A: np.ndarray, b: np.ndarray, prior: np.ndarray, rel: flo
     return x, int(good.sum())
 
 
-#: Largest statistical uncertainty (metres) of a fitted centre along a direction for that
-#: direction to count as determined by the motion (else the regression's component is kept).
+#: Largest statistical uncertainty (metres, one standard error from the fit's own residual) of a
+#: fitted centre along a direction for that direction to count as determined by the motion
+#: (else the regression's component is kept).  An engineering choice, not from a paper: 2 mm
+#: is a tenth of the 2 cm the regression itself is typically off (:data:`MAX_SHIFT`'s sources),
+#: so a direction kept from the fit is far better known than the one it replaces; a looser
+#: bound lets the near-singular directions of a hinge or a small motion move the centre by
+#: skin wobble.
 MAX_STD = 0.002
 
 

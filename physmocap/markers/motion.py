@@ -1,4 +1,5 @@
-"""A marker recording as a positional motion of canonical joints (what the retargeter reads)."""
+"""A marker recording as a :class:`~physmocap.motion.Motion` the retargeter reads: the solved
+actor skeleton (the default), or the canonical joint centres (``solve=False``)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,15 @@ import numpy as np
 from ..motion import Motion
 from .functional import functional_joint_centres, warn_fallbacks
 from .joints import up_axis, warn_unused
-from .markerset import recording_marker_set
+from .markerset import MarkerSet, recording_marker_set
 from .recording import MarkerRecording
 
-__all__ = ["marker_motion"]
+__all__ = ["marker_motion", "solved_motion", "check_legs", "LEG_SEGMENTS"]
+
+#: Segments a solved actor needs markers on before it is handed to the retargeter: without
+#: them its legs would hang in the rest pose under a moving pelvis, and the character's feet
+#: (floor, contacts, planting) would be invented, not captured.
+LEG_SEGMENTS = tuple(f"{side}_{seg}" for side in ("left", "right") for seg in ("thigh", "shank", "foot"))
 
 
 def _to_z_up(up: np.ndarray) -> np.ndarray:
@@ -27,22 +33,26 @@ def _to_z_up(up: np.ndarray) -> np.ndarray:
     return np.stack([x, y, z])  # rows: the new axes in the file's coordinates
 
 
-def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, solve: bool = False,
+def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, solve: bool = True,
                   **options: Any) -> Motion:
-    """The recording's canonical joint centres (functional where the clip exercises the
-    joint, else the regression: :func:`.functional.functional_joint_centres`) as a
-    positional :class:`~physmocap.motion.Motion` (metres, Z-up, floor at 0), through the
-    same conventions as tracker files (:func:`physmocap.sources.positions.positional_motion`:
-    gaps up to ``max_gap`` filled, levelling, floor).  With ``solve``, the actor skeleton
-    solved by marker-driven IK instead (:func:`.solve.solve_markers`, rotational, rigid
-    calibrated lengths, joint ranges and floor held; :func:`.solve.actor_motion`).
+    """What ``load_motion`` returns for a marker recording.
+
+    By default the actor skeleton solved by marker-driven IK (:func:`solved_motion`:
+    rotational, rigid calibrated lengths, joint ranges and floor held): markers -> actor ->
+    character, as issue 11 asks.  With ``solve=False`` the older, faster route: the canonical
+    joint centres (functional where the clip exercises the joint, else the regression:
+    :func:`.functional.functional_joint_centres`) as a positional
+    :class:`~physmocap.motion.Motion` (metres, Z-up, floor at 0), through the same
+    conventions as tracker files (:func:`physmocap.sources.positions.positional_motion`: gaps
+    up to ``max_gap`` filled, levelling, floor); no rigid skeleton and no joint ranges on the
+    actor, and no leg markers needed.
 
     Args:
         rec: The :class:`MarkerRecording`.
         marker_set: A TOML file of ``[markers] ROLE = "label"`` overriding the aliases.
-        solve: Return the solved actor skeleton rather than the joint centres.
+        solve: The solved actor skeleton (default) rather than the joint centres.
         **options: Options of ``positional_motion`` (``max_gap``, ``smooth``, ``floor``...);
-            none with ``solve``.
+            with ``solve=False`` only.
     """
     from ..sources.positions import positional_motion
 
@@ -65,17 +75,40 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
     return motion
 
 
-def solved_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, **options: Any) -> Motion:
+def check_legs(rec: MarkerRecording, ms: MarkerSet) -> None:
+    """An :class:`~physmocap.errors.InputError` naming the leg segments (:data:`LEG_SEGMENTS`)
+    that no marker of the recording is on (by role or label hint:
+    :func:`.functional.segment_markers`): an upper-body take cannot drive a character's legs."""
+    from ..errors import InputError
+    from .functional import segment_markers
+
+    have = set(segment_markers(rec, ms).values())
+    bare = [s for s in LEG_SEGMENTS if s not in have]
+    if bare:
+        raise InputError(f"no marker on {', '.join(bare)}: the legs were not captured (an upper-body take?), so "
+                         "they cannot drive a character's legs; `physmocap solve FILE -o actor.bvh` solves the "
+                         "captured part alone", path=rec.source)
+
+
+def solved_motion(rec: MarkerRecording, marker_set: str | os.PathLike | MarkerSet | None = None,
+                  **options: Any) -> Motion:
     """The actor skeleton solved from the markers (:func:`.solve.solve_markers`) as a
     rotational :class:`~physmocap.motion.Motion` (metres, Z-up, canonical joint names), with
-    the joint-centre methods, ignored markers and the residual RMS in ``meta``."""
+    the joint-centre methods, ignored markers and the residual RMS in ``meta``.  A recording
+    with no marker on a leg segment is refused before the solve (:func:`check_legs`)."""
     from ..errors import OptionError
     from .solve import actor_motion, solve_markers
 
     if options:
-        raise OptionError(f"option(s) {', '.join(sorted(options))} do not apply to a solved marker recording",
-                          path=rec.source)
-    sol = solve_markers(rec, marker_set)
+        raise OptionError(f"option(s) {', '.join(sorted(options))} do not apply to a solved marker recording "
+                          "(only to its joint centres: solve=False, --joint-centres)", path=rec.source)
+    ms = recording_marker_set(rec, marker_set)
+    if not ms.roles:
+        from .joints import joint_centres
+
+        joint_centres(rec, ms)  # raises: the labels match no known marker set
+    check_legs(rec, ms)
+    sol = solve_markers(rec, ms)
     motion = actor_motion(sol)
     rep = sol.report()
     motion.meta["joint_centre_methods"] = dict(sol.calibration.method)

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["MarkerRecording", "plain_label", "UNITS", "unit_scale"]
+__all__ = ["MarkerRecording", "plain_label", "unique_labels", "UNITS", "unit_scale"]
 
 #: Length unit name -> metres.
 UNITS = {"mm": 1e-3, "cm": 1e-2, "dm": 0.1, "m": 1.0, "in": 0.0254, "inch": 0.0254, "inches": 0.0254, "ft": 0.3048}
@@ -43,6 +43,38 @@ def plain_label(label: str) -> str:
     """A marker label without subject prefix, case or punctuation: ``"Daphnee:L_SHO"`` -> ``"LSHO"``."""
     base = label.rsplit(":", 1)[-1]
     return re.sub(r"[^A-Za-z0-9]", "", base).upper()
+
+
+def unique_labels(labels: "list[str] | tuple[str, ...]", where: str) -> list[str]:
+    """``labels`` with repeats told apart: the first of each keeps the label (and so its role),
+    the later ones become ``LABEL#2``, ``LABEL#3``...; one warning, prefixed by ``where``
+    (``"FILE:4"``), names every repeated label and its marker numbers (1-based), since which
+    copy is the real marker cannot be known (``--marker-set`` can give the role to a copy)."""
+    from ..errors import warn
+    from .markerset import ALIASES
+
+    out = list(labels)
+    seen: dict[str, list[int]] = {}
+    for i, lab in enumerate(out):
+        seen.setdefault(lab, []).append(i)
+    repeated = {lab: idx for lab, idx in seen.items() if len(idx) > 1}
+    if not repeated:
+        return out
+    taken = set(out)
+    for lab, idx in repeated.items():
+        n = 1
+        for i in idx[1:]:
+            n += 1
+            while f"{lab}#{n}" in taken:
+                n += 1
+            out[i] = f"{lab}#{n}"
+            taken.add(out[i])
+    names = "; ".join(f"{lab} (markers {', '.join(str(i + 1) for i in idx)})" for lab, idx in repeated.items())
+    first = next(iter(repeated))
+    warn(f"{where}: repeated marker label(s): {names}; the first of each keeps the label and its role, the others "
+         f"are renamed {', '.join(out[i] for lab, idx in repeated.items() for i in idx[1:])} and play none "
+         f'(to use another copy, a --marker-set file can name it, e.g. {ALIASES.get(plain_label(first), "ROLE")} = "{out[repeated[first][1]]}")')
+    return out
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,12 @@ SIDELESS_ROLES: dict[str, str] = {
     "STYLR": "WRA", "STYLU": "WRB",
     "INDEX": "FIN",
 }
-#: Smallest distance (metres) from the midline for a marker to have a side.
+#: Smallest distance (metres, median over the clip) from the midline for a marker to have a
+#: side.  An engineering choice, not from a paper: it must separate the midline markers, whose
+#: placement and skin motion leave them a few centimetres off the line (sternum, clavicular
+#: notch, C7, a head marker seen from a tilted pelvis axis), from the limb markers, which sit
+#: at least a hip or shoulder half-width off it (the ASIS half-width alone is about 12 cm:
+#: :mod:`.joints` takes 0.25 m ASIS to ASIS for an adult); 5 cm is well inside that gap.
 MIN_LATERAL = 0.05
 
 

@@ -41,7 +41,8 @@ from .markerset import MarkerSet, recording_marker_set
 from .motion import _to_z_up
 from .recording import MarkerRecording
 
-__all__ = ["MarkerSolveOptions", "MarkerSolution", "ActorModel", "calibrate_actor", "solve_markers", "frame_ranges"]
+__all__ = ["MarkerSolveOptions", "MarkerSolution", "ActorModel", "calibrate_actor", "calibrate_segments", "fit_actor",
+           "solve_markers", "frame_ranges"]
 
 #: Model body of each marker segment (default humanoid body names).
 SEGMENT_BODY = {
@@ -315,23 +316,41 @@ def solve_markers(
     )
 
 
+def check_calibration_length(rec: MarkerRecording) -> None:
+    """An :class:`~physmocap.errors.InputError` when the recording has fewer frames than a
+    segment's mean marker constellation needs (:data:`.functional.MIN_CONSTELLATION_FRAMES`)."""
+    from .functional import MIN_CONSTELLATION_FRAMES
+
+    if rec.num_frames < MIN_CONSTELLATION_FRAMES:
+        raise InputError(f"too short to calibrate ({rec.num_frames} frame{'s' if rec.num_frames != 1 else ''}, need "
+                         f"{MIN_CONSTELLATION_FRAMES}): each segment's marker shape is averaged over at least "
+                         f"{MIN_CONSTELLATION_FRAMES} frames", path=rec.source)
+
+
 def calibrate_actor(
     rec: MarkerRecording,
     marker_set: str | os.PathLike | MarkerSet | None = None,
     options: MarkerSolveOptions | None = None,
 ) -> ActorModel:
     """Calibrate the actor on a recording (a range-of-motion clip, the first seconds of a take,
-    or the whole take): joint centres, the scaled humanoid and its marker sites (steps 1-3 of
-    the module docstring)."""
-    from ..ik.solver import FrameSolver, SolverOptions
-    from ..models.character import load_character
-    from ..models.scaling import scaled_humanoid_spec
-
+    or the whole take), steps 1-3 of the module docstring, in two jobs:
+    :func:`calibrate_segments` (joint centres, each marker's segment) on the markers alone,
+    then :func:`fit_actor` (the scaled humanoid and its marker sites) on the model."""
     opt = options or MarkerSolveOptions()
     ms = recording_marker_set(rec, marker_set)
-    valid = rec.valid
-    if not valid.any():
+    cal, seg_of = calibrate_segments(rec, ms, opt)
+    return fit_actor(rec, ms, cal, seg_of, opt)
+
+
+def calibrate_segments(rec: MarkerRecording, ms: MarkerSet,
+                       opt: MarkerSolveOptions) -> tuple[Calibration, dict[int, str]]:
+    """Step 1: the joint centres (:func:`.functional.functional_joint_centres`, regression
+    fallbacks warned) and marker index -> segment (by role and name, then by rigidity:
+    :func:`.functional.attach_by_rigidity`; segments left without a marker warned).  An
+    :class:`~physmocap.errors.InputError` when no sample is valid or the clip is too short."""
+    if not rec.valid.any():
         raise InputError("every marker sample is invalid (NaN, zero or a negative residual): nothing to solve", path=rec.source)
+    check_calibration_length(rec)
     cal = functional_joint_centres(rec, ms)
     warn_fallbacks(cal, rec.source)
     seg_of = attach_by_rigidity(rec, cal.frames, cal.segment_of, opt.rigidity)
@@ -341,102 +360,167 @@ def calibrate_actor(
         warn(f"{rec.source}: no marker on {len(bare)} segment(s): {', '.join(bare)}; they keep the actor's rest "
              "pose")
     # segments with too few markers for a frame still take their markers (the IK needs no frame)
-    M = len(rec.labels)
+    return cal, seg_of
+
+
+@dataclass
+class _SolverFrame:
+    """A recording in the solver's frame (metres, Z-up, floor at 0).
+
+    Attributes:
+        to_z_up: ``(3, 3)`` rotation from the file's axes.
+        markers: ``(F, M, 3)`` the markers.
+        centres: Joint -> ``(F, 3)`` the calibrated centres.
+        floor: Height (file's up axis, metres) taken as the floor.
+        use_floor: Whether the floor is a constraint (asked for, and foot markers exist).
+    """
+
+    to_z_up: np.ndarray
+    markers: np.ndarray
+    centres: dict[str, np.ndarray]
+    floor: float
+    use_floor: bool
+
+
+def _solver_frame(rec: MarkerRecording, ms: MarkerSet, cal: Calibration, seg_of: dict[int, str],
+                  floor_on: bool) -> _SolverFrame:
+    """The markers and centres turned Z-up, the floor (2 cm below the 1st percentile of the
+    lowest foot marker per frame: markers sit about 2 cm above the sole) at 0."""
     R = _to_z_up(up_axis(rec, ms))
     Pz = rec.positions @ R.T
     centres = {k: v @ R.T for k, v in cal.positions.items()}
-    # the floor: the lowest foot markers (heel, toe) in the lowest percent of frames
     foot = [i for i, s in seg_of.items() if s.endswith("_foot")]
-    use_floor = bool(opt.floor and foot)
     floor = 0.0
     if foot:
         lows = np.nanmin(Pz[:, foot, 2], axis=1)
         lows = lows[np.isfinite(lows)]
         if lows.size:
-            floor = float(np.percentile(lows, 1)) - 0.02  # markers sit about 2 cm above the sole
+            floor = float(np.percentile(lows, 1)) - 0.02
     Pz[..., 2] -= floor
     centres = {k: v - np.array([0.0, 0.0, floor]) for k, v in centres.items()}
+    return _SolverFrame(to_z_up=R, markers=Pz, centres=centres, floor=floor, use_floor=bool(floor_on and foot))
 
-    base = load_character()
-    spec = scaled_humanoid_spec(_actor_lengths(cal, base))
+
+def fit_actor(rec: MarkerRecording, ms: MarkerSet, cal: Calibration, seg_of: dict[int, str],
+              opt: MarkerSolveOptions) -> ActorModel:
+    """Steps 2-3: the default humanoid scaled to the calibrated lengths, posed by IK on the
+    joint centres over calibration frames spread through the clip (:func:`_calibration_frames`,
+    :func:`_pose_on_centres`), then one site per marker at its mean position on its body,
+    refined on the markers (:func:`_place_marker_sites`)."""
+    from ..models.character import load_character
+    from ..models.scaling import scaled_humanoid_spec
+
+    frame = _solver_frame(rec, ms, cal, seg_of, opt.floor)
+    spec = scaled_humanoid_spec(_actor_lengths(cal, load_character()))
     with tempfile.TemporaryDirectory(prefix="physmocap-actor-") as tmp:
         actor = _load_spec_character(spec, Path(tmp), "actor")
-        # -- calibration frames: spread over the clip, where most centres are seen
-        names = [n for n in CALIBRATION_TARGETS if n in centres and n in actor.tracked]
-        if "pelvis" not in centres and "left_hip" in centres and "right_hip" in centres:
-            centres["pelvis"] = 0.5 * (centres["left_hip"] + centres["right_hip"])
-            names = ["pelvis"] + names
-        if not names:
-            raise InputError("the markers place none of the joints the actor is fitted to (pelvis or both hips, "
-                             f"knees, ankles, shoulders, elbows, wrists); they give only {', '.join(sorted(centres)) or 'none'}: "
-                             "too few markers are labelled or mapped (see physmocap inspect, --marker-set)", path=rec.source)
+        centres, names, calib = _calibration_frames(rec, actor, frame.centres, opt.calibration_frames)
         C = np.stack([centres[n] for n in names], 1)
-        seen = np.all(np.isfinite(C), 2)
-        good = np.flatnonzero(seen.mean(1) >= 0.8)
-        if len(good) == 0:
-            raise InputError("no frame shows enough joint centres to place the markers on the skeleton "
-                             "(are the markers labelled and mapped? see physmocap inspect)", path=rec.source)
-        calib = good[np.linspace(0, len(good) - 1, min(opt.calibration_frames, len(good))).astype(int)]
-        sopt = SolverOptions(max_iterations=12, first_frame_iterations=120, self_collision=False,
-                             velocity_limits=False, floor=False,
-                             weights={n: ((0.3 if n.endswith("hand_end") or n.endswith("toe") else 1.0), 0.0) for n in names})
-        cs = FrameSolver(_solver_character(actor, {n: actor.tracked[n].name for n in names}), names,
-                         np.zeros(len(names), bool), rec.fps, sopt)
-        q0 = np.array(actor.rest_qpos, float)
-        q0[:7] = _root_pose(centres, int(calib[0]), q0[:7])
-        cs.reset(q0)
-        Q = []
-        dummy_o = np.tile([0.0, 0.0, 0.0, 1.0], (len(names), 1))
-        for k, t in enumerate(calib):
-            # calibration frames are far apart (the actor may have turned): start each from
-            # the previous pose with the root placed by the hips and the neck
-            q = np.array(cs.configuration.q if k else q0, float)
-            q[:7] = _root_pose(centres, int(t), q[:7])
-            cs.reset(q)
-            q, _, _ = cs.solve_frame(np.nan_to_num(C[t]), dummy_o, seen[t], first=(k == 0))
-            Q.append(q)
-        # -- marker sites: mean body-frame position over the calibration frames, refined
-        model0 = actor.model
-        data0 = mujoco.MjData(model0)
-        body_id = {s: model0.body(b).id for s, b in SEGMENT_BODY.items()}
-        attached = sorted(i for i in seg_of if valid[calib, i].sum() >= 3 or valid[:, i].sum() >= 3)
-        local = _marker_locals(model0, data0, np.array(Q), Pz[calib], attached, seg_of, body_id)
-        attached = [i for i in attached if i in local]
-        ignored = [rec.labels[i] for i in range(M) if i not in local]
-        if not attached:
-            raise InputError("no marker could be attached to a segment of the skeleton", path=rec.source)
-        if ignored:
-            shown = ", ".join(ignored[:12]) + (" ..." if len(ignored) > 12 else "")
-            warn(f"{rec.source}: {len(ignored)} marker(s) belong to no segment (props, strays, too few samples) "
-                 f"and are ignored: {shown}")
-        scatter = np.full(M, np.nan)
-        for _ in range(2):
-            char, site_names = _with_marker_sites(spec, Path(tmp), rec.labels, attached, seg_of, local)
-            scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local, body_id, M)
-            weights = _weights(scatter, attached, opt.min_weight_scatter)
-            # the calibrated centres stay targets: markers alone would let the skeleton drift
-            # inside the marker cloud from one refinement to the next (sites follow poses)
-            solver = _marker_solver(char, rec.fps, attached, site_names, weights, opt, use_floor, max_iterations=10,
-                                    centres=tuple(names))
-            Q0, Q = Q, []
-            for k, t in enumerate(calib):
-                solver.reset(np.array(Q0[k]))
-                q, _, _ = solver.solve_frame(np.concatenate([np.nan_to_num(Pz[t, attached]), np.nan_to_num(C[t])]),
-                                             np.tile([0.0, 0, 0, 1], (len(attached) + len(names), 1)),
-                                             np.concatenate([valid[t, attached], seen[t]]))
-                Q.append(q)
-            local = _marker_locals(char.model, mujoco.MjData(char.model), np.array(Q), Pz[calib], attached, seg_of,
-                                   {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()})
-        char, site_names = _with_marker_sites(spec, Path(tmp), rec.labels, attached, seg_of, local)
-        scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local,
-                           {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()}, M)
-        weights = _weights(scatter, attached, opt.min_weight_scatter)
-    actor = ActorModel(
+        Q = _pose_on_centres(actor, centres, names, C, calib, rec.fps)
+        char, site_names, attached, ignored, weights, Q = _place_marker_sites(
+            spec, Path(tmp), rec, actor, frame, seg_of, names, C, calib, Q, opt)
+    return ActorModel(
         character=char, calibration=cal, labels=tuple(rec.labels), attached=attached, site_names=site_names,
-        segment_of={i: seg_of[i] for i in attached}, weights=weights, ignored=ignored, to_z_up=R, floor=floor,
-        use_floor=use_floor, rest_pose=np.array(Q[0]), fps=float(rec.fps), options=opt, marker_set=ms,
+        segment_of={i: seg_of[i] for i in attached}, weights=weights, ignored=ignored, to_z_up=frame.to_z_up,
+        floor=frame.floor, use_floor=frame.use_floor, rest_pose=np.array(Q[0]), fps=float(rec.fps), options=opt,
+        marker_set=ms,
     )
-    return actor
+
+
+def _calibration_frames(rec: MarkerRecording, actor, centres: dict[str, np.ndarray],
+                        count: int) -> tuple[dict[str, np.ndarray], list[str], np.ndarray]:
+    """``(centres, tracked joint names, frame indices)``: the joints the actor is fitted to
+    (:data:`CALIBRATION_TARGETS` the calibration places; the pelvis from the hips when
+    missing) and up to ``count`` frames spread evenly over those where at least 80 % of them
+    are seen.  An InputError naming the file when there is no such joint or frame."""
+    centres = dict(centres)
+    names = [n for n in CALIBRATION_TARGETS if n in centres and n in actor.tracked]
+    if "pelvis" not in centres and "left_hip" in centres and "right_hip" in centres:
+        centres["pelvis"] = 0.5 * (centres["left_hip"] + centres["right_hip"])
+        names = ["pelvis"] + names
+    if not names:
+        raise InputError("the markers place none of the joints the actor is fitted to (pelvis or both hips, "
+                         f"knees, ankles, shoulders, elbows, wrists); they give only {', '.join(sorted(centres)) or 'none'}: "
+                         "too few markers are labelled or mapped (see physmocap inspect, --marker-set)", path=rec.source)
+    seen = np.all(np.isfinite(np.stack([centres[n] for n in names], 1)), 2)
+    good = np.flatnonzero(seen.mean(1) >= 0.8)
+    if len(good) == 0:
+        raise InputError("no frame shows enough joint centres to place the markers on the skeleton "
+                         "(are the markers labelled and mapped? see physmocap inspect)", path=rec.source)
+    calib = good[np.linspace(0, len(good) - 1, min(count, len(good))).astype(int)]
+    return centres, names, calib
+
+
+def _pose_on_centres(actor, centres: dict[str, np.ndarray], names: list[str], C: np.ndarray, calib: np.ndarray,
+                     fps: float) -> list[np.ndarray]:
+    """The actor's ``qpos`` on each calibration frame by IK on the joint centres ``C``
+    ``(F, J, 3)`` (hand ends and toes at weight 0.3), each frame started from the previous
+    pose with the root placed by the hips and the neck (the frames are far apart: the actor
+    may have turned)."""
+    from ..ik.solver import FrameSolver, SolverOptions
+
+    seen = np.all(np.isfinite(C), 2)
+    sopt = SolverOptions(max_iterations=12, first_frame_iterations=120, self_collision=False,
+                         velocity_limits=False, floor=False,
+                         weights={n: ((0.3 if n.endswith("hand_end") or n.endswith("toe") else 1.0), 0.0) for n in names})
+    cs = FrameSolver(_solver_character(actor, {n: actor.tracked[n].name for n in names}), names,
+                     np.zeros(len(names), bool), fps, sopt)
+    q0 = np.array(actor.rest_qpos, float)
+    q0[:7] = _root_pose(centres, int(calib[0]), q0[:7])
+    cs.reset(q0)
+    Q = []
+    dummy_o = np.tile([0.0, 0.0, 0.0, 1.0], (len(names), 1))
+    for k, t in enumerate(calib):
+        q = np.array(cs.configuration.q if k else q0, float)
+        q[:7] = _root_pose(centres, int(t), q[:7])
+        cs.reset(q)
+        q, _, _ = cs.solve_frame(np.nan_to_num(C[t]), dummy_o, seen[t], first=(k == 0))
+        Q.append(q)
+    return Q
+
+
+def _place_marker_sites(spec: mujoco.MjSpec, folder: Path, rec: MarkerRecording, actor, frame: _SolverFrame,
+                        seg_of: dict[int, str], names: list[str], C: np.ndarray, calib: np.ndarray,
+                        Q: list[np.ndarray], opt: MarkerSolveOptions):
+    """One site per marker on its segment's body at its median position in the body frame
+    over the calibration poses ``Q``; then twice: solve those frames on the markers (weighted
+    by the inverse of their scatter) with the centres ``C`` kept as weak targets, and place
+    the sites again.  Markers with fewer than 3 valid samples are ignored (one warning).
+    Returns ``(character, index -> site name, attached, ignored labels, weights, poses)``."""
+    valid, Pz, M = rec.valid, frame.markers, len(rec.labels)
+    seen = np.all(np.isfinite(C), 2)
+    body_id = {s: actor.model.body(b).id for s, b in SEGMENT_BODY.items()}
+    attached = sorted(i for i in seg_of if valid[calib, i].sum() >= 3 or valid[:, i].sum() >= 3)
+    local = _marker_locals(actor.model, mujoco.MjData(actor.model), np.array(Q), Pz[calib], attached, seg_of, body_id)
+    attached = [i for i in attached if i in local]
+    ignored = [rec.labels[i] for i in range(M) if i not in local]
+    if not attached:
+        raise InputError("no marker could be attached to a segment of the skeleton", path=rec.source)
+    if ignored:
+        shown = ", ".join(ignored[:12]) + (" ..." if len(ignored) > 12 else "")
+        warn(f"{rec.source}: {len(ignored)} marker(s) belong to no segment (props, strays, too few samples) "
+             f"and are ignored: {shown}")
+    for _ in range(2):
+        char, site_names = _with_marker_sites(spec, folder, rec.labels, attached, seg_of, local)
+        weights = _weights(_scatter(char.model, Q, Pz[calib], attached, seg_of, local, body_id, M), attached,
+                           opt.min_weight_scatter)
+        # the calibrated centres stay targets: markers alone would let the skeleton drift
+        # inside the marker cloud from one refinement to the next (sites follow poses)
+        solver = _marker_solver(char, rec.fps, attached, site_names, weights, opt, frame.use_floor, max_iterations=10,
+                                centres=tuple(names))
+        Q0, Q = Q, []
+        for k, t in enumerate(calib):
+            solver.reset(np.array(Q0[k]))
+            q, _, _ = solver.solve_frame(np.concatenate([np.nan_to_num(Pz[t, attached]), np.nan_to_num(C[t])]),
+                                         np.tile([0.0, 0, 0, 1], (len(attached) + len(names), 1)),
+                                         np.concatenate([valid[t, attached], seen[t]]))
+            Q.append(q)
+        local = _marker_locals(char.model, mujoco.MjData(char.model), np.array(Q), Pz[calib], attached, seg_of,
+                               {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()})
+    char, site_names = _with_marker_sites(spec, folder, rec.labels, attached, seg_of, local)
+    scatter = _scatter(char.model, Q, Pz[calib], attached, seg_of, local,
+                       {s: char.model.body(b).id for s, b in SEGMENT_BODY.items()}, M)
+    return char, site_names, attached, ignored, _weights(scatter, attached, opt.min_weight_scatter), Q
 
 
 def _marker_locals(model, data, Q, P, attached, seg_of, body_id) -> dict[int, np.ndarray]:

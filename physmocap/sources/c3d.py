@@ -2,8 +2,8 @@
 
 Point labels (``POINT:LABELS`` and ``LABELS2``...), units (``POINT:UNITS``), rate
 (``POINT:RATE``); a sample is invalid where its residual is negative, its coordinates
-are not finite or all exactly zero.  Analog channels are ignored.  The markers become the
-actor's canonical joint centres (:mod:`physmocap.markers`).
+are not finite or all exactly zero.  Analog channels are ignored.  ``load_motion`` gives the
+solved actor skeleton (:mod:`physmocap.markers`; its joint centres with ``solve=False``).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..markers.recording import UNITS, MarkerRecording, unit_scale
+from ..markers.recording import UNITS, MarkerRecording, unique_labels, unit_scale
 from ..motion import Motion
 
 __all__ = ["read_c3d_markers", "read_c3d"]
@@ -63,6 +63,7 @@ def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) 
     if not any(labels):
         raise InputError("no point labels (POINT:LABELS is empty): the markers cannot be told apart", path=p)
     labels = [lab or f"marker{k}" for k, lab in enumerate(labels)] + [f"marker{k}" for k in range(len(labels), M)]
+    labels = unique_labels(labels, f"{p}: POINT:LABELS")
     if units is not None:
         scale = unit_scale(units, p)
     elif unit not in UNITS:
@@ -124,9 +125,9 @@ def _declared_frames(p: Path, markers: int) -> int | None:
 
 
 def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = False, **options: Any) -> Motion:
-    """A C3D file as the actor's canonical joint centres, or with ``solve`` the solved actor
-    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
+             solve: bool = True, **options: Any) -> Motion:
+    """A C3D file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
+    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
     return marker_motion(read_c3d_markers(path, units), marker_set, solve=solve, **options)

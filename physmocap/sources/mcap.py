@@ -18,6 +18,13 @@ Three layouts are understood, tried in this order:
    a ``physmocap.skeleton`` record, the channel's ``joint_names`` metadata, or
    the known tracker layouts by count (15: NITE, 25: Kinect v2, 32: Azure Kinect).
 
+Optical marker recordings (:func:`read_mcap_markers`; ``load_motion`` solves them like a C3D)
+are a ``physmocap.LabelledPoints`` channel (written by ``physmocap convert take.c3d
+take.mcap``: one message per frame, labelled points) or a ``foxglove.PointCloud`` channel
+whose points are labelled by metadata (a point cloud names no point: the labels come from the
+channel's ``labels`` metadata or a ``physmocap.markers`` metadata record, a JSON list in point
+order, or indexed by an integer ``id`` field of the points; without them, one error).
+
 Messages must be JSON-encoded (``message_encoding`` ``json``).  Frame ``i``
 of a clip is the message stamped nearest ``t0 + i / fps``; fps comes from the
 metadata, from ``fps=``, or from the median spacing of the timestamps.  A
@@ -44,7 +51,7 @@ from ..motion import MAX_JOINTS, Motion, Skeleton, forward_kinematics
 from ..rotations import Rotation, quat_mul, up_axis_matrix
 from . import check_grid
 
-__all__ = ["read_mcap", "read_mcap_markers", "list_skeletons", "has_markers"]
+__all__ = ["read_mcap", "read_mcap_markers", "list_skeletons", "has_markers", "POINTCLOUD_SCHEMA"]
 
 MAGIC = b"\x89MCAP0\r\n"
 TF_SCHEMAS = ("foxglove.FrameTransforms", "foxglove.FrameTransform")
@@ -726,7 +733,9 @@ def read_mcap(
         units: For foreign recordings: the length unit (default metres).
         up: For foreign recordings: the world's up axis, ``"Z"`` (default) or ``"Y"``.
         **options: Passed to the positional pipeline for PosesInFrame
-            recordings (:func:`physmocap.sources.positions.positional_motion`).
+            recordings (:func:`physmocap.sources.positions.positional_motion`); for a marker
+            recording, to :func:`physmocap.markers.motion.marker_motion` (the solved actor by
+            default, the joint centres with ``solve=False``).
 
     Raises:
         InputError: not an MCAP file, truncated or corrupt, no skeleton
@@ -797,49 +806,113 @@ def read_mcap(
 
 
 # --- optical markers ---------------------------------------------------------------
+#: Foxglove's point cloud schema: packed little-endian points, no labels (see :func:`_cloud_labels`).
+POINTCLOUD_SCHEMA = "foxglove.PointCloud"
+#: Foxglove ``NumericType`` -> NumPy dtype (integers little-endian, as Foxglove specifies).
+NUMERIC_TYPES = {1: "u1", 2: "i1", 3: "<u2", 4: "<i2", 5: "<u4", 6: "<i4", 7: "<f4", 8: "<f8"}
+
+
+def _skeleton_channels(raw: _Raw) -> bool:
+    return any(c.schema_name in TF_SCHEMAS or c.schema_name == POSES_SCHEMA for c in raw.channels.values())
+
+
 def _marker_channel(raw: _Raw) -> _Channel | None:
-    chans = [c for c in sorted(raw.channels.values(), key=lambda c: c.id) if c.schema_name == MARKERS_SCHEMA]
-    return chans[0] if chans else None
+    """The marker channel: the first ``physmocap.LabelledPoints`` one; else the first
+    ``foxglove.PointCloud`` one whose points have labels (:func:`_cloud_labels`); else the
+    first point cloud of a file with no skeleton channel (whose reading then says what is
+    missing).  A point cloud beside a transform tree without labels is not taken for markers
+    (a depth camera's, a lidar's)."""
+    chans = sorted(raw.channels.values(), key=lambda c: c.id)
+    own = [c for c in chans if c.schema_name == MARKERS_SCHEMA]
+    if own:
+        return own[0]
+    clouds = [c for c in chans if c.schema_name == POINTCLOUD_SCHEMA]
+    labelled = [c for c in clouds if _marker_meta(raw, c).get("labels") or c.metadata.get("labels")]
+    if labelled:
+        return labelled[0]
+    return clouds[0] if clouds and not _skeleton_channels(raw) else None
 
 
 def has_markers(path: str | os.PathLike) -> bool:
-    """Whether an MCAP file holds a ``physmocap.LabelledPoints`` marker channel."""
+    """Whether an MCAP file holds a marker channel (``physmocap.LabelledPoints``, or a
+    labelled ``foxglove.PointCloud``: :func:`_marker_channel`)."""
     return _marker_channel(_load(Path(path))) is not None
 
 
 def read_mcap_markers(path: str | os.PathLike, units: str | float | None = None):
     """The marker recording (:class:`~physmocap.markers.recording.MarkerRecording`) of an MCAP
-    file written by :func:`physmocap.export.mcap.write_markers_mcap` (or any
-    ``physmocap.LabelledPoints`` channel): frame ``i`` is the message with ``"frame": i``;
-    markers absent from a message are gaps."""
+    file: a ``physmocap.LabelledPoints`` channel (written by
+    :func:`physmocap.export.mcap.write_markers_mcap`; frame ``i`` is the message with
+    ``"frame": i``, markers absent from a message are gaps) or a labelled
+    ``foxglove.PointCloud`` channel (:func:`_cloud_markers`)."""
     p = Path(path)
     return _markers(p, _load(p), units)
 
 
+def _marker_meta(raw: _Raw, ch: _Channel) -> dict[str, str]:
+    """The ``physmocap.markers`` metadata record for ``ch`` (one naming its topic, or naming none)."""
+    return next((m for name, m in raw.metadata if name == MARKERS_METADATA and m.get("topic", ch.topic) == ch.topic), {})
+
+
+def _json_labels(p: Path, text: str, where: str) -> list[str]:
+    """Marker labels from a JSON list of strings (a metadata value), or one InputError naming ``where``."""
+    try:
+        labels = parse_json(text)
+    except ValueError:
+        labels = None
+    if not isinstance(labels, list) or not all(isinstance(x, str) and x.strip() for x in labels):
+        raise InputError(f"{where}: labels must be a JSON list of non-empty strings", path=p)
+    return [str(x) for x in labels]
+
+
 def _markers(p: Path, raw: _Raw, units: str | float | None):
-    from ..markers.recording import MarkerRecording, unit_scale
+    from ..markers.recording import MarkerRecording, unique_labels, unit_scale
 
     ch = _marker_channel(raw)
     if ch is None:
-        raise InputError(f"no marker channel (physmocap.LabelledPoints); {_describe_channels(raw)}", path=p)
-    dec = _Decoder(p, ch)
-    meta = next((m for name, m in raw.metadata if name == MARKERS_METADATA and m.get("topic", ch.topic) == ch.topic), {})
+        raise InputError(f"no marker channel (physmocap.LabelledPoints, or foxglove.PointCloud with labels); "
+                         f"{_describe_channels(raw)}", path=p)
     msgs = raw.messages.get(ch.id, [])
     if not msgs:
         raise InputError(f"no messages on {ch.topic}", path=p)
-    frames: list[tuple[int, dict]] = []
-    labels: list[str] = []
-    try:
-        labels = [str(x) for x in parse_json(meta["labels"])] if "labels" in meta else []
-    except (ValueError, TypeError):
-        raise InputError("the physmocap.markers metadata's labels are not a JSON list", path=p) from None
+    meta = _marker_meta(raw, ch)
+    read = _cloud_markers if ch.schema_name == POINTCLOUD_SCHEMA else _labelled_points
+    labels, P, times, fps = read(p, raw, ch, meta)
+    if fps is None:
+        try:
+            fps = float(meta.get("fps", ch.metadata.get("fps", "nan")))
+        except ValueError:
+            fps = float("nan")
+    if not (math.isfinite(fps) and fps > 0):
+        dt = np.diff(np.unique(times))
+        if not dt.size:
+            raise InputError("cannot tell the frame rate: one timestamp and no fps metadata", path=p)
+        fps = 1e9 / float(np.median(dt))
+    scale = unit_scale(units, p) if units is not None else 1.0
+    first = int(meta.get("first_frame", "0")) if str(meta.get("first_frame", "0")).isdigit() else 0
+    labels = unique_labels(labels, f"{p}: the labels of {ch.topic}")
+    return MarkerRecording(labels=tuple(labels), positions=P * scale, fps=fps, source=p, first_frame=first)
+
+
+def _labelled_points(p: Path, raw: _Raw, ch: _Channel, meta: dict[str, str]):
+    """``(labels, (F, M, 3) positions, timestamps, None)`` of a ``physmocap.LabelledPoints``
+    channel: frame ``i`` is the message with ``"frame": i``; a frame number held by two
+    messages is an error naming both."""
+    dec = _Decoder(p, ch)
+    labels = _json_labels(p, meta["labels"], "the physmocap.markers metadata") if "labels" in meta else []
     seen = set(labels)
+    frames: list[tuple[int, dict]] = []
     times = []
-    for k, (log_time, data) in enumerate(msgs):
+    first_msg: dict[int, int] = {}
+    for k, (log_time, data) in enumerate(raw.messages[ch.id]):
         obj = dec.load(k, data)
         f = obj.get("frame")
         if isinstance(f, bool) or not isinstance(f, int) or f < 0:
             raise dec.fail(k, f"field 'frame' must be a non-negative integer, got {f!r}")
+        if f in first_msg:
+            raise dec.fail(k, f"frame {f} again (message {first_msg[f]} holds it too): which one is the frame "
+                           "cannot be told")
+        first_msg[f] = k
         pts = obj.get("points")
         if not isinstance(pts, dict):
             raise dec.fail(k, "field 'points' must be an object of label -> {x, y, z}")
@@ -856,15 +929,146 @@ def _markers(p: Path, raw: _Raw, units: str | float | None):
     for k, (f, pts) in enumerate(frames):
         for lab, v in pts.items():
             P[f, col[lab]] = dec.vec3(k, pts, lab)
+    return labels, P, times, None
+
+
+def _cloud_labels(p: Path, ch: _Channel, meta: dict[str, str]) -> list[str]:
+    """The marker labels of a ``foxglove.PointCloud`` channel, which has none of its own: the
+    channel's ``labels`` metadata, else the ``labels`` of a ``physmocap.markers`` metadata
+    record naming the topic (a JSON list: point ``k`` of every message, or the point whose
+    ``id`` field is ``k``, is marker ``labels[k]``)."""
+    if "labels" in ch.metadata:
+        return _json_labels(p, ch.metadata["labels"], f"the metadata of channel {ch.topic}")
+    if "labels" in meta:
+        return _json_labels(p, meta["labels"], "the physmocap.markers metadata")
+    raise InputError(
+        f"{ch.topic} is a foxglove.PointCloud without marker labels: a point cloud does not name its points, so "
+        "the markers cannot be told apart (physmocap does not label markers). Give the labels, in point order, "
+        "as a JSON list in the channel's 'labels' metadata or in a physmocap.markers metadata record "
+        f"{{\"topic\": \"{ch.topic}\", \"labels\": \"[...]\"}}", path=p)
+
+
+def _cloud_fields(dec: _Decoder, k: int, obj: dict) -> tuple[int, dict[str, tuple[int, str]]]:
+    """``(point_stride, name -> (offset, dtype))`` of one PointCloud message, checked."""
+    stride = obj.get("point_stride")
+    if isinstance(stride, bool) or not isinstance(stride, int) or stride <= 0:
+        raise dec.fail(k, f"field 'point_stride' must be a positive integer, got {stride!r}")
+    fields = obj.get("fields")
+    if not isinstance(fields, list):
+        raise dec.fail(k, "field 'fields' must be a list of {name, offset, type}")
+    out: dict[str, tuple[int, str]] = {}
+    for f in fields:
+        name, off, typ = (f.get("name"), f.get("offset"), f.get("type")) if isinstance(f, dict) else (None, None, None)
+        if not isinstance(name, str) or isinstance(off, bool) or not isinstance(off, int) or off < 0:
+            raise dec.fail(k, f"a packed field needs a name and a non-negative offset, got {f!r}")
+        dtype = NUMERIC_TYPES.get(typ) if isinstance(typ, int) and not isinstance(typ, bool) else None
+        if dtype is None:
+            raise dec.fail(k, f"field {name!r}: numeric type {typ!r} is not one of Foxglove's 1-8 (UINT8 to FLOAT64)")
+        if off + np.dtype(dtype).itemsize > stride:
+            raise dec.fail(k, f"field {name!r} (offset {off}, {np.dtype(dtype).itemsize} bytes) runs past the "
+                           f"point stride of {stride} bytes")
+        out[name] = (off, dtype)
+    missing = [a for a in "xyz" if a not in out]
+    if missing:
+        raise dec.fail(k, f"the points have no {', '.join(missing)} field: markers need x, y and z")
+    return stride, out
+
+
+def _cloud_points(dec: _Decoder, k: int, obj: dict) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(N, 3)`` points of one PointCloud message in its frame (its ``pose`` applied; NaN
+    or all-zero points, the usual "not seen", as NaN) and the ``(N,)`` ``id`` field if any."""
+    import base64
+    import binascii
+
+    stride, fields = _cloud_fields(dec, k, obj)
+    data = obj.get("data", "")
     try:
-        fps = float(meta["fps"]) if "fps" in meta else float("nan")
+        buf = base64.b64decode(data, validate=True) if isinstance(data, str) else None
+    except (binascii.Error, ValueError):
+        buf = None
+    if buf is None:
+        raise dec.fail(k, "field 'data' must be the points' bytes in base64 (Foxglove's JSON encoding of bytes)")
+    if len(buf) % stride:
+        raise dec.fail(k, f"{len(buf)} bytes of point data are not a whole number of {stride}-byte points")
+    n = len(buf) // stride
+    raw = np.frombuffer(buf, dtype=np.uint8).reshape(n, stride)
+
+    def column(name: str) -> np.ndarray:
+        off, dtype = fields[name]
+        size = np.dtype(dtype).itemsize
+        return raw[:, off:off + size].copy().view(dtype).reshape(n).astype(float)
+
+    X = np.stack([column(a) for a in "xyz"], 1)
+    X[np.all(X == 0.0, axis=1) | ~np.all(np.isfinite(X), axis=1)] = np.nan
+    pose = obj.get("pose")
+    if pose is not None:
+        if not isinstance(pose, dict):
+            raise dec.fail(k, "field 'pose' must be an object with position and orientation")
+        t = np.array(dec.vec3(k, pose, "position"))
+        x, y, z, w = dec.quat(k, pose, "orientation")
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        X = X @ R.T + t
+    ids = column("id") if "id" in fields else None
+    return X, ids
+
+
+def _cloud_markers(p: Path, raw: _Raw, ch: _Channel, meta: dict[str, str]):
+    """``(labels, (F, M, 3) positions, timestamps, fps)`` of a ``foxglove.PointCloud``
+    channel (JSON encoding: ``data`` base64, ``fields`` with Foxglove ``NumericType``s).
+
+    Labels: :func:`_cloud_labels`.  Point ``k`` of a message is marker ``labels[k]`` (every
+    message then holds one point per label, NaN or all-zero where unseen), or, when the points
+    have an integer ``id`` field, marker ``labels[id]`` (unseen markers may be left out).
+    Frame ``i`` is the message stamped ``t0 + i / fps`` (fps from the metadata's ``fps``, else
+    the timestamps' spacing); two messages with the same timestamp, or in different
+    ``frame_id``s, are an error naming them.
+    """
+    dec = _Decoder(p, ch)
+    labels = _cloud_labels(p, ch, meta)
+    M = len(labels)
+    clouds: list[np.ndarray] = []
+    times: list[int] = []
+    frame_ids: dict[str, int] = {}
+    stamped: dict[int, int] = {}
+    for k, (log_time, data) in enumerate(raw.messages[ch.id]):
+        obj = dec.load(k, data)
+        t = dec.stamp(k, obj, log_time)
+        if t in stamped:
+            raise dec.fail(k, f"timestamp {t / 1e9:.9f} s again (message {stamped[t]} has it too): two clouds "
+                           "for one frame")
+        stamped[t] = k
+        fid = obj.get("frame_id", "")
+        frame_ids.setdefault(str(fid), k)
+        if len(frame_ids) > 1:
+            a, b = list(frame_ids)[:2]
+            raise dec.fail(k, f"frame_id {b!r} differs from {a!r} of message {frame_ids[a]}: markers must share one frame")
+        X, ids = _cloud_points(dec, k, obj)
+        out = np.full((M, 3), np.nan)
+        if ids is None:
+            if len(X) != M:
+                raise dec.fail(k, f"{len(X)} points, but the labels name {M} markers (without an 'id' field, "
+                               "point k is marker k, so every cloud holds one point per label)")
+            out = X
+        else:
+            if not np.all((ids >= 0) & (ids < M) & (ids == np.round(ids))):
+                raise dec.fail(k, f"an 'id' is not a label index 0-{M - 1}")
+            iid = ids.astype(np.int64)
+            if len(np.unique(iid)) != len(iid):
+                raise dec.fail(k, "two points have the same 'id'")
+            out[iid] = X
+        clouds.append(out)
+        times.append(t)
+    try:
+        fps = float(meta.get("fps", ch.metadata.get("fps", "nan")))
     except ValueError:
         fps = float("nan")
-    if not (math.isfinite(fps) and fps > 0):
-        dt = np.diff(np.unique(times))
-        if not dt.size:
-            raise InputError("cannot tell the frame rate: one timestamp and no fps metadata", path=p)
-        fps = 1e9 / float(np.median(dt))
-    scale = unit_scale(units, p) if units is not None else 1.0
-    first = int(meta.get("first_frame", "0")) if str(meta.get("first_frame", "0")).isdigit() else 0
-    return MarkerRecording(labels=tuple(labels), positions=P * scale, fps=fps, source=p, first_frame=first)
+    idx, fps, F = _frame_grid(p, times, fps if math.isfinite(fps) and fps > 0 else None, None)
+    check_grid(p, F, M, len(clouds) * M)
+    if len(np.unique(idx)) != len(idx):
+        raise InputError(f"{ch.topic}: two clouds fall on one frame at {fps:.6g} fps (timestamps closer than a "
+                         "frame); give the right fps in the metadata", path=p)
+    P = np.full((F, M, 3), np.nan)
+    P[idx] = np.array(clouds)
+    return labels, P, times, fps

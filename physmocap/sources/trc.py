@@ -5,7 +5,8 @@ Line 1 ``PathFileType``; line 2 the header names, line 3 their values (``DataRat
 label above its three columns; line 5 the ``X1 Y1 Z1`` row; then one row per frame.
 Empty cells are missing samples.  A file that declares more frames than it holds is read
 as far as it goes, with a warning; a cell that is not a number is an error naming its
-line and marker.  The markers become canonical joint centres (:mod:`physmocap.markers`).
+line and marker.  ``load_motion`` gives the solved actor
+skeleton (:mod:`physmocap.markers`; its joint centres with ``solve=False``).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, warn
-from ..markers.recording import UNITS, MarkerRecording, unit_scale
+from ..markers.recording import UNITS, MarkerRecording, unique_labels, unit_scale
 from ..motion import Motion
 
 __all__ = ["read_trc_markers", "read_trc"]
@@ -52,7 +53,8 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=p) from None
     if len(lines) < 5 or not lines[0].startswith("PathFileType"):
-        raise InputError("not a TRC file (line 1 must start with PathFileType and 5 header lines follow)", path=p)
+        raise InputError("not a TRC file (line 1 must start with PathFileType and 5 header lines follow)", path=p,
+                         line=1)
     sep = "\t" if "\t" in lines[0] else ","
     keys, values = _split(lines[1], sep), _split(lines[2], sep)
     head = {k: v for k, v in zip(keys, values) if k}
@@ -61,25 +63,25 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
     except ValueError:
         rate = math.nan
     if not (math.isfinite(rate) and 0 < rate < 1e6):
-        raise InputError(f"line 3: DataRate must be a positive number, got {head.get('DataRate')!r}", path=p)
+        raise InputError(f"DataRate must be a positive number, got {head.get('DataRate')!r}", path=p, line=3)
     unit = (head.get("Units") or "mm").strip().lower()
     if units is not None:
         scale = unit_scale(units, p)
     elif unit not in UNITS:
-        raise InputError(f"line 3: unknown Units {unit!r}; expected one of {', '.join(UNITS)} "
-                         "(or give the unit with --in-units)", path=p)
+        raise InputError(f"unknown Units {unit!r}; expected one of {', '.join(UNITS)} "
+                         "(or give the unit with --in-units)", path=p, line=3)
     else:
         scale = UNITS[unit]
     names = _split(lines[3], sep)[2:]
     while names and not names[-1]:
         names.pop()
     if not names:
-        raise InputError("line 4: no marker labels", path=p)
+        raise InputError("no marker labels", path=p, line=4)
     stray = next((k for k, n in enumerate(names) if n and k % 3), None)
     if stray is not None:
-        raise InputError(f"line 4: label {names[stray][:40]!r} is in column {stray + 3}, not at the first of a "
-                         "marker's three columns (a label is missing or a column is extra before it)", path=p)
-    labels = [names[k] or f"marker{k // 3}" for k in range(0, len(names), 3)]
+        raise InputError(f"label {names[stray][:40]!r} is in column {stray + 3}, not at the first of a "
+                         "marker's three columns (a label is missing or a column is extra before it)", path=p, line=4)
+    labels = unique_labels([names[k] or f"marker{k // 3}" for k in range(0, len(names), 3)], f"{p}:4")
     M = len(labels)
     rows: list[list[float]] = []
     short: list[int] = []
@@ -102,9 +104,10 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
             try:
                 v = float(cell)
             except ValueError:
-                raise InputError(f"line {ln}: marker {labels[k // 3]} {'XYZ'[k % 3]} is not a number: {cell[:20]!r}", path=p) from None
+                raise InputError(f"marker {labels[k // 3]} {'XYZ'[k % 3]} is not a number: {cell[:20]!r}", path=p,
+                                 line=ln) from None
             if not math.isfinite(v) or abs(v) > 1e9:
-                raise InputError(f"line {ln}: marker {labels[k // 3]} {'XYZ'[k % 3]} is out of range: {cell[:20]!r}", path=p)
+                raise InputError(f"marker {labels[k // 3]} {'XYZ'[k % 3]} is out of range: {cell[:20]!r}", path=p, line=ln)
             row.append(v)
         rows.append(row)
     if not rows:
@@ -125,9 +128,9 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
 
 
 def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = False, **options: Any) -> Motion:
-    """A TRC file as the actor's canonical joint centres, or with ``solve`` the solved actor
-    skeleton (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
+             solve: bool = True, **options: Any) -> Motion:
+    """A TRC file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
+    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
     from ..markers.motion import marker_motion
 
     return marker_motion(read_trc_markers(path, units), marker_set, solve=solve, **options)

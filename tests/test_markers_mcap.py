@@ -1,0 +1,182 @@
+"""Marker MCAPs beyond physmocap's own: ``foxglove.PointCloud`` channels (labels from metadata),
+and repeated frames or timestamps refused (issue 11, deliverable 5)."""
+
+from __future__ import annotations
+
+import base64
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from conftest import shared_file
+from physmocap.errors import InputError
+from physmocap.markers.recording import MarkerRecording
+
+#: Foxglove NumericType FLOAT32, FLOAT64, UINT16.
+FLOAT32, FLOAT64, UINT16 = 7, 8, 3
+
+
+def _cmu(frames: int) -> MarkerRecording:
+    from physmocap.sources.c3d import read_c3d_markers
+
+    rec = read_c3d_markers(shared_file("cmu_01_01_markers.c3d"))
+    return MarkerRecording(rec.labels, rec.positions[:frames], rec.fps, rec.source)
+
+
+def _cloud(points: np.ndarray, ids: np.ndarray | None = None, dtype: str = "<f4") -> dict:
+    """A foxglove.PointCloud JSON message body for ``(N, 3)`` points: x, y, z (``dtype``) and
+    a 2-byte padding field, plus a UINT16 ``id`` when ``ids`` are given."""
+    size = np.dtype(dtype).itemsize
+    kind = FLOAT32 if size == 4 else FLOAT64
+    fields = [{"name": a, "offset": k * size, "type": kind} for k, a in enumerate("xyz")]
+    stride = 3 * size + 2
+    cols = [("x", dtype), ("y", dtype), ("z", dtype), ("pad", "<u2")]
+    if ids is not None:
+        fields.append({"name": "id", "offset": stride, "type": UINT16})
+        cols.append(("id", "<u2"))
+        stride += 2
+    arr = np.zeros(len(points), dtype=np.dtype(cols))
+    for k, a in enumerate("xyz"):
+        arr[a] = points[:, k]
+    if ids is not None:
+        arr["id"] = ids
+    assert arr.dtype.itemsize == stride
+    return {"frame_id": "mocap", "point_stride": stride, "fields": fields,
+            "data": base64.b64encode(arr.tobytes()).decode()}
+
+
+def write_cloud_mcap(path, frames: list[dict], fps: float, labels=None, meta_record: bool = False,
+                     stamps: list[int] | None = None) -> None:
+    """Messages ``frames`` (PointCloud bodies) on /markers, stamped ``i / fps``; the labels in
+    the channel metadata, or in a physmocap.markers metadata record."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        sch = w.register_schema("foxglove.PointCloud", "jsonschema", b"{}")
+        chan_meta = {"labels": json.dumps(list(labels))} if labels is not None and not meta_record else {}
+        ch = w.register_channel("/markers", "json", sch, metadata=chan_meta)
+        if labels is not None and meta_record:
+            w.add_metadata("physmocap.markers", {"topic": "/markers", "labels": json.dumps(list(labels)),
+                                                 "fps": repr(fps)})
+        for i, body in enumerate(frames):
+            t = stamps[i] if stamps is not None else int(round(i * 1e9 / fps))
+            msg = dict(body, timestamp={"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000})
+            w.add_message(ch, log_time=t, data=json.dumps(msg).encode(), publish_time=t, sequence=i)
+        w.finish()
+
+
+def test_a_point_cloud_marker_mcap_reads_like_the_c3d(tmp_path):
+    from physmocap.sources.mcap import has_markers, read_mcap_markers
+
+    rec = _cmu(120)
+    shift = np.array([0.5, -0.25, 0.0])
+    path = tmp_path / "cloud.mcap"
+    frames = []
+    for t in range(rec.num_frames):
+        body = _cloud(np.nan_to_num(rec.positions[t] - shift), dtype="<f8")  # unseen: (0, 0, 0)
+        body["pose"] = {"position": dict(zip("xyz", shift.tolist())), "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}}
+        frames.append(body)
+    write_cloud_mcap(path, frames, rec.fps, rec.labels)
+    assert has_markers(path)
+    back = read_mcap_markers(path)
+    assert back.labels == rec.labels and abs(back.fps - rec.fps) < 1e-4 and back.num_frames == 120  # fps from ns stamps
+    assert np.array_equal(np.isnan(back.positions), np.isnan(rec.positions))
+    assert np.allclose(back.positions, rec.positions, atol=1e-9, equal_nan=True)
+
+
+def test_point_cloud_ids_place_points_and_a_rotated_pose_is_applied(tmp_path):
+    from physmocap.sources.mcap import read_mcap_markers
+
+    labels = ["LKNE", "RKNE", "LANK"]
+    X = np.array([[0.1, 0.2, 0.5], [0.1, -0.2, 0.5], [0.0, 0.2, 0.1]])
+    turn = {"x": 0.0, "y": 0.0, "z": np.sin(np.pi / 4), "w": np.cos(np.pi / 4)}  # 90 degrees about z
+    frames = [dict(_cloud(X[[2, 0]], ids=np.array([2, 0])), pose={"position": {"x": 1, "y": 0, "z": 0},
+                                                                  "orientation": turn}),
+              dict(_cloud(X, ids=np.arange(3)), pose={"position": {"x": 1, "y": 0, "z": 0}, "orientation": turn})]
+    path = tmp_path / "ids.mcap"
+    write_cloud_mcap(path, frames, 100.0, labels, meta_record=True)
+    rec = read_mcap_markers(path)
+    Rz = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    want = X @ Rz.T + [1, 0, 0]
+    assert rec.fps == 100.0 and rec.labels == tuple(labels)
+    assert np.isnan(rec.positions[0, 1]).all() and np.allclose(rec.positions[0, [0, 2]], want[[0, 2]], atol=1e-6)
+    assert np.allclose(rec.positions[1], want, atol=1e-6)
+
+
+def test_a_point_cloud_without_labels_is_one_clear_error(tmp_path):
+    from physmocap.sources.mcap import read_mcap_markers
+
+    path = tmp_path / "nolabels.mcap"
+    write_cloud_mcap(path, [_cloud(np.ones((3, 3)))] * 2, 100.0)
+    with pytest.raises(InputError, match=r"nolabels\.mcap: /markers is a foxglove.PointCloud without marker labels"):
+        read_mcap_markers(path)
+
+
+@pytest.mark.parametrize("case,needle", [
+    ("count", "message 1 on /markers: 2 points, but the labels name 3 markers"),
+    ("stamp", "message 1 on /markers: timestamp 0.000000000 s again \\(message 0 has it too\\)"),
+    ("base64", "message 1 on /markers: field 'data' must be the points' bytes in base64"),
+    ("stride", "message 1 on /markers: field 'z' \\(offset 8, 4 bytes\\) runs past the point stride of 10 bytes"),
+    ("type", "message 1 on /markers: field 'x': numeric type 9 is not one of Foxglove's 1-8"),
+    ("frame_id", "message 1 on /markers: frame_id 'other' differs from 'mocap' of message 0"),
+])
+def test_bad_point_clouds_name_the_message(tmp_path, case, needle):
+    from physmocap.sources.mcap import read_mcap_markers
+
+    good = _cloud(np.ones((3, 3)))
+    bad = dict(good)
+    stamps = None
+    if case == "count":
+        bad = _cloud(np.ones((2, 3)))
+    elif case == "stamp":
+        stamps = [0, 0]
+    elif case == "base64":
+        bad["data"] = "not base64!"
+    elif case == "stride":
+        bad["point_stride"] = 10
+    elif case == "type":
+        bad["fields"] = [dict(bad["fields"][0], type=9)] + bad["fields"][1:]
+    elif case == "frame_id":
+        bad["frame_id"] = "other"
+    path = tmp_path / f"{case}.mcap"
+    write_cloud_mcap(path, [good, bad], 100.0, ["LKNE", "RKNE", "LANK"], stamps=stamps)
+    with pytest.raises(InputError, match=needle):
+        read_mcap_markers(path)
+
+
+def test_a_repeated_frame_number_in_labelled_points_is_an_error(tmp_path):
+    """It was read silently, the later message replacing the earlier."""
+    from mcap.writer import Writer
+
+    from physmocap.sources.mcap import read_mcap_markers
+
+    path = tmp_path / "twice.mcap"
+    with open(path, "wb") as fh:
+        w = Writer(fh)
+        w.start()
+        ch = w.register_channel("/markers", "json", w.register_schema("physmocap.LabelledPoints", "jsonschema", b"{}"))
+        for k, (frame, x) in enumerate(((0, 1.0), (1, 1.0), (1, 2.0))):
+            msg = {"frame": frame, "points": {"LKNE": {"x": x, "y": 0.0, "z": 0.5}}}
+            w.add_message(ch, log_time=k * 10_000_000, data=json.dumps(msg).encode(), publish_time=k * 10_000_000)
+        w.finish()
+    with pytest.raises(InputError, match=r"twice\.mcap: message 2 on /markers: frame 1 again \(message 1 holds it too\)"):
+        read_mcap_markers(path)
+
+
+def test_replay_streams_a_point_cloud_marker_mcap(tmp_path, capsys):
+    from physmocap.cli import main
+
+    rec = _cmu(240)
+    path = tmp_path / "cloud.mcap"
+    write_cloud_mcap(path, [_cloud(np.nan_to_num(rec.positions[t])) for t in range(rec.num_frames)], rec.fps, rec.labels)
+    stats = tmp_path / "stats.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["replay", str(path), "--calibration-seconds", "2", "--stats", str(stats)]) == 0
+    s = json.loads(stats.read_text())
+    assert s["frames"] == 240 and s["marker_residual_rms_mm"] < 15.0
+    assert "replayed 240 frames" in capsys.readouterr().out

@@ -1,0 +1,73 @@
+"""Markers to a character through the solved actor (issue 11, deliverable 4): ``physmocap
+retarget take.c3d`` and ``load_motion(take.c3d)`` solve the actor first; ``--joint-centres``
+keeps the older joint-centre route; takes without legs are one clear error."""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+from conftest import shared_file
+from physmocap.cli import build_parser, main
+from test_markers import _c3d_copy, _standing_markers, _write_trc
+
+pytestmark = pytest.mark.filterwarnings("ignore::physmocap.errors.PhysmocapWarning")
+
+
+def _retarget_source(argv: list[str]):
+    """The source motion ``physmocap retarget`` hands the retargeter for ``argv``."""
+    from physmocap.cli.retarget import retarget_from_args
+
+    return retarget_from_args(build_parser().parse_args(["retarget"] + argv)).source_motion
+
+
+def test_retarget_takes_markers_through_the_solved_actor(tmp_path):
+    c3d = tmp_path / "take.c3d"
+    _c3d_copy(c3d, frames=240)
+    out = str(tmp_path / "o.npz")
+    solved = _retarget_source([str(c3d), "-o", out, "--character", "robot", "--quiet"])
+    assert solved.is_rotational and "left_knee" in solved.skeleton.names
+    assert solved.meta["character"] == "actor (physmocap solve)" and solved.meta["marker_residual_rms_mm"] < 15.0
+    centres = _retarget_source([str(c3d), "-o", out, "--character", "robot", "--quiet", "--joint-centres"])
+    assert not centres.is_rotational and "joint_centre_methods" in centres.meta
+
+
+def test_retargeting_markers_is_deterministic(tmp_path):
+    c3d = tmp_path / "take.c3d"
+    _c3d_copy(c3d, frames=120)
+    a, b = tmp_path / "a.bvh", tmp_path / "b.bvh"
+    for out in (a, b):
+        assert main(["retarget", str(c3d), "-o", str(out), "--character", "robot", "--quiet"]) == 0
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_load_motion_solves_markers_by_default(tmp_path):
+    from physmocap.sources import load_motion
+
+    labels, P, _ = _standing_markers(40)
+    path = tmp_path / "take.trc"
+    _write_trc(path, labels, P * 1000)
+    solved, centres = load_motion(path), load_motion(path, solve=False)
+    assert solved.is_rotational and not centres.is_rotational
+    with pytest.raises(Exception, match="do not apply to a solved marker recording"):
+        load_motion(path, max_gap=3)
+
+
+@pytest.mark.parametrize("name", ["vicon_upperbody.trc", "vicon_upperbody_box.c3d"])
+def test_an_upper_body_take_cannot_drive_a_character_and_says_why(tmp_path, capsys, name):
+    out = tmp_path / "o.bvh"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["retarget", str(shared_file(name)), "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert (f"physmocap: error: {shared_file(name)}: no marker on left_thigh, left_shank, left_foot, right_thigh, "
+            "right_shank, right_foot: the legs were not captured") in err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_joint_centres_flag_is_for_marker_files(tmp_path, capsys):
+    out = tmp_path / "o.bvh"
+    assert main(["retarget", "example", "-o", str(out), "--joint-centres"]) == 2
+    err = capsys.readouterr().err
+    assert "--joint-centres is for marker files" in err and "Traceback" not in err and not out.exists()

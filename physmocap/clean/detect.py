@@ -30,111 +30,14 @@ numbering) and a severity (degrees or metres).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from ..motion import Motion
+from .options import CleanOptions
 
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
-
-
-@dataclass(frozen=True)
-class CleanOptions:
-    """Detection thresholds and repair settings.
-
-    Attributes:
-        jump_deg: Smallest frame-to-frame rotation (degrees) that can be a glitch.
-        max_speed: ... and faster than this (degrees per second): joints of the fastest
-            human motions (throws, kicks) stay below about 1500 deg/s outside the
-            shoulder's internal rotation, so at a low frame rate a large step is no glitch.
-        pair_speed: A jump paired with a later jump that undoes it needs only this speed
-            (degrees per second, both jumps): going out and coming back is stronger evidence
-            than one step, but a joint stepping no faster than a walking knee (about 400
-            deg/s) cannot be told from real motion sampled at a low rate.
-        novelty_ratio: A spike (not a flip) is a glitch only if the poses it holds lie at
-            least this fraction of its entry jump away from every pose the joint takes
-            elsewhere in the clip (outside the span and as many frames each side): a joint
-            popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
-            solved spine settling) is the capture's own behaviour, an offset injected or added
-            by a solver error puts the joint where it never goes.  Not asked of a pair whose
-            two jumps are each impossible on their own (faster than ``max_speed`` and moving the
-            limb ``jump_distance``): out and back that way is a glitch wherever it goes.
-        jump_ratio: ... and at least this many times the median of its neighbours.
-        context_time: Seconds of neighbours (each side) for that median.
-        max_glitch_time: Longest glitch between a jump and its return (seconds).
-        return_ratio: The return brings the joint back to within this fraction of the jump.
-        return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
-            twice the joint's own motion on the two frames (its median step over
-            ``context_time`` before or after each jump, whichever is larger: a toe at 30 Hz
-            still swinging into the frame a glitch starts on).
-        flip_deg: A glitch whose jump is at least this large is a flip.
-        frozen_time: Shortest frozen run (seconds).
-        stretch_ratio: Bone-length departure from the median that is a glitch (positional).
-        rom_soft_margin: Degrees added, for the anatomical check, to each range of motion
-            that performers exceed (the ``"default"`` ranges of :mod:`physmocap.models.rom`
-            already carry a 15 degree margin over the largest clinical value; dancers'
-            hips and trunks go further).  Anatomical stops (knee and elbow
-            hyperextension) get none.
-        swap_min_distance: A left joint and its right twin this far apart (metres) or more
-            can be seen trading places (positional sources).
-        jump_distance: A single jump (a discontinuity) must also move some point of the
-            joint's limb (its descendants, relative to the joint) this many metres farther
-            than the limb moves on the neighbouring frames: a toe, finger or twist popping by
-            a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
-            markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
-        still_speed: A joint turning slower than this (degrees per second) is not moving (a
-            capture's noise floor): the body moves on a frame where its median joint turns
-            faster, and a frozen joint's catch-up is compared with at least this speed.
-            Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
-        offset_min_time: A spike or flip lasting this many seconds or more is repaired by
-            taking its offset off (entry jump and inverse exit jump, interpolated over the
-            span: the real motion under it comes back); a shorter one is bridged.
-        match_context: The matched bridge's template spans this many times the glitch's
-            length of frames on each side of it (at least 2 frames).
-        match_own_weight: Weight of the glitched joint's own rotations on those context
-            frames in the template (its motion into and out of the span says most about it).
-        match_windows: How many best-matching windows of the clip lend their motion
-            (averaged) to the matched bridge.
-        carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
-            its world orientation jumps by at least this fraction of its local jump, and
-            some child's world orientation by at least this fraction of its own (an offset
-            on one joint turns everything it carries by the same angle).  A solver moving a
-            bend between consecutive joints turns one while the next turns back, and the
-            limbs beyond stay where they were.
-    """
-
-    jump_deg: float = 10.0
-    max_speed: float = 1500.0
-    pair_speed: float = 400.0
-    novelty_ratio: float = 0.2
-    jump_ratio: float = 5.0
-    context_time: float = 0.1
-    max_glitch_time: float = 0.5
-    return_ratio: float = 0.5
-    return_deg: float = 2.0
-    flip_deg: float = 150.0
-    frozen_time: float = 0.1
-    stretch_ratio: float = 0.1
-    rom_soft_margin: float = 15.0
-    swap_min_distance: float = 0.05
-    jump_distance: float = 0.05
-    carry_ratio: float = 0.5
-    still_speed: float = 6.0
-    offset_min_time: float = 0.15
-    match_context: float = 0.5
-    match_own_weight: float = 5.0
-    match_windows: int = 3
-
-    def __post_init__(self) -> None:
-        from ..options import check_fields
-
-        check_fields(
-            self,
-            "clean",
-            counts=["match_windows"],
-            positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"],
-        )
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,8 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value
   held in several separate runs is a limit the capture's own solver clamps to, not a freeze.
-* **Bone stretch** (positional sources): a bone whose length departs from its median by
-  more than ``stretch_ratio``.
-* **Gaps** (positional sources): runs of zero confidence.
-* **Left/right swaps** (positional sources): a left joint and its right twin trading places.
+* **Positional sources** (:mod:`.positional`): bone stretch, gaps, frozen joints and
+  left/right swaps.
 * **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion
   (:mod:`.anatomy`), named by movement and plane ("left knee hyperextension",
   sagittal); spans longer than ``max_glitch_time`` are reported only.
@@ -45,8 +43,9 @@ class Glitch:
     """One glitch: ``kind`` on ``joint`` over frames ``start..end`` (inclusive).
 
     ``movement`` and ``plane`` name the anatomical movement of an ``anatomical`` glitch
-    ("left knee hyperextension", "sagittal"); ``repairable`` is False for one the
-    correction must leave alone (an out-of-range span too long to be a glitch)."""
+    ("left knee hyperextension", "sagittal"); ``other`` the joint an ``lr_swap`` traded
+    places with; ``repairable`` is False for one the correction must leave alone (an
+    out-of-range span too long to be a glitch)."""
 
     kind: str
     joint: str
@@ -58,6 +57,7 @@ class Glitch:
     movement: str = ""
     plane: str = ""
     repairable: bool = field(default=True, compare=False)
+    other: str = ""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -270,16 +270,18 @@ def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
     return float(np.median(np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))))
 
 
-def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
-    """Runs where the joint's rotation is exactly constant while the body moves, or that end
-    with the joint catching up: its first step after the run ``jump_ratio`` times its median
+def _frozen(
+    values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float
+) -> list[Glitch]:
+    """Runs where a joint's ``values (F, k)`` (a rotation, or a position) stay exactly the same
+    while the body moves (``moving (F,)``), or that end with the joint catching up: its first
+    ``step (F,)`` after the run (degrees or metres per frame) ``jump_ratio`` times its median
     step over the ``context_time`` after (a joint that really stops starts again smoothly;
-    one whose value stopped updating jumps to where it had got to; steps slower than ``still_speed``
-    count as that)."""
-    F = len(rot)
+    one whose value stopped updating jumps to where it had got to; steps below ``still``, per
+    frame, count as that: the capture's noise floor)."""
+    F = len(values)
     same = np.zeros(F, dtype=bool)
-    same[1:] = np.all(rot[1:] == rot[:-1], axis=1)
-    step = joint_angles_step(rot[:, None])[:, 0]
+    same[1:] = np.all(values[1:] == values[:-1], axis=1)
     half = max(2, int(round(opt.context_time * fps)))
     if same[1:].all():  # never animated: not a glitch
         return []
@@ -288,13 +290,15 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     runs = [(s - 1, e) for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]  # run's first frame too
     # A value the joint holds in several separate runs is a limit the capture's solver clamps
     # to (CMU's knees at full extension in every stance), not a freeze.
-    values = [tuple(np.round(rot[a], 9)) for a, _ in runs]
+    held = [tuple(np.round(values[a], 9)) for a, _ in runs]
     out = []
-    for (start, e), v in zip(runs, values):
+    for (start, e), v in zip(runs, held):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if values.count(v) > 1 or not inside or e - start + 1 < shortest:
+        if held.count(v) > 1 or not inside or e - start + 1 < shortest:
             continue
-        after = max(float(np.median(step[e + 2 : e + 2 + half])), opt.still_speed / fps) if e + 2 < F else np.inf
+        later = step[e + 2 : e + 2 + half]
+        later = later[np.isfinite(later)]
+        after = max(float(np.median(later)), still) if len(later) else np.inf
         catch_up = step[e + 1] > opt.jump_ratio * after
         if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
@@ -308,10 +312,12 @@ def animated_joints(motion: Motion) -> list[int]:
     return [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
 
 
-def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
-    """Every glitch found in ``motion`` (sorted by frame, then joint)."""
+def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping=None) -> list[Glitch]:
+    """Every glitch found in ``motion`` (sorted by frame, then joint); ``mapping``: a source
+    mapping file or dict (:func:`physmocap.sources.profiles.map_skeleton`) naming its joints,
+    as ``retarget --source-map`` takes."""
     opt = options or CleanOptions()
-    ji = canonical_joints(motion)  # once: mapping a long clip takes a good part of the time
+    ji = canonical_joints(motion, mapping)  # once: mapping a long clip takes a good part of the time
     names = motion.skeleton.names
     glitches: list[Glitch] = []
     fps = float(motion.fps)
@@ -333,32 +339,11 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         # the body moves on a frame where the median joint moves
         moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         for j in animated:
-            glitches += _frozen(R[:, j], moving, fps, opt, names[j])
+            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps)
     if motion.positions is not None:
-        P = np.asarray(motion.positions, dtype=float)
-        parents = motion.skeleton.parents
-        swaps = _lr_swaps(motion, P, opt)
-        glitches += swaps
-        for j, p in enumerate(parents):
-            if p < 0:
-                continue
-            length = np.linalg.norm(P[:, j] - P[:, p], axis=1)
-            med = np.nanmedian(length)
-            if not np.isfinite(med) or med <= 1e-6:
-                continue
-            bad = np.abs(length - med) > opt.stretch_ratio * med
-            d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
-            for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
-                if any(g.start <= s and e <= g.end and names.index(g.joint) in (j, p) for g in swaps):
-                    continue  # the bone only looks stretched because its joint traded places
-                dev = float(np.nanmax(np.abs(length[s : e + 1] - med)))
-                glitches.append(Glitch("bone_stretch", names[j], int(s), int(e), dev, unit="m"))
-        if motion.confidence is not None:
-            for j in range(P.shape[1]):
-                lost = motion.confidence[:, j] <= 0.0
-                d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
-                for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
-                    glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
+        from .positional import positional_glitches
+
+        glitches += positional_glitches(motion, opt, ji)
     glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji), motion, ji)
     glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
@@ -382,7 +367,8 @@ def _drop_boundary_jumps(glitches: list[Glitch]) -> list[Glitch]:
 def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
     """Source joints whose local rotation can change an anatomical angle: the ancestors
     of the joint centres it is read from, except those common to all of them (which
-    move them rigidly together)."""
+    move them rigidly together); on a joint-position source, those joint centres
+    themselves and the ones the pelvis frame is read from."""
     from .anatomy import ANCHORS
 
     parents = motion.skeleton.parents
@@ -391,6 +377,9 @@ def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
         c = c.format(side=movement.key.split("_", 1)[0])
         if c not in ji:
             continue
+        if not motion.is_rotational:
+            chains.append({ji[c]})
+            continue
         up, p = set(), int(parents[ji[c]])
         while p >= 0:
             up.add(p)
@@ -398,18 +387,33 @@ def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
         chains.append(up)
     if not chains:
         return set()
+    if not motion.is_rotational:  # and the pelvis frame they are read in: the hips and the trunk's top
+        top = next((c for c in ("neck", "chest", "spine") if c in ji), None)
+        return set().union(*chains) | {ji[c] for c in ("left_hip", "right_hip", top) if c in ji}
     return set().union(*chains) - set.intersection(*chains)
 
 
-def canonical_joints(motion: Motion) -> dict[str, int]:
+def canonical_joints(motion: Motion, mapping=None) -> dict[str, int]:
     """Canonical joint -> source joint index of ``motion`` (the retargeter's name mapping),
     without its warnings; empty when the skeleton cannot be mapped (the anatomical checks
-    are then skipped and said so, the other detectors still run)."""
+    are then skipped and said so, the other detectors still run).  A ``mapping`` the user
+    gives (a file or dict) is applied as given, every joint it names checked, none required.
+
+    Raises:
+        MappingError, InputError: ``mapping`` names a joint the skeleton does not have, or
+            cannot be read.
+    """
     import warnings
 
     from ..errors import MappingError
     from ..ik.retarget import map_motion
 
+    if mapping is not None:
+        from ..sources.profiles import map_skeleton
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return dict(map_skeleton(motion, mapping=mapping, required=()).indices)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -418,12 +422,17 @@ def canonical_joints(motion: Motion) -> dict[str, int]:
         return {}
 
 
+#: Glitches that move a joint far enough to put an anatomical angle read from it out of range.
+EXPLAIN_ANATOMICAL = ("spike", "flip", "frozen", "lr_swap", "bone_stretch", "gap")
+
+
 def _merge_anatomical(
     glitches: list[Glitch], anatomical: list[Glitch], motion: Motion, ji: dict[str, int]
 ) -> list[Glitch]:
-    """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
-    a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
-    shoulder line the trunk angles are read from), is that glitch's anatomical
+    """An out-of-range span inside a spike, flip, frozen, swap, stretch or gap span of the
+    same joint, or of a joint that moves that anatomical angle (a clavicle's spike tilts the
+    shoulder line the trunk angles are read from; a knee centre swapped with the other
+    bends both legs), is that glitch's anatomical
     movement, not a second glitch: name the movement on it instead (``ji``: the
     :func:`canonical_joints` of ``motion``)."""
     import dataclasses
@@ -440,54 +449,12 @@ def _merge_anatomical(
             if m is not None:
                 related |= {names[j] for j in _movement_joints(motion, ji, m)}
         for i, g in enumerate(out):
-            if g.joint in related and g.kind in ("spike", "flip", "frozen") and g.start <= a.start and a.end <= g.end:
+            if g.joint in related and g.kind in EXPLAIN_ANATOMICAL and g.start <= a.start and a.end <= g.end:
                 if not g.movement and g.joint == a.joint:
                     out[i] = dataclasses.replace(g, movement=a.movement, plane=a.plane)
                 break
         else:
             out.append(a)
-    return out
-
-
-def _lr_swaps(motion: Motion, P: np.ndarray, opt: CleanOptions) -> list[Glitch]:
-    r"""Left/right swaps on a joint-position source: spans where a left joint and its right
-    twin trade places.
-
-    For a pair with positions :math:`l, r`, the frame-to-frame motion kept is
-    :math:`d_k(t) = |l_t - l_{t-1}| + |r_t - r_{t-1}|` and swapped
-    :math:`d_s(t) = |l_t - r_{t-1}| + |r_t - l_{t-1}|`; a swap toggles on a frame where
-    :math:`d_s < d_k / 4` while the two are at least ``swap_min_distance`` apart (a labeller
-    trading two markers or a tracker flipping the body).  The span runs from a toggle to the
-    next (to the clip's end if none comes back); reported on both joints.
-    """
-    import warnings
-
-    from ..errors import MappingError
-    from ..ik.retarget import map_motion
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ji = map_motion(motion)
-    except MappingError:
-        return []
-    names = motion.skeleton.names
-    out: list[Glitch] = []
-    F = P.shape[0]
-    for canon, jl in ji.items():
-        if not canon.startswith("left_") or f"right_{canon[5:]}" not in ji:
-            continue
-        jr = ji[f"right_{canon[5:]}"]
-        L, R = P[:, jl], P[:, jr]
-        keep = np.linalg.norm(L[1:] - L[:-1], axis=1) + np.linalg.norm(R[1:] - R[:-1], axis=1)
-        swap = np.linalg.norm(L[1:] - R[:-1], axis=1) + np.linalg.norm(R[1:] - L[:-1], axis=1)
-        apart = np.linalg.norm(L - R, axis=1)
-        with np.errstate(invalid="ignore"):
-            toggle = (swap < 0.25 * keep) & (apart[1:] > opt.swap_min_distance) & (apart[:-1] > opt.swap_min_distance)
-        events = (np.flatnonzero(toggle) + 1).tolist()
-        for a, b in zip(events[::2], events[1::2] + [F]):
-            for j in (jl, jr):
-                out.append(Glitch("lr_swap", names[j], int(a), int(b - 1), float(np.nanmedian(apart[a:b])), unit="m"))
     return out
 
 

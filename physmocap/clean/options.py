@@ -64,14 +64,21 @@ class CleanOptions:
         flip_deg: A glitch whose jump is at least this large (degrees) is a flip.
         frozen_time: Shortest frozen run (seconds).
         stretch_ratio: Bone-length departure from the median that is a glitch (a fraction of
-            the median; positional sources).
+            the median; positional sources), if also beyond ``stretch_distance``.
+        stretch_distance: ... and beyond this many metres: a joint centre read off skin
+            markers carries their soft-tissue artefact, up to 2-3 cm on the thigh (Leardini
+            et al. 2005, Gait & Posture 21:212), so a short bone (a hand, a toe) varies by
+            more than its ``stretch_ratio`` without any glitch.
         rom_soft_margin: Degrees added, for the anatomical check, to each range of motion
             that performers exceed (the ``"default"`` ranges of :mod:`physmocap.models.rom`
             already carry a 15 degree margin over the largest clinical value; dancers'
             hips and trunks go further).  Anatomical stops (knee and elbow
             hyperextension) get none.
-        swap_min_distance: A left joint and its right twin this far apart (metres) or more
-            can be seen trading places (positional sources).
+        swap_min_distance: A left joint and its right twin are traded where relabelling them
+            brings the two (summed) this many metres nearer to where their motion was heading
+            than the labels do, over the trade (positional sources): traded, each is off by
+            the pair's distance, so pairs closer than about half this cannot be told apart
+            (they also matter least).
         jump_distance: A single jump (a discontinuity) must also move some point of the
             joint's limb (its descendants, relative to the joint) this many metres farther
             than the limb moves on the neighbouring frames: a toe, finger or twist popping by
@@ -87,6 +94,10 @@ class CleanOptions:
             capture's noise floor): the body moves on a frame where its median joint turns
             faster, and a frozen joint's catch-up is compared with at least this speed.
             Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
+        still_velocity: A joint moving slower than this (metres per second) is not moving,
+            on joint-position sources: quiet standing sways at about 1 cm/s (mean
+            centre-of-pressure velocity, Prieto et al. 1996, IEEE Trans. Biomed. Eng.
+            43:956); the body moves on a frame where its median joint is faster.
         offset_min_time: A spike or flip lasting this many seconds or more is repaired by
             taking its offset off (entry jump and inverse exit jump, interpolated over the
             span: the real motion under it comes back); a shorter one is bridged.
@@ -110,11 +121,13 @@ class CleanOptions:
     flip_deg: float = _opt(150.0, "deg")
     frozen_time: float = _opt(0.1, "s")
     stretch_ratio: float = _opt(0.1, "ratio")
+    stretch_distance: float = _opt(0.03, "m")
     rom_soft_margin: float = _opt(15.0, "deg")
     swap_min_distance: float = _opt(0.05, "m")
     jump_distance: float = _opt(0.05, "m")
     carry_ratio: float = _opt(0.5, "ratio")
     still_speed: float = _opt(6.0, "deg/s")
+    still_velocity: float = _opt(0.01, "m/s")
     offset_min_time: float = _opt(0.15, "s")
     match_context: float = _opt(0.5, "ratio")
     match_own_weight: float = _opt(5.0, "ratio")

@@ -31,8 +31,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write PNGs: anatomical angles with their ranges and the spans beyond them, and each glitched "
         "joint's speed with its glitched spans (needs: pip install 'physmocap[plot]')",
     )
+    p.add_argument(
+        "--source-map",
+        metavar="MAP.toml",
+        help="source skeleton mapping file (TOML, as retarget takes; physmocap inspect FILE --emit-map writes "
+        "one): names the joints of a skeleton or tracker no profile knows, for the left/right pairs, the "
+        "hierarchy of a joint-position file's bones and the ranges of motion",
+    )
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
     add_clean_options(p)
     p.set_defaults(func=run)
+
+
+#: Readers that build a joint-position skeleton from the source mapping as they read.
+POSITIONAL_SUFFIXES = {".csv", ".npz", ".jsonl", ".c3d", ".trc"}
+MARKER_SUFFIXES = {".c3d", ".trc"}
 
 
 def _flag(name: str) -> str:
@@ -103,12 +116,20 @@ def run(args: argparse.Namespace) -> int:
 
         require_matplotlib()
         check_output_dir(args.plots, "plot directory")
-    check_not_input([args.output, args.report], [args.input])
+    check_not_input([args.output, args.report], [args.input, args.source_map, args.marker_set])
     check_distinct([args.output, args.report])
-    motion = load_motion(args.input, min_frames=1)
+    suffix = Path(args.input).suffix.lower()
+    if args.marker_set and suffix not in MARKER_SUFFIXES:
+        raise OptionError("--marker-set is for marker files (.c3d, .trc)", path=args.input)
+    read_opts = {}
+    if args.source_map and suffix in POSITIONAL_SUFFIXES:
+        read_opts["mapping"] = args.source_map  # the bones follow the mapped joints
+    if args.marker_set:
+        read_opts["marker_set"] = args.marker_set
+    motion = load_motion(args.input, min_frames=1, **read_opts)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
-    fixed, report = clean(motion, options)
+    fixed, report = clean(motion, options, mapping=args.source_map)
     sys.stdout.write(report.table())
     with OutputSet():  # the BVH, the plots and the JSON renamed into place together, or none
         _write(motion, fixed, report, args)

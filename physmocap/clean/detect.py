@@ -306,6 +306,45 @@ def _frozen(
     return out
 
 
+def reference_exit(motion: Motion, opt: CleanOptions, positions: np.ndarray | None = None) -> int:
+    """How many of the clip's first frame-to-frame steps are the capture leaving a reference
+    pose (CMU's T-pose on frame 0), not motion: 0 if frame 0 is part of the performance.
+
+    The steps counted are the leading ones in which the body's pose (every joint's position
+    relative to the root, ``positions (F, J, 3)`` or the forward kinematics, averaged) moves
+    ``jump_ratio`` times faster than its median over the ``context_time`` after, and together
+    they must move it ``jump_distance`` metres or more.  A duration and a distance, not a frame
+    count: resampled to 240 Hz, the jump out of CMU's T-pose spreads over two frames; at 24 Hz
+    it is one frame among much larger steps of real motion.  The retargeter's own test
+    (:func:`physmocap.ik.retarget.default_start`, one frame) is kept where it says more."""
+    import warnings
+
+    from ..ik.retarget import default_start
+
+    with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
+        warnings.simplefilter("ignore")
+        least = default_start(motion)
+    P = np.asarray(motion.world_positions() if positions is None else positions, dtype=float)
+    F = len(P)
+    if F < 3:
+        return least
+    rel = P - P[:, :1]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with every joint lost
+        step = np.nanmean(np.linalg.norm(rel[1:] - rel[:-1], axis=-1), axis=1)  # step k: frame k -> k+1
+    half = max(2, int(round(opt.context_time * float(motion.fps))))
+    count = 0
+    while count < F - 2:
+        later = step[count + 1 : count + 1 + half]
+        later = later[np.isfinite(later)]
+        if not (len(later) and step[count] > opt.jump_ratio * float(np.median(later))):
+            break
+        count += 1
+    if not count or not np.sum(step[:count]) >= opt.jump_distance:
+        count = 0
+    return max(least, count)
+
+
 def animated_joints(motion: Motion) -> list[int]:
     """Indices of ``motion``'s joints (not end sites) whose rotation changes at some frame."""
     R = np.asarray(motion.rotations)
@@ -325,14 +364,8 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
         R = np.asarray(motion.rotations, dtype=float)
         steps = joint_angles_step(R)
         animated = animated_joints(motion)
-        from ..ik.retarget import default_start
-
-        import warnings
-
-        with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
-            warnings.simplefilter("ignore")
-            skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
         P, W = motion.forward_kinematics()
+        skip = reference_exit(motion, opt, P)  # a reference pose the capture jumps away from (CMU's T-pose)
         limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
         for j in animated:
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])

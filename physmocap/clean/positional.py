@@ -268,15 +268,11 @@ def bone_stretch(
 def positional_glitches(motion: Motion, opt: CleanOptions, ji: dict[str, int]) -> list[Glitch]:
     """Swaps, gaps, frozen joints and bone stretch of ``motion.positions`` (``ji``: its
     canonical joints, for the left/right pairs)."""
-    import warnings
-
-    from ..ik.retarget import default_start
+    from .detect import reference_exit
 
     P = np.asarray(motion.positions, dtype=float)
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
-    with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
-        warnings.simplefilter("ignore")
-        start = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
+    start = reference_exit(motion, opt, P)  # a reference pose the capture jumps away from (CMU's T-pose)
     found = lr_swaps(motion, P, opt, ji, start) + gaps(motion, P) + frozen_positions(motion, P, opt)
     explained = lost_samples(motion, P)
     for g in found:

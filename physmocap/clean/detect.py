@@ -29,6 +29,7 @@ numbering) and a severity (degrees or metres).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -136,30 +137,35 @@ def _descendants(parents: np.ndarray, j: int) -> list[int]:
     return out
 
 
-def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
-    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+@dataclass(frozen=True)
+class _Steps:
+    """One joint's frame-to-frame motion as the jump tests read it (all ``(F,)``).
 
-    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
-    neighbours' median.  A jump at :math:`a` is paired with the first later jump at
-    :math:`b` (within ``max_glitch_time``) that *undoes* it: the exit step composed with
-    the entry step is the identity up to ``return_ratio`` of the jump, in either
-    convention (an offset applied in the parent's frame, :math:`D_b D_a \approx 1` with
-    :math:`D_t = q_t q_{t-1}^{-1}`, or in the joint's own, :math:`E_a E_b \approx 1` with
-    :math:`E_t = q_{t-1}^{-1} q_t`), or the joint is back where it was before :math:`a`.
-    This does not depend on how far the real joint moves during a long glitch, and two
-    unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
-    paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
-    limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
-    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when
-    both jumps are discontinuities on their own) and both jumps
-    carried by its segment and children (:func:`_carried`, when ``limb`` says what it
-    carries); an unpaired jump (or one whose pair fails those) is a ``discontinuity`` only if
-    it is faster than ``max_speed`` both in the joint's local rotation and in its world
-    orientation (a local jump its parent's jump cancels, a solver moving a twist from one
-    joint to the next, moves no segment), and moves the limb below the joint
-    ``jump_distance`` metres farther than the limb's own motion on the neighbouring frames.
+    Attributes:
+        step: Degrees its local rotation turns from the frame before.
+        wstep: Degrees its world orientation turns (``step`` when nothing says).
+        own: Its own motion next to each frame: the median step over ``context_time``
+            before or after, whichever is larger (degrees).
+        entry, exit: Jumps that can start a glitch (5 times the motion before them: a step
+            that only continues an acceleration is no entry) and end one (the motion after).
+        jumps: Frame indices of every jump (``jump_deg`` and ``jump_ratio`` times its
+            neighbours' median), none within the reference pose's exit.
+        half: Frames in ``context_time``.
     """
-    from ..rotations import quat_conj, quat_mul
+
+    step: np.ndarray
+    wstep: np.ndarray
+    own: np.ndarray
+    entry: np.ndarray
+    exit: np.ndarray
+    jumps: np.ndarray
+    half: int
+
+
+def _joint_steps(rot: np.ndarray, fps: float, opt: CleanOptions, skip: int, limb: Limb | None) -> _Steps:
+    """The :class:`_Steps` of a joint's local rotations ``rot (F, 4)`` (``limb``: its world
+    orientation, if known; ``skip``: the reference pose's exit steps)."""
+    from numpy.lib.stride_tricks import sliding_window_view
 
     F = len(rot)
     step = np.zeros(F)
@@ -170,23 +176,26 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
         wstep[1:] = _angle(limb.world[1:], limb.world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
-    single = _single_jump(step, wstep, limb, half, opt.max_speed / fps, opt.jump_distance)
     is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
     # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
     # is the joint's real motion: a step that only continues an acceleration is no entry
-    from numpy.lib.stride_tricks import sliding_window_view
-
     win = sliding_window_view(np.pad(step, half, mode="edge"), half)
     before = np.median(win[:F], axis=1)  # t-half .. t-1
     after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
     own = np.maximum(before, after)  # the joint's own motion next to a jump, on its busier side
     entry = is_jump & (step > opt.jump_ratio * before)
     exit_ = is_jump & (step > opt.jump_ratio * after)
-    jumps = np.flatnonzero(is_jump)
-    out: list[Glitch] = []
-    if not len(jumps):
-        return out
+    return _Steps(step, wstep, own, entry, exit_, np.flatnonzero(is_jump), half)
+
+
+def _pair_jumps(rot: np.ndarray, s: _Steps, fps: float, opt: CleanOptions) -> tuple[list[tuple[int, int]], list[int]]:
+    r"""``(pairs, unpaired)``: each jump that can start a glitch paired with the first later
+    one (within ``max_glitch_time``) that can end it and *undoes* it, both faster than
+    ``pair_speed`` (:func:`_jumps`); the jumps left, in frame order."""
+    from ..rotations import quat_conj, quat_mul
+
+    step, jumps = s.step, s.jumps
     inv = quat_conj(rot)
     D = np.zeros_like(rot)
     E = np.zeros_like(rot)
@@ -196,15 +205,16 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     longest = max(1, int(round(opt.max_glitch_time * fps)))
     used: set[int] = set()
     pairs: list[tuple[int, int]] = []
+    unpaired: list[int] = []
     for a in jumps:
         if a in used:
             continue
         back = None
-        for b in jumps[(jumps > a) & (jumps <= a + longest)] if entry[a] else ():
-            if b in used or not exit_[b]:
+        for b in jumps[(jumps > a) & (jumps <= a + longest)] if s.entry[a] else ():
+            if b in used or not s.exit[b]:
                 continue
             # what is left of the entry after the exit: the joint's own motion on those two frames
-            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (own[a] + own[b]) + opt.return_deg)
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (s.own[a] + s.own[b]) + opt.return_deg)
             undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
             if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
@@ -214,8 +224,26 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            if single(a):
-                out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
+            unpaired.append(int(a))
+    return pairs, unpaired
+
+
+def _classify_pairs(
+    rot: np.ndarray,
+    s: _Steps,
+    pairs: list[tuple[int, int]],
+    single: Callable[[int], bool],
+    opt: CleanOptions,
+    joint: str,
+    skip: int,
+    limb: Limb | None,
+) -> list[Glitch]:
+    """Each paired span a ``flip`` (a jump of ``flip_deg`` or more), a ``spike`` (carried by
+    the segment and its children, to poses the joint takes nowhere else unless both jumps are
+    impossible on their own), or else each of its jumps that is a discontinuity on its own
+    (``single``, :func:`_single_jump`)."""
+    F = len(rot)
+    step, wstep = s.step, s.wstep
     # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
     # glitches of one joint do not vouch for each other)
     elsewhere = np.ones(F, dtype=bool)
@@ -223,6 +251,7 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     for a, b in pairs:
         n = max(2, b - a)
         elsewhere[max(0, a - n) : b + n] = False
+    out: list[Glitch] = []
     for a, b in pairs:
         size = float(np.max(_angle(rot[a:b], rot[a - 1])))
         carried = limb is None or all(_carried(step, wstep, limb.carried, t, opt.carry_ratio) for t in (a, b))
@@ -234,6 +263,40 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             continue
         kind = "flip" if size >= opt.flip_deg else "spike"
         out.append(Glitch(kind, joint, a, b - 1, size))
+    return out
+
+
+def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
+    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+
+    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
+    neighbours' median (:func:`_joint_steps`).  A jump at :math:`a` is paired with the
+    first later jump at :math:`b` (within ``max_glitch_time``) that *undoes* it
+    (:func:`_pair_jumps`): the exit step composed with the entry step is the identity up
+    to ``return_ratio`` of the jump, in either convention (an offset applied in the
+    parent's frame, :math:`D_b D_a \approx 1` with :math:`D_t = q_t q_{t-1}^{-1}`, or in
+    the joint's own, :math:`E_a E_b \approx 1` with :math:`E_t = q_{t-1}^{-1} q_t`), or the
+    joint is back where it was before :math:`a`.  This does not depend on how far the real
+    joint moves during a long glitch, and two unrelated jumps of a noisy joint (a toe
+    snapping at two landings) do not pair.  A paired glitch needs both jumps faster than
+    ``pair_speed`` (lower than the single-jump limit: real motion seldom jumps out and
+    back) and (:func:`_classify_pairs`), unless it is a flip, poses that the joint takes
+    nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when both
+    jumps are discontinuities on their own) and both jumps carried by its segment and
+    children (:func:`_carried`, when ``limb`` says what it carries); an unpaired jump (or
+    one whose pair fails those) is a ``discontinuity`` only if it is faster than
+    ``max_speed`` both in the joint's local rotation and in its world orientation (a local
+    jump its parent's jump cancels, a solver moving a twist from one joint to the next,
+    moves no segment), and moves the limb below the joint ``jump_distance`` metres farther
+    than the limb's own motion on the neighbouring frames (:func:`_single_jump`).
+    """
+    s = _joint_steps(rot, fps, opt, skip, limb)
+    if not len(s.jumps):
+        return []
+    single = _single_jump(s.step, s.wstep, limb, s.half, opt.max_speed / fps, opt.jump_distance)
+    pairs, unpaired = _pair_jumps(rot, s, fps, opt)
+    out = [Glitch("discontinuity", joint, a, a, float(s.step[a])) for a in unpaired if single(a)]
+    out += _classify_pairs(rot, s, pairs, single, opt, joint, skip, limb)
     return sorted(out, key=lambda g: g.start)
 
 

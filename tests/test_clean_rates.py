@@ -43,3 +43,18 @@ def test_a_clip_that_starts_moving_has_no_reference_pose():
         m = _load(name)
         assert reference_exit(m, CleanOptions()) == 0, name
         assert reference_exit(m.resample(240.0), CleanOptions()) == 0, name
+
+
+def test_a_flip_spread_over_two_frames_by_resampling_is_one_glitch():
+    """The dance's real thigh flip (frames 245-253 at 120 Hz) resampled to 240 Hz: its entry
+    and exit are each interpolated through 90 degrees, so the jumps pair twice; it is still
+    one flip per joint, over the same time."""
+    m = _load("cmu_05_10_dance_spins.bvh")
+    _, native = clean(m)
+    assert {(g.kind, g.joint, g.start, g.end) for g in native.glitches if g.joint in ("RightUpLeg", "RightFoot")} == {
+        ("flip", "RightUpLeg", 245, 253),
+        ("flip", "RightFoot", 245, 253),
+    }
+    _, report = clean(m.resample(240.0))
+    mine = sorted((g.joint, g.kind, g.start, g.end) for g in report.glitches if g.joint in ("RightUpLeg", "RightFoot"))
+    assert mine == [("RightFoot", "flip", 489, 507), ("RightUpLeg", "flip", 489, 507)], report.table()

@@ -296,8 +296,27 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     single = _single_jump(s.step, s.wstep, limb, s.half, opt.max_speed / fps, opt.jump_distance)
     pairs, unpaired = _pair_jumps(rot, s, fps, opt)
     out = [Glitch("discontinuity", joint, a, a, float(s.step[a])) for a in unpaired if single(a)]
-    out += _classify_pairs(rot, s, pairs, single, opt, joint, skip, limb)
+    out += _merge_overlapping(_classify_pairs(rot, s, pairs, single, opt, joint, skip, limb))
     return sorted(out, key=lambda g: g.start)
+
+
+def _merge_overlapping(glitches: list[Glitch]) -> list[Glitch]:
+    """Spikes and flips of one joint whose spans overlap are one glitch: a jump spread over
+    two frames (a clip resampled above its capture rate interpolates a 180-degree flip's
+    entry and exit through 90 degrees) pairs twice.  The union span, a flip if either is,
+    the larger severity; the other glitches unchanged, in order."""
+    spans = sorted((g for g in glitches if g.kind in ("spike", "flip")), key=lambda g: g.start)
+    merged: list[Glitch] = []
+    for g in spans:
+        if merged and g.start <= merged[-1].end:
+            m = merged[-1]
+            kind = "flip" if "flip" in (m.kind, g.kind) else "spike"
+            merged[-1] = Glitch(kind, m.joint, m.start, max(m.end, g.end), max(m.severity, g.severity))
+        else:
+            merged.append(g)
+    if len(merged) == len(spans):
+        return glitches
+    return [g for g in glitches if g.kind not in ("spike", "flip")] + merged
 
 
 def _carried(step: np.ndarray, wstep: np.ndarray, carried: np.ndarray | None, t: int, ratio: float) -> bool:

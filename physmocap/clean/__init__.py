@@ -13,12 +13,28 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from ..motion import Motion
-from .correct import correct_glitches
-from .detect import CleanOptions, Glitch, detect_glitches
+from .options import CleanOptions
+
+if TYPE_CHECKING:  # the detectors load scipy: imported when used (``physmocap --help`` stays fast)
+    from ..motion import Motion
+    from .correct import correct_glitches
+    from .detect import Glitch, detect_glitches
 
 __all__ = ["CleanOptions", "Glitch", "GlitchReport", "clean", "detect_glitches", "correct_glitches"]
+
+
+def __getattr__(name: str):
+    if name in ("Glitch", "detect_glitches"):
+        from . import detect
+
+        return getattr(detect, name)
+    if name == "correct_glitches":
+        from .correct import correct_glitches
+
+        return correct_glitches
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -91,6 +107,9 @@ def clean(motion: Motion, options: CleanOptions | None = None, mapping=None) -> 
         InputError: A rotation, translation or position is not finite (the file's reader
             refuses those; a motion built in Python may hold them).
     """
+    from .correct import correct_glitches
+    from .detect import detect_glitches
+
     _check_finite(motion)
     found = detect_glitches(motion, options, mapping)
     fixed, done = correct_glitches(motion, found, options)

@@ -102,9 +102,10 @@ def test_a_displaced_joint_is_reported_on_itself_not_on_its_children(walk, bench
     assert after.max() < 0.2 * before.max()
 
 
-def test_swap_detection_follows_the_tracks(walk, bench):
+def test_swap_detection_follows_the_tracks(walk, bench, monkeypatch):
     """Feet traded for one frame and, later, for 0.4 s: both found with their exact spans,
-    nothing else; the untouched positions have no glitch at all."""
+    nothing else; the untouched positions have no glitch at all.  The same when the
+    residuals are computed in blocks that end inside the trade."""
     import dataclasses
 
     pos = bench.positional_version(walk)
@@ -118,6 +119,10 @@ def test_swap_detection_follows_the_tracks(walk, bench):
     assert swaps == {(n, a, b) for n in ("LeftFoot", "RightFoot") for a, b in ((120, 120), (300, 347))}
     assert not [g for g in report.glitches if g.kind != "lr_swap"]
     np.testing.assert_array_equal(fixed.positions, pos.positions)
+    import physmocap.clean.positional as positional
+
+    monkeypatch.setattr(positional, "BLOCK", 37)
+    assert clean(dataclasses.replace(pos, positions=P))[1].glitches == report.glitches
 
 
 def test_shortened_positional_benchmark_on_the_bundled_walk(walk, bench):

@@ -66,22 +66,25 @@ def twin_pairs(motion: Motion, ji: dict[str, int]) -> list[tuple[int, int]]:
     return out
 
 
-def _swap_residuals(L: np.ndarray, R: np.ndarray) -> np.ndarray:
-    r"""``(K, F, 8)``: for the pairs ``L, R (K, F, 3)``, how far (metres, both joints summed)
-    each frame's samples land from where the two tracks were heading, for every labelling of
-    that frame and the two before (index :math:`4 s_{t-2} + 2 s_{t-1} + s_t`, :math:`s = 1`
-    traded): :math:`|X_t(s_t) - 2 X_{t-1}(s_{t-1}) + X_{t-2}(s_{t-2})|` (constant velocity;
-    0 for every labelling where a sample of the three frames is missing, and on frames 0
-    and 1: no evidence, so the labelling holds across a gap)."""
-    K, F = L.shape[:2]
-    X = np.stack([np.stack([L, R], axis=2), np.stack([R, L], axis=2)], axis=2)  # (K, F, s, side, 3)
-    out = np.zeros((K, F, 8))
-    if F < 3:
-        return out
+#: Frames of residuals computed at a time (bounded memory on hour-long clips).
+BLOCK = 4096
+
+
+def _swap_residuals(L: np.ndarray, R: np.ndarray, t0: int, t1: int) -> np.ndarray:
+    r"""``(K, t1 - t0, 8)``: for the pairs ``L, R (K, F, 3)``, how far (metres, both joints
+    summed) the samples of frames ``t0 .. t1 - 1`` (``t0 >= 2``) land from where the two
+    tracks were heading, for every labelling of that frame and the two before (index
+    :math:`4 s_{t-2} + 2 s_{t-1} + s_t`, :math:`s = 1` traded):
+    :math:`|X_t(s_t) - 2 X_{t-1}(s_{t-1}) + X_{t-2}(s_{t-2})|` (constant velocity; 0 for
+    every labelling where a sample of the three frames is missing: no evidence, so the
+    labelling holds across a gap)."""
+    seg_l, seg_r = L[:, t0 - 2 : t1], R[:, t0 - 2 : t1]
+    X = np.stack([np.stack([seg_l, seg_r], axis=2), np.stack([seg_r, seg_l], axis=2)], axis=2)  # (K, n+2, s, side, 3)
+    out = np.empty((L.shape[0], t1 - t0, 8))
     for code in range(8):
         s2, s1, s0 = code >> 2, (code >> 1) & 1, code & 1
-        miss = X[:, 2:, s0] - 2.0 * X[:, 1:-1, s1] + X[:, :-2, s2]  # (K, F-2, side, 3)
-        out[:, 2:, code] = np.linalg.norm(miss, axis=-1).sum(axis=-1)
+        miss = X[:, 2:, s0] - 2.0 * X[:, 1:-1, s1] + X[:, :-2, s2]  # (K, n, side, 3)
+        out[..., code] = np.linalg.norm(miss, axis=-1).sum(axis=-1)
     out[~np.isfinite(out)] = 0.0  # a sample missing on one of the three frames: no evidence either way
     return out
 
@@ -99,7 +102,6 @@ def _swapped_frames(L: np.ndarray, R: np.ndarray, margin: float, start: int = 0)
     first = start + 2
     if F <= first:
         return out
-    cost = _swap_residuals(L, R)
     # state (s_{t-1}, s_t) = 2 s_{t-1} + s_t; before ``first`` every label is kept
     best = np.full((K, 4), np.inf)
     best[:, 0] = 0.0
@@ -110,7 +112,9 @@ def _swapped_frames(L: np.ndarray, R: np.ndarray, margin: float, start: int = 0)
     ends = [np.flatnonzero(next_state == st) for st in range(4)]  # the two codes ending in each state
     rows = np.arange(K)
     for t in range(first, F):
-        total = best[:, prev_state] + cost[:, t] + switch  # (K, 8)
+        if (t - first) % BLOCK == 0:
+            cost, t0 = _swap_residuals(L, R, t, min(F, t + BLOCK)), t
+        total = best[:, prev_state] + cost[:, t - t0] + switch  # (K, 8)
         new = np.empty((K, 4))
         for st, cand in enumerate(ends):
             pick = cand[np.argmin(total[:, cand], axis=1)]

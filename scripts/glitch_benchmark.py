@@ -34,7 +34,21 @@ many of those touched frames got more than 1 cm worse; "beyond ROM" counts the t
 the correction left beyond a range of motion (:mod:`physmocap.clean.anatomy`) that the
 untouched clip is within there.
 
+**Joint-position sources** (``--sources positional`` or ``both``, the default): every shared
+BVH as the joint positions of its forward kinematics (a tracker's view of the same motion, every
+joint and end site, confidence 1), and every shared marker file whose markers map to joint
+centres (the CMU C3D: real positional noise; the upper-body Vicon files have no legs and are
+refused, as every command refuses them).  The same protocol, with ``--per-type`` glitches of one
+type at a time, 1 frame to 0.5 s long unless said: *stretch* (a joint moved along its bone from
+its parent by 15-100 % of the bone's length (or shrunk by 15-90 %) and at least 4 cm, bones of
+5 cm or more), *gap* (a joint lost: no position, confidence 0), *swap* (a left joint and its
+right twin trading positions) and *pos_frozen* (a joint's position held for 0.1-0.5 s while it
+moves).  A (joint, frame) pair is labelled only where the injection moves the joint more than
+``--floor-m`` (1 cm: a marker-based joint centre's own noise); the error is the position RMS
+of the glitched joints on their glitched frames (a gap has no "before").
+
 Usage:  python scripts/glitch_benchmark.py [--clips ...] [--per-type 6] [--seed 0] [--misses]
+            [--sources rotational|positional|both]
 """
 
 from __future__ import annotations
@@ -50,6 +64,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
 TYPES = ("spike", "segment", "flip", "frozen", "anatomical")
+POS_TYPES = ("stretch", "gap", "swap", "pos_frozen")
 
 
 def inject(motion, rng: np.random.Generator, per_type: int, kinds=TYPES, floor: float = 0.5):
@@ -116,6 +131,205 @@ def inject(motion, rng: np.random.Generator, per_type: int, kinds=TYPES, floor: 
     return dataclasses.replace(motion, rotations=R), truth, faint
 
 
+def positional_version(motion):
+    """``motion`` as a joint-position source: its forward-kinematics positions (every joint
+    and end site), confidence 1, no rotations (what a tracker of the same motion records).
+    A joint with animated translation channels besides the root (Bandai Namco's Hips under
+    its ``joint_Root``) hangs from no bone: it becomes a root of its own."""
+    import dataclasses
+
+    from physmocap.motion import Motion
+
+    P = np.asarray(motion.world_positions(), dtype=float)
+    parents = np.array(motion.skeleton.parents, copy=True)
+    moved = np.asarray(motion.translated, dtype=int)[np.ptp(np.asarray(motion.translations), axis=0).max(axis=-1) > 1e-6]
+    parents[moved] = -1
+    skeleton = dataclasses.replace(motion.skeleton, parents=parents)
+    return Motion(skeleton, motion.fps, positions=P, confidence=np.ones(P.shape[:2]),
+                  source=f"{motion.source} (positions)")
+
+
+def inject_positional(motion, rng: np.random.Generator, per_type: int, kind: str, floor: float = 0.01, start: int = 0):
+    """A copy of the positional ``motion`` with ``per_type`` glitches of ``kind`` (one of
+    :data:`POS_TYPES`, module docstring) from frame ``start`` on, the truth (the set of
+    (joint, frame) moved more than ``floor`` metres) and the injected pairs moved less."""
+    import dataclasses
+
+    from physmocap.clean.detect import canonical_joints
+    from physmocap.clean.positional import twin_pairs
+
+    P = np.array(motion.positions, dtype=float, copy=True)
+    C = np.ones(P.shape[:2]) if motion.confidence is None else np.array(motion.confidence, dtype=float, copy=True)
+    F, J = P.shape[:2]
+    fps = float(motion.fps)
+    parents = motion.skeleton.parents
+    with np.errstate(invalid="ignore"):
+        bone = np.array([np.nanmedian(np.linalg.norm(P[:, j] - P[:, p], axis=1)) if p >= 0 else 0.0
+                         for j, p in enumerate(parents)])  # fmt: skip
+    longest = max(1, int(round(0.5 * fps)))
+    pairs = twin_pairs(motion, canonical_joints(motion)) if kind == "swap" else []
+    lost = ~np.isfinite(P).all(axis=-1) | (C <= 0)
+    truth: set[tuple[int, int]] = set()
+    faint: set[tuple[int, int]] = set()
+    taken = np.zeros((F, J), dtype=bool)
+    placed = tries = 0
+    while placed < per_type and tries < 1000:
+        tries += 1
+        if kind == "pos_frozen":
+            n = max(3, int(round(rng.uniform(0.1, 0.5) * fps)))
+        else:
+            n = int(rng.integers(1, longest + 1))
+        if F - n - 2 <= start + 1:
+            break
+        a = int(rng.integers(start + 1, F - n - 2))
+        span = slice(a, a + n)
+        if kind == "swap":
+            if not pairs:
+                break
+            joints = list(pairs[int(rng.integers(len(pairs)))])
+        else:
+            joints = [int(rng.integers(J))]
+        lo, hi = max(0, a - int(fps)), min(F, a + n + int(fps))
+        near = joints + [int(parents[j]) for j in joints if parents[j] >= 0] + np.flatnonzero(np.isin(parents, joints)).tolist()
+        if taken[lo:hi, near].any() or lost[lo:hi, joints].any():
+            continue  # a second glitch on it or a bone it shares (or the source's own gap) within a second is not attributable
+        new = P[span][:, joints].copy()
+        j = joints[0]
+        if kind == "stretch":
+            p = int(parents[j])
+            if p < 0 or not bone[j] >= 0.05:
+                continue  # no bone (or two names for one point) to stretch
+            grow = rng.uniform(0.15, 1.0) if rng.random() < 0.5 else -rng.uniform(0.15, 0.9)
+            if abs(grow) * bone[j] < 0.04:
+                continue
+            new[:, 0] = P[span, p] + (1.0 + grow) * (P[span, j] - P[span, p])
+        elif kind == "gap":
+            new[:] = np.nan
+        elif kind == "swap":
+            new = new[:, ::-1]
+        else:  # pos_frozen
+            if np.nanmax(np.linalg.norm(P[a : a + n + 1, j] - P[a - 1, j], axis=-1)) < 1e-4:
+                continue  # the joint does not move there: nothing to freeze
+            new[:, 0] = P[a - 1, j]
+        with np.errstate(invalid="ignore"):
+            moved = np.linalg.norm(new - P[span][:, joints], axis=-1)
+        moved = np.where(np.isnan(moved), np.inf, moved)  # a lost sample is labelled
+        P[span, joints] = new
+        if kind == "gap":
+            C[span, joints] = 0.0
+        taken[span, joints] = True
+        for i in range(n):
+            for k, jj in enumerate(joints):
+                (truth if moved[i, k] > floor else faint).add((jj, a + i))
+        placed += 1
+    return dataclasses.replace(motion, positions=P, confidence=C), truth, faint
+
+
+def positional_clips(args: argparse.Namespace) -> list[tuple[str, object]]:
+    """(name, positional motion) of every shared BVH (:func:`positional_version`) and marker
+    file that maps to joints; the others said why they are left out."""
+    from physmocap.errors import PhysmocapError
+    from physmocap.sources import load_motion
+
+    names = args.clips or sorted(p.name for p in DATA.iterdir() if p.suffix.lower() in (".bvh", ".c3d", ".trc"))
+    out = []
+    for name in names:
+        try:
+            m = load_motion(DATA / name)
+        except PhysmocapError as exc:
+            print(f"{name:26s} left out: {exc.message[:100]}")
+            continue
+        out.append((name, positional_version(m) if m.is_rotational else m))
+    return out
+
+
+def positional_benchmark(args: argparse.Namespace) -> None:
+    """The joint-position benchmark (module docstring), printed."""
+    from physmocap.clean import clean
+    from physmocap.ik.retarget import default_start
+
+    types = args.pos_types
+    count = {t: np.zeros(3, int) for t in types}
+    own_fp = {t: 0 for t in types}
+    # sum sq before, n before, sum sq after, n after, worst increase (cm), touched frames, of them > 1 cm worse
+    err = {t: [0.0, 0, 0.0, 0, 0.0, 0, 0] for t in types}
+    faint_total = {t: 0 for t in types}
+    print(f"{'positions of':26s} {'frames':>6s} {'untouched flagged %':>19s} {'changed %':>9s}  "
+          + " ".join(f"{t[:10] + ' P/R':>14s}" for t in types) + "  (strict P)")  # fmt: skip
+    for ci, (clip, motion) in enumerate(positional_clips(args)):
+        names = {n: j for j, n in enumerate(motion.skeleton.names)}
+        jn = motion.skeleton.names
+        P0 = np.asarray(motion.positions, dtype=float)
+        base_fixed, base = clean(motion)
+        own_fix = np.any(np.asarray(base_fixed.positions) != P0, axis=(1, 2)) & np.isfinite(P0).all(axis=(1, 2))
+        flagged = {t for g in base.glitches for t in range(g.start, g.end + 1)}
+        base_pairs = _flagged(base, names)
+        if args.misses:
+            for g in base.glitches:
+                print(f"    untouched  {g.kind:13s} {g.joint:18s} frames {g.start}-{g.end} severity {g.severity:.3f} {g.unit}")
+        start = default_start(motion) + 2
+        cells = []
+        for ti, t in enumerate(types):
+            rng = np.random.default_rng([args.seed, 100 + ci, POS_TYPES.index(t)])  # the same glitches whichever types run
+            glitched, truth, faint = inject_positional(motion, rng, args.per_type, t, args.floor_m, start)
+            fixed, report = clean(glitched)
+            det = _flagged(report, names) - faint
+            tp, fp, fn = len(det & truth), len(det - truth), len(truth - det)
+            count[t] += (tp, fp, fn)
+            own_fp[t] += len((det - truth) & base_pairs)
+            faint_total[t] += len(faint)
+            p, r, _ = _prf(tp, fp, fn)
+            cells.append(f"{p:6.3f}/{r:6.3f}")
+            if args.misses:
+                for label, pairs in (("MISS", truth - det), ("FP", det - truth)):
+                    for j in sorted({j for j, _ in pairs}):
+                        fr = sorted(f for jj, f in pairs if jj == j)
+                        kinds = {g.kind for g in report.glitches if names[g.joint] == j}
+                        inj = sorted(f for jj, f in truth if jj == j)
+                        print(f"    {t:10s} {label:4s} {jn[j]:18s} frames {fr[0]}-{fr[-1]} ({len(fr)})"
+                              f" injected {inj[0] if inj else '-'}-{inj[-1] if inj else '-'} found as {sorted(kinds)}")
+            frames = sorted({f for _, f in truth})
+            if not frames:
+                continue
+            Pg, Pf = np.asarray(glitched.positions), np.asarray(fixed.positions)
+            jj, ff = (np.array(x) for x in zip(*sorted(truth)))  # the glitched joints on their frames
+            eb = np.sum((Pg[ff, jj] - P0[ff, jj]) ** 2, axis=-1)
+            ea = np.sum((Pf[ff, jj] - P0[ff, jj]) ** 2, axis=-1)
+            err[t][0] += np.nansum(eb)
+            err[t][1] += int(np.isfinite(eb).sum())
+            err[t][2] += np.nansum(ea)
+            err[t][3] += int(np.isfinite(ea).sum())
+            with np.errstate(invalid="ignore"):
+                changed = np.any(~((Pf == Pg) | (np.isnan(Pf) & np.isnan(Pg))), axis=(1, 2))
+            changed = np.flatnonzero(changed & ~own_fix)
+            if len(changed):
+                # a lost joint had no error before: it counts as its error after
+                wb = np.nanmax(np.nan_to_num(np.linalg.norm(Pg[changed] - P0[changed], axis=-1), nan=0.0), axis=-1)
+                wa = np.nanmax(np.linalg.norm(Pf[changed] - P0[changed], axis=-1), axis=-1)
+                err[t][4] = max(err[t][4], 100 * float(np.nanmax(wa - wb)))
+                err[t][5] += len(changed)
+                err[t][6] += int(np.sum(wa - wb > 0.01))
+        print(f"{clip:26s} {motion.num_frames:6d} {100 * len(flagged) / motion.num_frames:19.2f} "
+              f"{100 * own_fix.mean():9.2f}  " + " ".join(f"{c:>14s}" for c in cells), flush=True)  # fmt: skip
+    print()
+    print(f"{'type':11s} {'strict P':>9s} {'injected P':>10s} {'recall':>7s} {'F1':>6s} {'pairs':>6s} {'sub-noise':>9s} "
+          f"{'RMS before':>10s} {'after cm':>8s} {'removed':>7s} {'worst +cm':>9s} {'>1cm worse':>12s}")  # fmt: skip
+    tot = np.zeros(3, int)
+    for t in types:
+        tot += count[t]
+        p, r, f = _prf(*count[t])
+        pi, _, f = _prf(count[t][0], count[t][1] - own_fp[t], count[t][2])
+        b, nb, a, na, w, touched, worse = err[t]
+        rb, ra = np.sqrt(b / max(1, nb)) * 100, np.sqrt(a / max(1, na)) * 100
+        before = f"{rb:10.2f}" if nb else f"{'lost':>10s}"
+        removed = f"{1 - ra / max(1e-12, rb):7.1%}" if nb else f"{'-':>7s}"
+        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} "
+              f"{before} {ra:8.2f} {removed} {w:9.2f} {worse:5d}/{touched:<6d}")  # fmt: skip
+    p, r, f = _prf(*tot)
+    pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
+    print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")
+
+
 def _beyond_rom(motion) -> set[int]:
     """Frames where some anatomical angle of ``motion`` is beyond its range of motion."""
     from physmocap.clean.detect import anatomical_glitches
@@ -137,16 +351,30 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--clips", nargs="+", default=None)
     ap.add_argument("--types", nargs="+", default=list(TYPES), choices=TYPES)
+    ap.add_argument("--pos-types", nargs="+", default=list(POS_TYPES), choices=POS_TYPES)
+    ap.add_argument("--sources", choices=["rotational", "positional", "both"], default="both")
     ap.add_argument("--per-type", type=int, default=6)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--floor", type=float, default=0.5, help="degrees an injection must change a pair to label it")
+    ap.add_argument("--floor-m", type=float, default=0.01, help="metres an injection must move a joint to label it")
     ap.add_argument("--misses", action="store_true", help="print every missed and falsely flagged span")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
+    if args.sources in ("rotational", "both"):
+        rotational(args)
+    if args.sources in ("positional", "both"):
+        if args.sources == "both":
+            print()
+        positional_benchmark(args)
+    return 0
+
+
+def rotational(args: argparse.Namespace) -> None:
+    """The rotational benchmark (module docstring) on the shared BVHs, printed."""
     from physmocap.clean import clean
     from physmocap.sources import load_motion
 
-    clips = args.clips or sorted(p.name for p in DATA.glob("*.bvh"))
+    clips = [c for c in args.clips if c.endswith(".bvh")] if args.clips else sorted(p.name for p in DATA.glob("*.bvh"))
     count = {t: np.zeros(3, int) for t in args.types}  # tp, fp, fn
     own_fp = {t: 0 for t in args.types}  # false positives the untouched clip already had
     # sum sq before, sum sq after, n, worst increase (cm), touched frames, of them > 1 cm worse,
@@ -218,7 +446,6 @@ def main() -> int:
     p, r, f = _prf(*tot)
     pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")
-    return 0
 
 
 if __name__ == "__main__":

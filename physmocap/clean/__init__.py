@@ -1,8 +1,10 @@
 """Glitch detection and repair in the source's own skeleton (``physmocap clean``).
 
-* :mod:`.detect`: spikes, flips, discontinuities, frozen joints, bone stretch, gaps, and
-  anatomical glitches (:mod:`.anatomy`: a joint beyond its range of motion, named by
-  anatomical movement).
+* :mod:`.detect`: spikes, flips, discontinuities, frozen joints, and anatomical glitches
+  (:mod:`.anatomy`: a joint beyond its range of motion, named by anatomical movement);
+  :mod:`.positional`: bone stretch, gaps, frozen joints and left/right swaps of
+  joint-position sources.
+* :mod:`.options`: the thresholds (:class:`CleanOptions`), physical quantities with units.
 * :mod:`.correct`: interpolation over the repairable ones, nothing else touched.
 
 ``clean(motion) -> (Motion, GlitchReport)``.
@@ -11,12 +13,28 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from ..motion import Motion
-from .correct import correct_glitches
-from .detect import CleanOptions, Glitch, detect_glitches
+from .options import CleanOptions
+
+if TYPE_CHECKING:  # the detectors load scipy: imported when used (``physmocap --help`` stays fast)
+    from ..motion import Motion
+    from .correct import correct_glitches
+    from .detect import Glitch, detect_glitches
 
 __all__ = ["CleanOptions", "Glitch", "GlitchReport", "clean", "detect_glitches", "correct_glitches"]
+
+
+def __getattr__(name: str):
+    if name in ("Glitch", "detect_glitches"):
+        from . import detect
+
+        return getattr(detect, name)
+    if name == "correct_glitches":
+        from .correct import correct_glitches
+
+        return correct_glitches
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -43,7 +61,7 @@ class GlitchReport:
         rows = [f"{'type':14s} {'joint':22s} {'movement':34s} {'frames':>13s} {'severity':>10s}  corrected"]
         for g in self.glitches:
             frames = f"{g.start}" if g.start == g.end else f"{g.start}-{g.end}"
-            movement = f"{g.movement} ({g.plane})" if g.movement else "-"
+            movement = f"{g.movement} ({g.plane})" if g.movement else f"with {g.other}" if g.other else "-"
             digits = {"m": 3, "s": 2}.get(g.unit, 1)  # millimetres, hundredths of a second, tenths of a degree
             rows.append(
                 f"{g.kind:14s} {g.joint:22s} {movement:34s} {frames:>13s} {g.severity:7.{digits}f} {g.unit:3s}  "
@@ -81,14 +99,18 @@ def _check_finite(motion: Motion) -> None:
             )
 
 
-def clean(motion: Motion, options: CleanOptions | None = None) -> tuple[Motion, GlitchReport]:
-    """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`).
+def clean(motion: Motion, options: CleanOptions | None = None, mapping=None) -> tuple[Motion, GlitchReport]:
+    """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`);
+    ``mapping``: a source mapping file or dict naming its joints (``--source-map``).
 
     Raises:
         InputError: A rotation, translation or position is not finite (the file's reader
             refuses those; a motion built in Python may hold them).
     """
+    from .correct import correct_glitches
+    from .detect import detect_glitches
+
     _check_finite(motion)
-    found = detect_glitches(motion, options)
+    found = detect_glitches(motion, options, mapping)
     fixed, done = correct_glitches(motion, found, options)
     return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

@@ -208,6 +208,9 @@ def anatomical_angles(
         if calibration_frame is not None:
             rel = np.einsum("ji,fjk->fik", rel[calibration_frame], rel)
         ok = np.all(np.isfinite(rel), axis=(1, 2))
+        # a frame whose shoulder line or trunk line has collapsed (a tracker putting both
+        # shoulders, or a shoulder and the neck, on one point) has no orientation: no angle
+        ok[ok] = np.abs(np.linalg.det(rel[ok]) - 1.0) < 1e-6
         angles = np.full((rel.shape[0], 3), np.nan)
         if ok.any():
             angles[ok] = Rotation.from_matrix(rel[ok]).as_euler("YXZ", degrees=True)

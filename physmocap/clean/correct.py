@@ -10,8 +10,9 @@ space, leaving and arriving at the joint's own speed, or the joint's motion in t
 of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
 what it was doing).  At the clip's ends the nearest good rotation is held.  A
-positional glitch (bone stretch, gap) is bridged by linear interpolation of the joint's
-position; a left/right swap by trading the two joints' positions back over the span.
+positional glitch (bone stretch, gap, a held position) is bridged by the joint's offset
+from its parent turning steadily from its value before to its value after, riding on the
+parent's own motion (linear interpolation of the position where the parent is not tracked); a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.
 """
@@ -25,6 +26,7 @@ import numpy as np
 from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints
+from .positional import twin as positional_twin
 
 __all__ = ["correct_glitches"]
 
@@ -208,21 +210,6 @@ def _remove_offset(R: np.ndarray, a: int, b: int) -> np.ndarray | None:
     return (offset.inv() * inner if pre else inner * offset.inv()).as_quat()
 
 
-def _twin(name: str, names: dict[str, int]) -> int | None:
-    """Index of the joint named like ``name`` with the other side (``Left``/``Right``,
-    ``left_``/``right_``, ``L``/``R`` prefixes), or None."""
-    import re
-
-    swaps = [("Left", "Right"), ("left", "right"), ("LEFT", "RIGHT"), ("L", "R"), ("l", "r")]
-    for a, b in swaps:
-        for x, y in ((a, b), (b, a)):
-            for pattern in (rf"^{x}(?=[_A-Z\d]|$)", rf"(?<=[_\s]){x}(?=[_\s]|$)", rf"^{x}_"):
-                other = re.sub(pattern, y, name, count=1)
-                if other != name and other in names:
-                    return names[other]
-    return None
-
-
 def _repair_rotation(
     R: np.ndarray, j: int, g: Glitch, fps: float, matcher: _Matcher | None, opt: CleanOptions
 ) -> tuple[np.ndarray, str]:
@@ -243,12 +230,53 @@ def _repair_rotation(
     return np.repeat(held[None], n, axis=0), "held"
 
 
+def _slerp_vectors(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``(n, 3)``: the vectors from ``u`` to ``v`` (``(3,)`` each) at the fractions ``w (n, 1)``,
+    their direction turned at a steady rate and their length linear."""
+    lu, lv = float(np.linalg.norm(u)), float(np.linalg.norm(v))
+    length = (1 - w) * lu + w * lv
+    if min(lu, lv) < 1e-9:
+        return (1 - w) * u + w * v
+    du, dv = u / lu, v / lv
+    angle = float(np.arccos(np.clip(du @ dv, -1.0, 1.0)))
+    if angle < 1e-6 or angle > np.pi - 1e-6:  # the same direction, or no single way round
+        d = (1 - w) * du + w * dv
+        d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+    else:
+        d = (np.sin((1 - w) * angle) * du + np.sin(w * angle) * dv) / np.sin(angle)
+    return d * length
+
+
+def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) -> tuple[np.ndarray, str]:
+    """Joint ``j``'s positions over frames ``s..e`` of ``P (F, J, 3)`` rebuilt from its good
+    samples just outside (the nearest one held at the clip's ends), and how.
+
+    Where its parent is tracked over the span and at both ends, the joint rides on it: its
+    offset from the parent turns from the offset before to the offset after at a steady rate
+    (its length linear), added to the parent's own motion ("parent-relative": a lost hand
+    goes on moving with the walking body, its bone keeps its length).  Otherwise its world
+    position is interpolated linearly ("linear")."""
+    F, n = len(P), e - s + 1
+    a, b = s - 1, e + 1
+    w = (np.arange(1, n + 1) / (n + 1))[:, None]
+    ends = [t for t in (a, b) if 0 <= t < F]
+    if parent is not None and ends and np.isfinite(P[s : e + 1, parent]).all() and np.isfinite(P[ends, parent]).all():
+        before = P[a, j] - P[a, parent] if a >= 0 else P[b, j] - P[b, parent]
+        after = P[b, j] - P[b, parent] if b < F else before
+        if np.isfinite(before).all() and np.isfinite(after).all():
+            return P[s : e + 1, parent] + _slerp_vectors(before, after, w), "parent-relative"
+    first = P[a, j] if a >= 0 else P[b, j]  # the good value before, or after at the start
+    last = P[b, j] if b < F else P[a, j]
+    return (1 - w) * first + w * last, "linear"
+
+
 def correct_glitches(
     motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "linear", "swapped back",
+    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
+    or "linear" (a position, :func:`_repair_position`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``)."""
     opt = options or CleanOptions()
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
@@ -263,7 +291,7 @@ def correct_glitches(
         if g.kind == "lr_swap" and pos is not None:
             # trade the pair back (once per pair and span; both joints carry the glitch)
             j = names[g.joint]
-            twin = _twin(names_of[j], names)
+            twin = names.get(g.other) if g.other else positional_twin(names_of[j], names)
             key = (min(j, twin), g.start, g.end) if twin is not None else None
             if key is not None and key not in swapped:
                 swapped.add(key)
@@ -271,6 +299,8 @@ def correct_glitches(
             out.append(dataclasses.replace(g, corrected="swapped back" if key is not None else ""))
             continue
         how = REPAIRED.get(g.kind) if g.repairable else None
+        if g.kind == "frozen" and rot is None:
+            how = "position"  # a joint-position source's held position
         arr = rot if how == "rotation" else pos if how == "position" else None
         a, b = g.start - 1, g.end + 1
         if arr is None or (a < 0 and b >= F):
@@ -283,11 +313,9 @@ def correct_glitches(
             arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
             out.append(dataclasses.replace(g, corrected=curve))
             continue
-        first = arr[a, j] if a >= 0 else arr[b, j]  # the good value before, or after at the start
-        last = arr[b, j] if b < F else arr[a, j]
-        w = (np.arange(1, g.end - g.start + 2) / (g.end - g.start + 2))[:, None]
-        arr[g.start : g.end + 1, j] = (1 - w) * first + w * last
-        out.append(dataclasses.replace(g, corrected="linear"))
+        parent = int(motion.skeleton.parents[j])
+        arr[g.start : g.end + 1, j], how = _repair_position(arr, j, parent if parent >= 0 else None, g.start, g.end)
+        out.append(dataclasses.replace(g, corrected=how))
     fixed = dataclasses.replace(motion, rotations=rot) if rot is not None else motion
     if pos is not None:
         fixed = dataclasses.replace(fixed, positions=pos)

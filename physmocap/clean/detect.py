@@ -16,10 +16,8 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value
   held in several separate runs is a limit the capture's own solver clamps to, not a freeze.
-* **Bone stretch** (positional sources): a bone whose length departs from its median by
-  more than ``stretch_ratio``.
-* **Gaps** (positional sources): runs of zero confidence.
-* **Left/right swaps** (positional sources): a left joint and its right twin trading places.
+* **Positional sources** (:mod:`.positional`): bone stretch, gaps, frozen joints and
+  left/right swaps.
 * **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion
   (:mod:`.anatomy`), named by movement and plane ("left knee hyperextension",
   sagittal); spans longer than ``max_glitch_time`` are reported only.
@@ -30,111 +28,15 @@ numbering) and a severity (degrees or metres).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from ..motion import Motion
+from .options import CleanOptions
 
 __all__ = ["CleanOptions", "Glitch", "detect_glitches", "anatomical_glitches", "joint_angles_step"]
-
-
-@dataclass(frozen=True)
-class CleanOptions:
-    """Detection thresholds and repair settings.
-
-    Attributes:
-        jump_deg: Smallest frame-to-frame rotation (degrees) that can be a glitch.
-        max_speed: ... and faster than this (degrees per second): joints of the fastest
-            human motions (throws, kicks) stay below about 1500 deg/s outside the
-            shoulder's internal rotation, so at a low frame rate a large step is no glitch.
-        pair_speed: A jump paired with a later jump that undoes it needs only this speed
-            (degrees per second, both jumps): going out and coming back is stronger evidence
-            than one step, but a joint stepping no faster than a walking knee (about 400
-            deg/s) cannot be told from real motion sampled at a low rate.
-        novelty_ratio: A spike (not a flip) is a glitch only if the poses it holds lie at
-            least this fraction of its entry jump away from every pose the joint takes
-            elsewhere in the clip (outside the span and as many frames each side): a joint
-            popping out and back to a pose it reaches anyway (a toe flexing at each landing, a
-            solved spine settling) is the capture's own behaviour, an offset injected or added
-            by a solver error puts the joint where it never goes.  Not asked of a pair whose
-            two jumps are each impossible on their own (faster than ``max_speed`` and moving the
-            limb ``jump_distance``): out and back that way is a glitch wherever it goes.
-        jump_ratio: ... and at least this many times the median of its neighbours.
-        context_time: Seconds of neighbours (each side) for that median.
-        max_glitch_time: Longest glitch between a jump and its return (seconds).
-        return_ratio: The return brings the joint back to within this fraction of the jump.
-        return_deg: ... and the exit leaves at most this many degrees of the entry, on top of
-            twice the joint's own motion on the two frames (its median step over
-            ``context_time`` before or after each jump, whichever is larger: a toe at 30 Hz
-            still swinging into the frame a glitch starts on).
-        flip_deg: A glitch whose jump is at least this large is a flip.
-        frozen_time: Shortest frozen run (seconds).
-        stretch_ratio: Bone-length departure from the median that is a glitch (positional).
-        rom_soft_margin: Degrees added, for the anatomical check, to each range of motion
-            that performers exceed (the ``"default"`` ranges of :mod:`physmocap.models.rom`
-            already carry a 15 degree margin over the largest clinical value; dancers'
-            hips and trunks go further).  Anatomical stops (knee and elbow
-            hyperextension) get none.
-        swap_min_distance: A left joint and its right twin this far apart (metres) or more
-            can be seen trading places (positional sources).
-        jump_distance: A single jump (a discontinuity) must also move some point of the
-            joint's limb (its descendants, relative to the joint) this many metres farther
-            than the limb moves on the neighbouring frames: a toe, finger or twist popping by
-            a couple of centimetres is within a solved skeleton's soft-tissue noise (skin
-            markers slide 1-3 cm on the bone).  An offset, so independent of the frame rate.
-        still_speed: A joint turning slower than this (degrees per second) is not moving (a
-            capture's noise floor): the body moves on a frame where its median joint turns
-            faster, and a frozen joint's catch-up is compared with at least this speed.
-            Per second, so the same at every frame rate (0.05 degrees per frame at 120 Hz).
-        offset_min_time: A spike or flip lasting this many seconds or more is repaired by
-            taking its offset off (entry jump and inverse exit jump, interpolated over the
-            span: the real motion under it comes back); a shorter one is bridged.
-        match_context: The matched bridge's template spans this many times the glitch's
-            length of frames on each side of it (at least 2 frames).
-        match_own_weight: Weight of the glitched joint's own rotations on those context
-            frames in the template (its motion into and out of the span says most about it).
-        match_windows: How many best-matching windows of the clip lend their motion
-            (averaged) to the matched bridge.
-        carry_ratio: A spike's jumps must turn the joint's segment and what it carries:
-            its world orientation jumps by at least this fraction of its local jump, and
-            some child's world orientation by at least this fraction of its own (an offset
-            on one joint turns everything it carries by the same angle).  A solver moving a
-            bend between consecutive joints turns one while the next turns back, and the
-            limbs beyond stay where they were.
-    """
-
-    jump_deg: float = 10.0
-    max_speed: float = 1500.0
-    pair_speed: float = 400.0
-    novelty_ratio: float = 0.2
-    jump_ratio: float = 5.0
-    context_time: float = 0.1
-    max_glitch_time: float = 0.5
-    return_ratio: float = 0.5
-    return_deg: float = 2.0
-    flip_deg: float = 150.0
-    frozen_time: float = 0.1
-    stretch_ratio: float = 0.1
-    rom_soft_margin: float = 15.0
-    swap_min_distance: float = 0.05
-    jump_distance: float = 0.05
-    carry_ratio: float = 0.5
-    still_speed: float = 6.0
-    offset_min_time: float = 0.15
-    match_context: float = 0.5
-    match_own_weight: float = 5.0
-    match_windows: int = 3
-
-    def __post_init__(self) -> None:
-        from ..options import check_fields
-
-        check_fields(
-            self,
-            "clean",
-            counts=["match_windows"],
-            positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"],
-        )
 
 
 @dataclass(frozen=True)
@@ -142,8 +44,9 @@ class Glitch:
     """One glitch: ``kind`` on ``joint`` over frames ``start..end`` (inclusive).
 
     ``movement`` and ``plane`` name the anatomical movement of an ``anatomical`` glitch
-    ("left knee hyperextension", "sagittal"); ``repairable`` is False for one the
-    correction must leave alone (an out-of-range span too long to be a glitch)."""
+    ("left knee hyperextension", "sagittal"); ``other`` the joint an ``lr_swap`` traded
+    places with; ``repairable`` is False for one the correction must leave alone (an
+    out-of-range span too long to be a glitch)."""
 
     kind: str
     joint: str
@@ -155,6 +58,7 @@ class Glitch:
     movement: str = ""
     plane: str = ""
     repairable: bool = field(default=True, compare=False)
+    other: str = ""
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -233,30 +137,35 @@ def _descendants(parents: np.ndarray, j: int) -> list[int]:
     return out
 
 
-def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
-    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+@dataclass(frozen=True)
+class _Steps:
+    """One joint's frame-to-frame motion as the jump tests read it (all ``(F,)``).
 
-    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
-    neighbours' median.  A jump at :math:`a` is paired with the first later jump at
-    :math:`b` (within ``max_glitch_time``) that *undoes* it: the exit step composed with
-    the entry step is the identity up to ``return_ratio`` of the jump, in either
-    convention (an offset applied in the parent's frame, :math:`D_b D_a \approx 1` with
-    :math:`D_t = q_t q_{t-1}^{-1}`, or in the joint's own, :math:`E_a E_b \approx 1` with
-    :math:`E_t = q_{t-1}^{-1} q_t`), or the joint is back where it was before :math:`a`.
-    This does not depend on how far the real joint moves during a long glitch, and two
-    unrelated jumps of a noisy joint (a toe snapping at two landings) do not pair.  A
-    paired glitch needs both jumps faster than ``pair_speed`` (lower than the single-jump
-    limit: real motion seldom jumps out and back) and, unless it is a flip, poses that the
-    joint takes nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when
-    both jumps are discontinuities on their own) and both jumps
-    carried by its segment and children (:func:`_carried`, when ``limb`` says what it
-    carries); an unpaired jump (or one whose pair fails those) is a ``discontinuity`` only if
-    it is faster than ``max_speed`` both in the joint's local rotation and in its world
-    orientation (a local jump its parent's jump cancels, a solver moving a twist from one
-    joint to the next, moves no segment), and moves the limb below the joint
-    ``jump_distance`` metres farther than the limb's own motion on the neighbouring frames.
+    Attributes:
+        step: Degrees its local rotation turns from the frame before.
+        wstep: Degrees its world orientation turns (``step`` when nothing says).
+        own: Its own motion next to each frame: the median step over ``context_time``
+            before or after, whichever is larger (degrees).
+        entry, exit: Jumps that can start a glitch (5 times the motion before them: a step
+            that only continues an acceleration is no entry) and end one (the motion after).
+        jumps: Frame indices of every jump (``jump_deg`` and ``jump_ratio`` times its
+            neighbours' median), none within the reference pose's exit.
+        half: Frames in ``context_time``.
     """
-    from ..rotations import quat_conj, quat_mul
+
+    step: np.ndarray
+    wstep: np.ndarray
+    own: np.ndarray
+    entry: np.ndarray
+    exit: np.ndarray
+    jumps: np.ndarray
+    half: int
+
+
+def _joint_steps(rot: np.ndarray, fps: float, opt: CleanOptions, skip: int, limb: Limb | None) -> _Steps:
+    """The :class:`_Steps` of a joint's local rotations ``rot (F, 4)`` (``limb``: its world
+    orientation, if known; ``skip``: the reference pose's exit steps)."""
+    from numpy.lib.stride_tricks import sliding_window_view
 
     F = len(rot)
     step = np.zeros(F)
@@ -267,23 +176,26 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
         wstep[1:] = _angle(limb.world[1:], limb.world[:-1])
     half = max(2, int(round(opt.context_time * fps)))
     ref = _neighbour_median(step, half)
-    single = _single_jump(step, wstep, limb, half, opt.max_speed / fps, opt.jump_distance)
     is_jump = (step > opt.jump_deg) & (step > opt.jump_ratio * ref)
     is_jump[: skip + 1] = False
     # one side of a glitch's entry (the frames before it) and of its exit (the frames after)
     # is the joint's real motion: a step that only continues an acceleration is no entry
-    from numpy.lib.stride_tricks import sliding_window_view
-
     win = sliding_window_view(np.pad(step, half, mode="edge"), half)
     before = np.median(win[:F], axis=1)  # t-half .. t-1
     after = np.median(win[half + 1 : half + 1 + F], axis=1)  # t+1 .. t+half
     own = np.maximum(before, after)  # the joint's own motion next to a jump, on its busier side
     entry = is_jump & (step > opt.jump_ratio * before)
     exit_ = is_jump & (step > opt.jump_ratio * after)
-    jumps = np.flatnonzero(is_jump)
-    out: list[Glitch] = []
-    if not len(jumps):
-        return out
+    return _Steps(step, wstep, own, entry, exit_, np.flatnonzero(is_jump), half)
+
+
+def _pair_jumps(rot: np.ndarray, s: _Steps, fps: float, opt: CleanOptions) -> tuple[list[tuple[int, int]], list[int]]:
+    r"""``(pairs, unpaired)``: each jump that can start a glitch paired with the first later
+    one (within ``max_glitch_time``) that can end it and *undoes* it, both faster than
+    ``pair_speed`` (:func:`_jumps`); the jumps left, in frame order."""
+    from ..rotations import quat_conj, quat_mul
+
+    step, jumps = s.step, s.jumps
     inv = quat_conj(rot)
     D = np.zeros_like(rot)
     E = np.zeros_like(rot)
@@ -293,15 +205,16 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     longest = max(1, int(round(opt.max_glitch_time * fps)))
     used: set[int] = set()
     pairs: list[tuple[int, int]] = []
+    unpaired: list[int] = []
     for a in jumps:
         if a in used:
             continue
         back = None
-        for b in jumps[(jumps > a) & (jumps <= a + longest)] if entry[a] else ():
-            if b in used or not exit_[b]:
+        for b in jumps[(jumps > a) & (jumps <= a + longest)] if s.entry[a] else ():
+            if b in used or not s.exit[b]:
                 continue
             # what is left of the entry after the exit: the joint's own motion on those two frames
-            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (own[a] + own[b]) + opt.return_deg)
+            tol = min(opt.return_ratio * min(step[a], step[b]), 2.0 * (s.own[a] + s.own[b]) + opt.return_deg)
             undo = min(float(_angle(quat_mul(D[b], D[a]), identity)), float(_angle(quat_mul(E[a], E[b]), identity)))
             if undo <= tol or _angle(rot[b], rot[a - 1]) <= tol:
                 back = b
@@ -311,8 +224,26 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             pairs.append((int(a), int(back)))
         else:
             used.add(int(a))
-            if single(a):
-                out.append(Glitch("discontinuity", joint, int(a), int(a), float(step[a])))
+            unpaired.append(int(a))
+    return pairs, unpaired
+
+
+def _classify_pairs(
+    rot: np.ndarray,
+    s: _Steps,
+    pairs: list[tuple[int, int]],
+    single: Callable[[int], bool],
+    opt: CleanOptions,
+    joint: str,
+    skip: int,
+    limb: Limb | None,
+) -> list[Glitch]:
+    """Each paired span a ``flip`` (a jump of ``flip_deg`` or more), a ``spike`` (carried by
+    the segment and its children, to poses the joint takes nowhere else unless both jumps are
+    impossible on their own), or else each of its jumps that is a discontinuity on its own
+    (``single``, :func:`_single_jump`)."""
+    F = len(rot)
+    step, wstep = s.step, s.wstep
     # the poses the joint takes elsewhere: not its reference pose nor any candidate span (two
     # glitches of one joint do not vouch for each other)
     elsewhere = np.ones(F, dtype=bool)
@@ -320,6 +251,7 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
     for a, b in pairs:
         n = max(2, b - a)
         elsewhere[max(0, a - n) : b + n] = False
+    out: list[Glitch] = []
     for a, b in pairs:
         size = float(np.max(_angle(rot[a:b], rot[a - 1])))
         carried = limb is None or all(_carried(step, wstep, limb.carried, t, opt.carry_ratio) for t in (a, b))
@@ -331,7 +263,60 @@ def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int
             continue
         kind = "flip" if size >= opt.flip_deg else "spike"
         out.append(Glitch(kind, joint, a, b - 1, size))
+    return out
+
+
+def _jumps(rot: np.ndarray, fps: float, opt: CleanOptions, joint: str, skip: int = 0, limb: Limb | None = None) -> list[Glitch]:
+    r"""Spikes, flips and discontinuities of one joint's local rotation ``(F, 4)``.
+
+    A *jump* is a step :math:`\omega(t)` above ``jump_deg`` and ``jump_ratio`` times its
+    neighbours' median (:func:`_joint_steps`).  A jump at :math:`a` is paired with the
+    first later jump at :math:`b` (within ``max_glitch_time``) that *undoes* it
+    (:func:`_pair_jumps`): the exit step composed with the entry step is the identity up
+    to ``return_ratio`` of the jump, in either convention (an offset applied in the
+    parent's frame, :math:`D_b D_a \approx 1` with :math:`D_t = q_t q_{t-1}^{-1}`, or in
+    the joint's own, :math:`E_a E_b \approx 1` with :math:`E_t = q_{t-1}^{-1} q_t`), or the
+    joint is back where it was before :math:`a`.  This does not depend on how far the real
+    joint moves during a long glitch, and two unrelated jumps of a noisy joint (a toe
+    snapping at two landings) do not pair.  A paired glitch needs both jumps faster than
+    ``pair_speed`` (lower than the single-jump limit: real motion seldom jumps out and
+    back) and (:func:`_classify_pairs`), unless it is a flip, poses that the joint takes
+    nowhere else in the clip (``novelty_ratio``, :func:`_novelty`; not asked when both
+    jumps are discontinuities on their own) and both jumps carried by its segment and
+    children (:func:`_carried`, when ``limb`` says what it carries); an unpaired jump (or
+    one whose pair fails those) is a ``discontinuity`` only if it is faster than
+    ``max_speed`` both in the joint's local rotation and in its world orientation (a local
+    jump its parent's jump cancels, a solver moving a twist from one joint to the next,
+    moves no segment), and moves the limb below the joint ``jump_distance`` metres farther
+    than the limb's own motion on the neighbouring frames (:func:`_single_jump`).
+    """
+    s = _joint_steps(rot, fps, opt, skip, limb)
+    if not len(s.jumps):
+        return []
+    single = _single_jump(s.step, s.wstep, limb, s.half, opt.max_speed / fps, opt.jump_distance)
+    pairs, unpaired = _pair_jumps(rot, s, fps, opt)
+    out = [Glitch("discontinuity", joint, a, a, float(s.step[a])) for a in unpaired if single(a)]
+    out += _merge_overlapping(_classify_pairs(rot, s, pairs, single, opt, joint, skip, limb))
     return sorted(out, key=lambda g: g.start)
+
+
+def _merge_overlapping(glitches: list[Glitch]) -> list[Glitch]:
+    """Spikes and flips of one joint whose spans overlap are one glitch: a jump spread over
+    two frames (a clip resampled above its capture rate interpolates a 180-degree flip's
+    entry and exit through 90 degrees) pairs twice.  The union span, a flip if either is,
+    the larger severity; the other glitches unchanged, in order."""
+    spans = sorted((g for g in glitches if g.kind in ("spike", "flip")), key=lambda g: g.start)
+    merged: list[Glitch] = []
+    for g in spans:
+        if merged and g.start <= merged[-1].end:
+            m = merged[-1]
+            kind = "flip" if "flip" in (m.kind, g.kind) else "spike"
+            merged[-1] = Glitch(kind, m.joint, m.start, max(m.end, g.end), max(m.severity, g.severity))
+        else:
+            merged.append(g)
+    if len(merged) == len(spans):
+        return glitches
+    return [g for g in glitches if g.kind not in ("spike", "flip")] + merged
 
 
 def _carried(step: np.ndarray, wstep: np.ndarray, carried: np.ndarray | None, t: int, ratio: float) -> bool:
@@ -367,16 +352,18 @@ def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
     return float(np.median(np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))))
 
 
-def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str) -> list[Glitch]:
-    """Runs where the joint's rotation is exactly constant while the body moves, or that end
-    with the joint catching up: its first step after the run ``jump_ratio`` times its median
+def _frozen(
+    values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float
+) -> list[Glitch]:
+    """Runs where a joint's ``values (F, k)`` (a rotation, or a position) stay exactly the same
+    while the body moves (``moving (F,)``), or that end with the joint catching up: its first
+    ``step (F,)`` after the run (degrees or metres per frame) ``jump_ratio`` times its median
     step over the ``context_time`` after (a joint that really stops starts again smoothly;
-    one whose value stopped updating jumps to where it had got to; steps slower than ``still_speed``
-    count as that)."""
-    F = len(rot)
+    one whose value stopped updating jumps to where it had got to; steps below ``still``, per
+    frame, count as that: the capture's noise floor)."""
+    F = len(values)
     same = np.zeros(F, dtype=bool)
-    same[1:] = np.all(rot[1:] == rot[:-1], axis=1)
-    step = joint_angles_step(rot[:, None])[:, 0]
+    same[1:] = np.all(values[1:] == values[:-1], axis=1)
     half = max(2, int(round(opt.context_time * fps)))
     if same[1:].all():  # never animated: not a glitch
         return []
@@ -385,18 +372,59 @@ def _frozen(rot: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, 
     runs = [(s - 1, e) for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]  # run's first frame too
     # A value the joint holds in several separate runs is a limit the capture's solver clamps
     # to (CMU's knees at full extension in every stance), not a freeze.
-    values = [tuple(np.round(rot[a], 9)) for a, _ in runs]
+    held = [tuple(np.round(values[a], 9)) for a, _ in runs]
     out = []
-    for (start, e), v in zip(runs, values):
+    for (start, e), v in zip(runs, held):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if values.count(v) > 1 or not inside or e - start + 1 < shortest:
+        if held.count(v) > 1 or not inside or e - start + 1 < shortest:
             continue
-        after = max(float(np.median(step[e + 2 : e + 2 + half])), opt.still_speed / fps) if e + 2 < F else np.inf
+        later = step[e + 2 : e + 2 + half]
+        later = later[np.isfinite(later)]
+        after = max(float(np.median(later)), still) if len(later) else np.inf
         catch_up = step[e + 1] > opt.jump_ratio * after
         if moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
         out.append(Glitch("frozen", joint, int(start + 1), int(e), float((e - start) / fps), unit="s"))
     return out
+
+
+def reference_exit(motion: Motion, opt: CleanOptions, positions: np.ndarray | None = None) -> int:
+    """How many of the clip's first frame-to-frame steps are the capture leaving a reference
+    pose (CMU's T-pose on frame 0), not motion: 0 if frame 0 is part of the performance.
+
+    The steps counted are the leading ones in which the body's pose (every joint's position
+    relative to the root, ``positions (F, J, 3)`` or the forward kinematics, averaged) moves
+    ``jump_ratio`` times faster than its median over the ``context_time`` after, and together
+    they must move it ``jump_distance`` metres or more.  A duration and a distance, not a frame
+    count: resampled to 240 Hz, the jump out of CMU's T-pose spreads over two frames; at 24 Hz
+    it is one frame among much larger steps of real motion.  The retargeter's own test
+    (:func:`physmocap.ik.retarget.default_start`, one frame) is kept where it says more."""
+    import warnings
+
+    from ..ik.retarget import default_start
+
+    with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
+        warnings.simplefilter("ignore")
+        least = default_start(motion)
+    P = np.asarray(motion.world_positions() if positions is None else positions, dtype=float)
+    F = len(P)
+    if F < 3:
+        return least
+    rel = P - P[:, :1]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a frame with every joint lost
+        step = np.nanmean(np.linalg.norm(rel[1:] - rel[:-1], axis=-1), axis=1)  # step k: frame k -> k+1
+    half = max(2, int(round(opt.context_time * float(motion.fps))))
+    count = 0
+    while count < F - 2:
+        later = step[count + 1 : count + 1 + half]
+        later = later[np.isfinite(later)]
+        if not (len(later) and step[count] > opt.jump_ratio * float(np.median(later))):
+            break
+        count += 1
+    if not count or not np.sum(step[:count]) >= opt.jump_distance:
+        count = 0
+    return max(least, count)
 
 
 def animated_joints(motion: Motion) -> list[int]:
@@ -405,10 +433,12 @@ def animated_joints(motion: Motion) -> list[int]:
     return [j for j in range(R.shape[1]) if not motion.skeleton.end_site[j] and np.ptp(R[:, j], axis=0).max() > 0]
 
 
-def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list[Glitch]:
-    """Every glitch found in ``motion`` (sorted by frame, then joint)."""
+def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping=None) -> list[Glitch]:
+    """Every glitch found in ``motion`` (sorted by frame, then joint); ``mapping``: a source
+    mapping file or dict (:func:`physmocap.sources.profiles.map_skeleton`) naming its joints,
+    as ``retarget --source-map`` takes."""
     opt = options or CleanOptions()
-    ji = canonical_joints(motion)  # once: mapping a long clip takes a good part of the time
+    ji = canonical_joints(motion, mapping)  # once: mapping a long clip takes a good part of the time
     names = motion.skeleton.names
     glitches: list[Glitch] = []
     fps = float(motion.fps)
@@ -416,46 +446,19 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None) -> list
         R = np.asarray(motion.rotations, dtype=float)
         steps = joint_angles_step(R)
         animated = animated_joints(motion)
-        from ..ik.retarget import default_start
-
-        import warnings
-
-        with warnings.catch_warnings():  # the retargeter's warning about skipping it does not apply
-            warnings.simplefilter("ignore")
-            skip = default_start(motion)  # a reference pose the capture jumps away from (CMU's T-pose)
         P, W = motion.forward_kinematics()
+        skip = reference_exit(motion, opt, P)  # a reference pose the capture jumps away from (CMU's T-pose)
         limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
         for j in animated:
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
         # the body moves on a frame where the median joint moves
         moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         for j in animated:
-            glitches += _frozen(R[:, j], moving, fps, opt, names[j])
+            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps)
     if motion.positions is not None:
-        P = np.asarray(motion.positions, dtype=float)
-        parents = motion.skeleton.parents
-        swaps = _lr_swaps(motion, P, opt)
-        glitches += swaps
-        for j, p in enumerate(parents):
-            if p < 0:
-                continue
-            length = np.linalg.norm(P[:, j] - P[:, p], axis=1)
-            med = np.nanmedian(length)
-            if not np.isfinite(med) or med <= 1e-6:
-                continue
-            bad = np.abs(length - med) > opt.stretch_ratio * med
-            d = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
-            for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
-                if any(g.start <= s and e <= g.end and names.index(g.joint) in (j, p) for g in swaps):
-                    continue  # the bone only looks stretched because its joint traded places
-                dev = float(np.nanmax(np.abs(length[s : e + 1] - med)))
-                glitches.append(Glitch("bone_stretch", names[j], int(s), int(e), dev, unit="m"))
-        if motion.confidence is not None:
-            for j in range(P.shape[1]):
-                lost = motion.confidence[:, j] <= 0.0
-                d = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
-                for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1):
-                    glitches.append(Glitch("gap", names[j], int(s), int(e), float((e - s + 1) / fps), unit="s"))
+        from .positional import positional_glitches
+
+        glitches += positional_glitches(motion, opt, ji)
     glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji), motion, ji)
     glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
@@ -479,7 +482,8 @@ def _drop_boundary_jumps(glitches: list[Glitch]) -> list[Glitch]:
 def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
     """Source joints whose local rotation can change an anatomical angle: the ancestors
     of the joint centres it is read from, except those common to all of them (which
-    move them rigidly together)."""
+    move them rigidly together); on a joint-position source, those joint centres
+    themselves and the ones the pelvis frame is read from."""
     from .anatomy import ANCHORS
 
     parents = motion.skeleton.parents
@@ -488,6 +492,9 @@ def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
         c = c.format(side=movement.key.split("_", 1)[0])
         if c not in ji:
             continue
+        if not motion.is_rotational:
+            chains.append({ji[c]})
+            continue
         up, p = set(), int(parents[ji[c]])
         while p >= 0:
             up.add(p)
@@ -495,18 +502,33 @@ def _movement_joints(motion: Motion, ji: dict[str, int], movement) -> set[int]:
         chains.append(up)
     if not chains:
         return set()
+    if not motion.is_rotational:  # and the pelvis frame they are read in: the hips and the trunk's top
+        top = next((c for c in ("neck", "chest", "spine") if c in ji), None)
+        return set().union(*chains) | {ji[c] for c in ("left_hip", "right_hip", top) if c in ji}
     return set().union(*chains) - set.intersection(*chains)
 
 
-def canonical_joints(motion: Motion) -> dict[str, int]:
+def canonical_joints(motion: Motion, mapping=None) -> dict[str, int]:
     """Canonical joint -> source joint index of ``motion`` (the retargeter's name mapping),
     without its warnings; empty when the skeleton cannot be mapped (the anatomical checks
-    are then skipped and said so, the other detectors still run)."""
+    are then skipped and said so, the other detectors still run).  A ``mapping`` the user
+    gives (a file or dict) is applied as given, every joint it names checked, none required.
+
+    Raises:
+        MappingError, InputError: ``mapping`` names a joint the skeleton does not have, or
+            cannot be read.
+    """
     import warnings
 
     from ..errors import MappingError
     from ..ik.retarget import map_motion
 
+    if mapping is not None:
+        from ..sources.profiles import map_skeleton
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return dict(map_skeleton(motion, mapping=mapping, required=()).indices)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -515,12 +537,17 @@ def canonical_joints(motion: Motion) -> dict[str, int]:
         return {}
 
 
+#: Glitches that move a joint far enough to put an anatomical angle read from it out of range.
+EXPLAIN_ANATOMICAL = ("spike", "flip", "frozen", "lr_swap", "bone_stretch", "gap")
+
+
 def _merge_anatomical(
     glitches: list[Glitch], anatomical: list[Glitch], motion: Motion, ji: dict[str, int]
 ) -> list[Glitch]:
-    """An out-of-range span inside a spike, flip or frozen span of the same joint, or of
-    a joint whose rotation moves that anatomical angle (a clavicle's spike tilts the
-    shoulder line the trunk angles are read from), is that glitch's anatomical
+    """An out-of-range span inside a spike, flip, frozen, swap, stretch or gap span of the
+    same joint, or of a joint that moves that anatomical angle (a clavicle's spike tilts the
+    shoulder line the trunk angles are read from; a knee centre swapped with the other
+    bends both legs), is that glitch's anatomical
     movement, not a second glitch: name the movement on it instead (``ji``: the
     :func:`canonical_joints` of ``motion``)."""
     import dataclasses
@@ -537,54 +564,12 @@ def _merge_anatomical(
             if m is not None:
                 related |= {names[j] for j in _movement_joints(motion, ji, m)}
         for i, g in enumerate(out):
-            if g.joint in related and g.kind in ("spike", "flip", "frozen") and g.start <= a.start and a.end <= g.end:
+            if g.joint in related and g.kind in EXPLAIN_ANATOMICAL and g.start <= a.start and a.end <= g.end:
                 if not g.movement and g.joint == a.joint:
                     out[i] = dataclasses.replace(g, movement=a.movement, plane=a.plane)
                 break
         else:
             out.append(a)
-    return out
-
-
-def _lr_swaps(motion: Motion, P: np.ndarray, opt: CleanOptions) -> list[Glitch]:
-    r"""Left/right swaps on a joint-position source: spans where a left joint and its right
-    twin trade places.
-
-    For a pair with positions :math:`l, r`, the frame-to-frame motion kept is
-    :math:`d_k(t) = |l_t - l_{t-1}| + |r_t - r_{t-1}|` and swapped
-    :math:`d_s(t) = |l_t - r_{t-1}| + |r_t - l_{t-1}|`; a swap toggles on a frame where
-    :math:`d_s < d_k / 4` while the two are at least ``swap_min_distance`` apart (a labeller
-    trading two markers or a tracker flipping the body).  The span runs from a toggle to the
-    next (to the clip's end if none comes back); reported on both joints.
-    """
-    import warnings
-
-    from ..errors import MappingError
-    from ..ik.retarget import map_motion
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ji = map_motion(motion)
-    except MappingError:
-        return []
-    names = motion.skeleton.names
-    out: list[Glitch] = []
-    F = P.shape[0]
-    for canon, jl in ji.items():
-        if not canon.startswith("left_") or f"right_{canon[5:]}" not in ji:
-            continue
-        jr = ji[f"right_{canon[5:]}"]
-        L, R = P[:, jl], P[:, jr]
-        keep = np.linalg.norm(L[1:] - L[:-1], axis=1) + np.linalg.norm(R[1:] - R[:-1], axis=1)
-        swap = np.linalg.norm(L[1:] - R[:-1], axis=1) + np.linalg.norm(R[1:] - L[:-1], axis=1)
-        apart = np.linalg.norm(L - R, axis=1)
-        with np.errstate(invalid="ignore"):
-            toggle = (swap < 0.25 * keep) & (apart[1:] > opt.swap_min_distance) & (apart[:-1] > opt.swap_min_distance)
-        events = (np.flatnonzero(toggle) + 1).tolist()
-        for a, b in zip(events[::2], events[1::2] + [F]):
-            for j in (jl, jr):
-                out.append(Glitch("lr_swap", names[j], int(a), int(b - 1), float(np.nanmedian(apart[a:b])), unit="m"))
     return out
 
 

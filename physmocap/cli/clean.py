@@ -31,13 +31,79 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write PNGs: anatomical angles with their ranges and the spans beyond them, and each glitched "
         "joint's speed with its glitched spans (needs: pip install 'physmocap[plot]')",
     )
+    p.add_argument(
+        "--source-map",
+        metavar="MAP.toml",
+        help="source skeleton mapping file (TOML, as retarget takes; physmocap inspect FILE --emit-map writes "
+        "one): names the joints of a skeleton or tracker no profile knows, for the left/right pairs, the "
+        "hierarchy of a joint-position file's bones and the ranges of motion",
+    )
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    add_clean_options(p)
     p.set_defaults(func=run)
+
+
+#: Readers that build a joint-position skeleton from the source mapping as they read.
+POSITIONAL_SUFFIXES = {".csv", ".npz", ".jsonl", ".c3d", ".trc"}
+MARKER_SUFFIXES = {".c3d", ".trc"}
+
+
+def _flag(name: str) -> str:
+    """The command-line flag of the :class:`~physmocap.clean.CleanOptions` field ``name``."""
+    return "--" + name.replace("_", "-")
+
+
+def add_clean_options(p: argparse.ArgumentParser) -> None:
+    """One flag per :class:`~physmocap.clean.CleanOptions` field (``jump_deg`` ->
+    ``--jump-deg``), generated from the fields: its type, unit, default and the field's own
+    documentation as the help.  Unset flags keep the defaults (:func:`options_from_args`)."""
+    from dataclasses import MISSING, fields
+
+    from ..clean.options import CleanOptions, option_docs, option_unit
+
+    docs = option_docs()
+    group = p.add_argument_group(
+        "detection and repair thresholds",
+        "each a physical quantity (seconds, degrees, metres, per second), never frames",
+    )
+    for f in fields(CleanOptions):
+        unit = option_unit(f.name)
+        kind = int if unit == "count" else float
+        default = f.default if f.default is not MISSING else None
+        physical = unit not in ("ratio", "count")
+        text = f"{docs[f.name]} (default {default:g}{' ' + unit if physical else ''})"
+        metavar = unit.upper() if physical else {"ratio": "X", "count": "N"}[unit]
+        group.add_argument(_flag(f.name), type=kind, default=None, metavar=metavar, help=text.replace("%", "%%"))
+
+
+def options_from_args(args: argparse.Namespace):
+    """The :class:`~physmocap.clean.CleanOptions` the flags of :func:`add_clean_options` ask
+    for (defaults for the unset ones), validated before any file is read.
+
+    Raises:
+        OptionError: A value the options refuse, naming its flag (``--still-speed must be
+            > 0, got -1.0``).
+    """
+    from dataclasses import fields
+
+    from ..clean import CleanOptions
+
+    given = {f.name: getattr(args, f.name) for f in fields(CleanOptions) if getattr(args, f.name, None) is not None}
+    for name, value in given.items():  # one at a time: the error names the flag that is wrong
+        try:
+            CleanOptions(**{name: value})
+        except OptionError as exc:
+            prefix = f"clean option {name} "
+            text = exc.message[len(prefix):] if exc.message.startswith(prefix) else exc.message
+            raise OptionError(f"{_flag(name)} {text}") from None
+    return CleanOptions(**given)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..clean import clean
     from ..sources import load_motion
 
+    options = options_from_args(args)
     if args.output:
         if Path(args.output).suffix.lower() != ".bvh":
             raise OptionError("clean writes .bvh files", path=args.output)
@@ -50,12 +116,20 @@ def run(args: argparse.Namespace) -> int:
 
         require_matplotlib()
         check_output_dir(args.plots, "plot directory")
-    check_not_input([args.output, args.report], [args.input])
+    check_not_input([args.output, args.report], [args.input, args.source_map, args.marker_set])
     check_distinct([args.output, args.report])
-    motion = load_motion(args.input, min_frames=1)
+    suffix = Path(args.input).suffix.lower()
+    if args.marker_set and suffix not in MARKER_SUFFIXES:
+        raise OptionError("--marker-set is for marker files (.c3d, .trc)", path=args.input)
+    read_opts = {}
+    if args.source_map and suffix in POSITIONAL_SUFFIXES:
+        read_opts["mapping"] = args.source_map  # the bones follow the mapped joints
+    if args.marker_set:
+        read_opts["marker_set"] = args.marker_set
+    motion = load_motion(args.input, min_frames=1, **read_opts)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
-    fixed, report = clean(motion)
+    fixed, report = clean(motion, options, mapping=args.source_map)
     sys.stdout.write(report.table())
     with OutputSet():  # the BVH, the plots and the JSON renamed into place together, or none
         _write(motion, fixed, report, args)

@@ -81,7 +81,7 @@ class PlantOptions:
             site settles).  Two held points fix the toes' bend: a tip held where it first
             touched, 1.4 cm up, kept a standing actor's toes bent and, through their height
             pull, the heels 1.3 cm up for 20 s.  Held from this height the bend it can
-            lock is under :math:`\arcsin(h/L)`: 7 degrees for 4 cm toes, and its tip
+            lock is under :math:`\\arcsin(h/L)`: 7 degrees for 4 cm toes, and its tip
             then rests on the floor.  (A further point of the *same* segment is held from
             ``engage_height``, without look-ahead, at its flat rest distance:
             :meth:`FootPlanter._anchor_for`.)

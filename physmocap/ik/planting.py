@@ -616,8 +616,7 @@ class Planting:
             # toes in their landing bend, and a third held point over a straight leg made the
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
-            ball_down = {side: any(self.locks.locked[k] and self._release[k] for k in ks) for side, ks in self._side_sites.items()}
-            waiting = toe & heel & self._toe_segment & ~np.array([ball_down[side] for side in self._site_side], dtype=bool)
+            waiting = toe & heel & self._toe_segment
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only

@@ -46,7 +46,7 @@ def test_g1_hands_stay_palm_in_and_limbs_apart(g1_walk):
     +-31), and the limbs were not kept apart at all.  The whole walk: where the stance
     ankle's roll sits at its 15-degree limit the body lags its target by 5 cm, and the arms
     reaching for hand targets placed for a torso elsewhere rolled the left wrist to 59
-    degrees (physmocap.ik.frame: the upper body now follows the chest's lag)."""
+    degrees (physmocap.ik.frame: the upper body now follows the pelvis's lag)."""
     from physmocap.metrics import self_penetration
 
     ch, traj = g1_walk

@@ -31,15 +31,15 @@ from ..canonical import canonical_parent
 from .planting import PlantOptions, Planting
 from .solver import ContactHolds, FrameSolver, SolverOptions
 
-__all__ = ["FrameResult", "FrameRetargeter", "CHEST_LAG_FREE", "CHEST_LAG_TIME"]
+__all__ = ["FrameResult", "FrameRetargeter", "PELVIS_LAG_FREE", "PELVIS_LAG_TIME"]
 
-#: Metres of the chest's lag behind its target that the upper body does *not* follow:
+#: Metres of the pelvis's lag behind its target that the upper body does *not* follow:
 #: ordinary tracking error, left to the arms' own tasks (following every centimetre fed
 #: the solver's frame-to-frame fluctuations back into the arms: the Bandai walk's joint
 #: acceleration rose 28 %).
-CHEST_LAG_FREE = 0.02
-#: Seconds: time constant of the low-pass on the chest's lag that the upper body follows.
-CHEST_LAG_TIME = 0.05
+PELVIS_LAG_FREE = 0.02
+#: Seconds: time constant of the low-pass on the pelvis's lag that the upper body follows.
+PELVIS_LAG_TIME = 0.05
 
 
 @dataclass(frozen=True)
@@ -92,19 +92,18 @@ class FrameRetargeter:
         self.anchored = bool(anchored)
         self.planting: Planting | None = None
         self.frame = 0
-        self._chest, self._upper = self._upper_body(character, self.names)
-        #: ``(3,)`` the chest's (or spine's) offset from its target on the previous frame (metres)
-        self._chest_lag = np.zeros(3)
+        self._upper = self._upper_body(character, self.names)
+        #: ``(3,)`` the pelvis's low-passed offset from its target up to the previous frame (metres)
+        self._lag = np.zeros(3)
         self.restart_contacts()
 
     @staticmethod
-    def _upper_body(character, names: tuple[str, ...]) -> tuple[str | None, np.ndarray]:
-        """The highest tracked torso joint (``chest``, else ``spine``) and the indices of the
-        targets whose canonical ancestors include it (neck, head, clavicles, arms);
-        ``(None, [])`` without either."""
+    def _upper_body(character, names: tuple[str, ...]) -> np.ndarray:
+        """Indices of the targets above the highest tracked torso joint (``chest``, else
+        ``spine``): neck, head, clavicles, arms; empty without either."""
         torso = next((t for t in ("chest", "spine") if t in names and t in character.tracked), None)
         if torso is None:
-            return None, np.zeros(0, dtype=int)
+            return np.zeros(0, dtype=int)
         present = set(names)
         upper = []
         for i, n in enumerate(names):
@@ -113,37 +112,38 @@ class FrameRetargeter:
                 p = canonical_parent(p, present)
             if p == torso:
                 upper.append(i)
-        return torso, np.array(upper, dtype=int)
+        return np.array(upper, dtype=int)
 
-    def _follow_chest(self, positions: np.ndarray) -> np.ndarray:
-        r"""``positions`` with the upper-body targets moved by the chest's lag: with
-        :math:`e` the low-passed offset of the character's chest from its target up to
-        the previous frame (:data:`CHEST_LAG_TIME`), the targets above the chest move by
-        :math:`e\,(1 - f/|e|)` where :math:`|e| > f` (:data:`CHEST_LAG_FREE`), so the arms
-        keep their pose relative to a torso that cannot reach its target (a new array;
-        ``SolverOptions.upper_body_follows_chest``)."""
-        if self._chest is None or not self.solver.options.upper_body_follows_chest or not self._upper.size:
+    def _follow_pelvis(self, positions: np.ndarray) -> np.ndarray:
+        r"""``positions`` with the upper-body targets moved by the body's lag: with
+        :math:`e` the low-passed offset of the character's pelvis from its target up to
+        the previous frame (:data:`PELVIS_LAG_TIME`), the targets above the chest move by
+        :math:`e\,(1 - f/|e|)` where :math:`|e| > f` (:data:`PELVIS_LAG_FREE`), so the arms
+        keep their pose relative to a body that cannot reach its target (a new array;
+        ``SolverOptions.upper_body_follows_pelvis``)."""
+        if not self.solver.options.upper_body_follows_pelvis or not self._upper.size:
+            return positions
+        n = float(np.linalg.norm(self._lag))
+        if n <= PELVIS_LAG_FREE:
             return positions
         out = np.array(positions, dtype=float, copy=True)
-        lag = self._chest_lag
-        n = float(np.linalg.norm(lag))
-        if n > CHEST_LAG_FREE:
-            out[self._upper] += lag * (1.0 - CHEST_LAG_FREE / n)
+        out[self._upper] += self._lag * (1.0 - PELVIS_LAG_FREE / n)
         return out
 
-    def _measure_chest(self, positions: np.ndarray, valid: np.ndarray) -> None:
-        r"""Update the low-passed offset of the chest from its (unmoved) target after this
-        frame's solve (the first-order filter :math:`e \leftarrow e + a (x - T - e)`,
-        :math:`a = 1 - e^{-1/(\tau f)}`)."""
-        i = None if self._chest is None else self.names.index(self._chest)
-        if i is None or not bool(valid[i]):
-            self._chest_lag = np.zeros(3)
+    def _measure_lag(self, positions: np.ndarray, valid: np.ndarray) -> None:
+        r"""Update the low-passed offset :math:`e` of the pelvis from its target after this
+        frame's solve: :math:`e \leftarrow e + a (x - T - e)`, :math:`a = 1 - e^{-1/(\tau f)}`."""
+        if "pelvis" not in self.names or not self._upper.size:
             return
-        tracked = self.character.tracked[self._chest]
+        i = self.names.index("pelvis")
+        if not bool(valid[i]):
+            self._lag = np.zeros(3)
+            return
+        tracked = self.character.tracked["pelvis"]
         data = self.solver.configuration.data
         x = data.site(tracked.name).xpos if tracked.kind == "site" else data.body(tracked.name).xpos
-        a = 1.0 - np.exp(-1.0 / (CHEST_LAG_TIME * self.fps))
-        self._chest_lag = self._chest_lag + a * (np.asarray(x, dtype=float) - positions[i] - self._chest_lag)
+        a = 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps))
+        self._lag = self._lag + a * (np.asarray(x, dtype=float) - positions[i] - self._lag)
 
     def restart_contacts(self) -> None:
         """Forget every anchor and lock (a stream calibrating again); the pose is kept."""
@@ -174,7 +174,7 @@ class FrameRetargeter:
         first = self.frame == 0
         solver = self.solver
         given = positions
-        positions = self._follow_chest(positions)
+        positions = self._follow_pelvis(positions)
         if self.planting is None or labels is None:
             q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first)
         else:
@@ -186,6 +186,6 @@ class FrameRetargeter:
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )
             q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds)
-        self._measure_chest(given, valid)
+        self._measure_lag(given, valid)
         self.frame += 1
         return FrameResult(q.copy(), int(iterations), int(level), time.perf_counter() - t0)

@@ -3,8 +3,9 @@
 
 For every shared BVH clip (../shared/data) and bundled character, retargets
 with the default options and prints, with physmocap.metrics (definitions in
-shared/design/metrics.md): stance foot skating (mean, p95 cm/s), floor
-penetration (max mm), hovering in contact (median, p95 mm), joint-limit and
+docs/metrics.md): stance foot skating (mean, p95 cm/s), floor
+penetration (max mm), hovering in contact (median, p95 mm), flat feet (the highest
+contact site of a foot the actor has flat: median mm, share of frames over 1 cm), joint-limit and
 velocity-limit violations, and the tracking error of ankles, knees, wrists and
 elbows (feet counted outside their contacts), next to the source's own
 skating.
@@ -40,7 +41,7 @@ def main() -> int:
 
     head = (
         f"{'clip':26s} {'character':9s} {'src skate':>9s} {'skate mean':>10s} {'p95':>5s} {'pen max':>7s}"
-        f" {'hover med':>9s} {'p95':>5s} {'lim':>3s} {'vel':>3s} {'track cm':>8s} {'self mm':>7s}"
+        f" {'hover med':>9s} {'p95':>5s} {'flat med':>8s} {'>1cm %':>6s} {'lim':>3s} {'vel':>3s} {'track cm':>8s} {'self mm':>7s}"
     )
     print(head)
     for clip in args.clips:
@@ -55,6 +56,7 @@ def main() -> int:
             traj = retarget(motion, ch, progress=False)
             sk = metrics.character_skating(traj)
             hv = metrics.character_hovering(traj, traj.contacts)
+            fl = metrics.character_flat_feet(traj, traj.contacts)
             pen = metrics.penetration(ch.model, traj.qpos)["max_mm"]
             lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
             vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]
@@ -62,7 +64,8 @@ def main() -> int:
             selfpen = metrics.self_penetration(ch, traj.qpos)["max_mm"]
             print(
                 f"{clip:26s} {name:9s} {src:9.1f} {sk['mean_cm_s']:10.2f} {sk['p95_cm_s']:5.2f} {pen:7.2f}"
-                f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {lim:3d} {vel:3d} {trk:8.2f} {selfpen:7.2f}"
+                f" {hv['median_mm']:9.2f} {hv['p95_mm']:5.1f} {fl['median_mm']:8.1f} {100 * fl['share_over_band']:6.1f}"
+                f" {lim:3d} {vel:3d} {trk:8.2f} {selfpen:7.2f}"
             )
     return 0
 

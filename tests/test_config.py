@@ -106,3 +106,29 @@ def test_streaming_source_floor_is_the_actors_floor(walk):
     assert live.config.targets.source_floor == 0.0 and live.config.solver.floor is True
     with pytest.raises(OptionError, match="floor must be true or false"):
         StreamingRetargeter(None, skeleton=walk.skeleton, fps=walk.fps, floor=0.0)
+
+
+@pytest.mark.parametrize("character", ["humanoid", "robot"])
+def test_the_upper_body_follows_a_pelvis_that_lags_its_target(walk, character):
+    """FrameRetargeter: a pelvis 5 cm from its target moves the targets above the chest (neck,
+    head, clavicles, arms) by what exceeds PELVIS_LAG_FREE, and nothing else; option off, nothing."""
+    from physmocap.ik.frame import PELVIS_LAG_FREE
+    from physmocap.ik.solver import SolverOptions
+
+    ch = load_character(character)
+    targets = build_targets(walk, map_motion(walk), ch)
+    names = list(targets.names)
+    frame = FrameRetargeter(ch, targets.names, targets.has_orientation, walk.fps)
+    frame._lag = np.array([0.05, 0.0, 0.0])
+    p = targets.positions[0]
+    moved = frame._follow_pelvis(p)
+    shift = moved - p
+    legs = ("hip", "knee", "ankle", "toe", "toe_end")
+    upper = {n for n in names if n not in ("pelvis", "spine", "chest") and n.split("_", 1)[-1] not in legs}
+    assert {"neck", "head", "left_wrist", "right_elbow"} <= upper
+    for i, n in enumerate(names):
+        expect = 0.05 - PELVIS_LAG_FREE if n in upper else 0.0
+        assert np.allclose(shift[i], [expect, 0.0, 0.0]), (n, shift[i])
+    off = FrameRetargeter(ch, targets.names, targets.has_orientation, walk.fps, SolverOptions(upper_body_follows_pelvis=False))
+    off._lag = frame._lag
+    np.testing.assert_array_equal(off._follow_pelvis(p), p)

@@ -23,7 +23,7 @@ def g1_walk():
     ch = load_character(G1)  # the bundled mapping file is found by the model's file name
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        traj = retarget(load_motion(shared_file("pymo_walk.bvh")), ch, progress=False, end=240)
+        traj = retarget(load_motion(shared_file("pymo_walk.bvh")), ch, progress=False)
     return ch, traj
 
 
@@ -43,7 +43,10 @@ def test_g1_retargets_without_a_user_mapping(g1_walk):
 
 def test_g1_hands_stay_palm_in_and_limbs_apart(g1_walk):
     """Before: the wrist roll swung over +-113 degrees (hands rolled palm-up; a peer keeps
-    +-31), and the limbs were not kept apart at all."""
+    +-31), and the limbs were not kept apart at all.  The whole walk: where the stance
+    ankle's roll sits at its 15-degree limit the body lags its target by 5 cm, and the arms
+    reaching for hand targets placed for a torso elsewhere rolled the left wrist to 59
+    degrees (physmocap.ik.frame: the upper body now follows the pelvis's lag)."""
     from physmocap.metrics import self_penetration
 
     ch, traj = g1_walk
@@ -51,7 +54,7 @@ def test_g1_hands_stay_palm_in_and_limbs_apart(g1_walk):
     for side in ("left", "right"):
         j = model.joint(f"{side}_wrist_roll_joint")
         roll = np.degrees(traj.qpos[:, j.qposadr[0]])
-        assert np.abs(roll).max() < 45.0, (side, roll.min(), roll.max())
+        assert np.abs(roll).max() < 40.0, (side, roll.min(), roll.max())
     sp = self_penetration(ch, traj.qpos)
     assert sp["pairs"] > 50 and sp["max_mm"] < 3.0, sp
 

@@ -27,10 +27,19 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..canonical import canonical_parent
 from .planting import PlantOptions, Planting
 from .solver import ContactHolds, FrameSolver, SolverOptions
 
-__all__ = ["FrameResult", "FrameRetargeter"]
+__all__ = ["FrameResult", "FrameRetargeter", "PELVIS_LAG_FREE", "PELVIS_LAG_TIME"]
+
+#: Metres of the pelvis's lag behind its target that the upper body does *not* follow:
+#: ordinary tracking error, left to the arms' own tasks (following every centimetre fed
+#: the solver's frame-to-frame fluctuations back into the arms: the Bandai walk's joint
+#: acceleration rose 28 %).
+PELVIS_LAG_FREE = 0.02
+#: Seconds: time constant of the low-pass on the pelvis's lag that the upper body follows.
+PELVIS_LAG_TIME = 0.05
 
 
 @dataclass(frozen=True)
@@ -83,7 +92,58 @@ class FrameRetargeter:
         self.anchored = bool(anchored)
         self.planting: Planting | None = None
         self.frame = 0
+        self._upper = self._upper_body(character, self.names)
+        #: ``(3,)`` the pelvis's low-passed offset from its target up to the previous frame (metres)
+        self._lag = np.zeros(3)
         self.restart_contacts()
+
+    @staticmethod
+    def _upper_body(character, names: tuple[str, ...]) -> np.ndarray:
+        """Indices of the targets above the highest tracked torso joint (``chest``, else
+        ``spine``): neck, head, clavicles, arms; empty without either."""
+        torso = next((t for t in ("chest", "spine") if t in names and t in character.tracked), None)
+        if torso is None:
+            return np.zeros(0, dtype=int)
+        present = set(names)
+        upper = []
+        for i, n in enumerate(names):
+            p = canonical_parent(n, present)
+            while p is not None and p != torso:
+                p = canonical_parent(p, present)
+            if p == torso:
+                upper.append(i)
+        return np.array(upper, dtype=int)
+
+    def _follow_pelvis(self, positions: np.ndarray) -> np.ndarray:
+        r"""``positions`` with the upper-body targets moved by the body's lag: with
+        :math:`e` the low-passed offset of the character's pelvis from its target up to
+        the previous frame (:data:`PELVIS_LAG_TIME`), the targets above the chest move by
+        :math:`e\,(1 - f/|e|)` where :math:`|e| > f` (:data:`PELVIS_LAG_FREE`), so the arms
+        keep their pose relative to a body that cannot reach its target (a new array;
+        ``SolverOptions.upper_body_follows_pelvis``)."""
+        if not self.solver.options.upper_body_follows_pelvis or not self._upper.size:
+            return positions
+        n = float(np.linalg.norm(self._lag))
+        if n <= PELVIS_LAG_FREE:
+            return positions
+        out = np.array(positions, dtype=float, copy=True)
+        out[self._upper] += self._lag * (1.0 - PELVIS_LAG_FREE / n)
+        return out
+
+    def _measure_lag(self, positions: np.ndarray, valid: np.ndarray) -> None:
+        r"""Update the low-passed offset :math:`e` of the pelvis from its target after this
+        frame's solve: :math:`e \leftarrow e + a (x - T - e)`, :math:`a = 1 - e^{-1/(\tau f)}`."""
+        if "pelvis" not in self.names or not self._upper.size:
+            return
+        i = self.names.index("pelvis")
+        if not bool(valid[i]):
+            self._lag = np.zeros(3)
+            return
+        tracked = self.character.tracked["pelvis"]
+        data = self.solver.configuration.data
+        x = data.site(tracked.name).xpos if tracked.kind == "site" else data.body(tracked.name).xpos
+        a = 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps))
+        self._lag = self._lag + a * (np.asarray(x, dtype=float) - positions[i] - self._lag)
 
     def restart_contacts(self) -> None:
         """Forget every anchor and lock (a stream calibrating again); the pose is kept."""
@@ -113,6 +173,8 @@ class FrameRetargeter:
         t0 = time.perf_counter()
         first = self.frame == 0
         solver = self.solver
+        given = positions
+        positions = self._follow_pelvis(positions)
         if self.planting is None or labels is None:
             q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first)
         else:
@@ -124,5 +186,6 @@ class FrameRetargeter:
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )
             q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds)
+        self._measure_lag(given, valid)
         self.frame += 1
         return FrameResult(q.copy(), int(iterations), int(level), time.perf_counter() - t0)

@@ -75,6 +75,16 @@ class PlantOptions:
             ``clearance``, so a swing foot held at its clearance is held as
             soon as its contact begins.
         release_margin: A held site is let go only above ``engage_height`` plus this.
+        settle_height: A site whose foot is already held at a point of another segment
+            (a toe tip next to a held ball) is held only while it is this close to the
+            floor (metres; a hold left above it, from toes rolling, is let go until the
+            site settles).  Two held points fix the toes' bend: a tip held where it first
+            touched, 1.4 cm up, kept a standing actor's toes bent and, through their height
+            pull, the heels 1.3 cm up for 20 s.  Held from this height the bend it can
+            lock is under :math:`\\arcsin(h/L)`: 7 degrees for 4 cm toes, and its tip
+            then rests on the floor.  (A further point of the *same* segment is held from
+            ``engage_height``, without look-ahead, at its flat rest distance:
+            :meth:`FootPlanter._anchor_for`.)
         clearance: Swing feet (contact sites neither labelled nor held) stay
             at least this high (metres), a hard inequality (0 disables): a foot
             skimming the floor would otherwise slide within the stance band.
@@ -101,6 +111,7 @@ class PlantOptions:
     lock_low: bool = True
     engage_height: float = 0.014
     release_margin: float = 0.006
+    settle_height: float = 0.005
     clearance: float = 0.012
     max_descent_speed: float = 1.0
     root_follow_time: float = 0.15
@@ -142,11 +153,18 @@ class FootPlanter:
         fps: float,
         options: PlantOptions | None = None,
         floor: float = 0.0,
+        rest_distances: np.ndarray | None = None,
+        feet: Sequence[int] | None = None,
     ) -> None:
         self.options = opt = options or PlantOptions()
         self.model = model
         self.sites = tuple(sites)
         self.floor = float(floor)
+        #: ``(n, n)`` horizontal distance (metres) between two sites of the same foot
+        #: standing flat in the rest pose; NaN between feet (:meth:`_anchor_for`)
+        self.rest_distances = rest_distances
+        #: ``(n,)`` which foot each site belongs to (None: every site is its own foot)
+        self.feet = np.arange(len(self.sites)) if feet is None else np.asarray(feet, dtype=int)
         self.tasks = [SitePositionTask(model, s, cost=0.0, axes=(2,)) for s in self.sites]
         self.xy = [SitePositionTask(model, s, cost=opt.cost_xy, axes=(0, 1)) for s in self.sites]
         self._prev_z: np.ndarray | None = None
@@ -159,6 +177,31 @@ class FootPlanter:
         self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
         self.anchor = np.zeros((n, 3))
+
+    def _anchor_for(self, k: int, xy: np.ndarray) -> np.ndarray:
+        r"""Where site ``k``, now at ``xy``, is held from this frame on.
+
+        Two held points of one rigid body fix its horizontal extent: a site latched
+        while still :math:`h` above the floor at distance :math:`L` from an already held
+        site of its body would keep its foot tilted by
+        :math:`\arcsin(h/L)` for the whole contact, its height pull fighting the
+        hold.  So a site
+        whose body already has a held site :math:`j` is held at that site's anchor
+        plus the flat rest-pose distance, in the current direction:
+        :math:`a_k = a_j + d^{rest}_{jk}\, \widehat{(x_k - a_j)}`, consistent with
+        the foot standing flat; the first site of a body is held where it is.
+        Of several held sites the farthest in the rest pose is used (the
+        direction, the foot's heading, is then the most precise).
+        """
+        if self.rest_distances is None:
+            return xy
+        d = np.where(self.locked, self.rest_distances[k], np.nan)
+        if not np.any(np.isfinite(d)):
+            return xy
+        j = int(np.nanargmax(d))
+        u = xy - self.anchor[j, :2]
+        n = float(np.linalg.norm(u))
+        return xy if n < 1e-9 else self.anchor[j, :2] + d[j] * u / n
 
     def reset(self) -> None:
         self.locked[:] = False
@@ -214,6 +257,11 @@ class FootPlanter:
             band = opt.engage_height + (opt.release_margin if self.locked[k] else 0.0)
             rolling = hints is not None and bool(hints.rolling[k])
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or (rolling and self.locked[k])
+            partner = self.locked & (self.feet == self.feet[k]) & (np.arange(n) != k)
+            if partner.any() and not rolling:  # a foot already held: its further holds, without look-ahead
+                rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
+                start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
+                low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
             # A lock starts when a labelled site touches down (a labelled site still in
             # the air is pulled down first: holding it in the air would keep it from
             # reaching the floor).  With lock_low it lasts, label or not, until the
@@ -221,7 +269,7 @@ class FootPlanter:
             engaged[k] = low and (flags[k] or (opt.lock_low and self.locked[k])) and (hints is None or bool(hints.holdable[k]))
             if engaged[k]:
                 if not self.locked[k]:
-                    self.anchor[k, :2] = data.site_xpos[sid, :2]
+                    self.anchor[k, :2] = self._anchor_for(k, data.site_xpos[sid, :2])
                     self.anchor[k, 2] = self.floor
                     self.locked[k] = True
                 self.xy[k].set_target(self.anchor[k])
@@ -382,7 +430,10 @@ class Planting:
         # Offline the labels are final and the targets planned (.footplan): a site is held
         # exactly while labelled (no hold-until-lifted hysteresis).
         lock_opt = opt if self.anchored else dataclasses.replace(opt, lock_low=False)
-        self.locks = FootPlanter(model, self.sites, fps, lock_opt, floor=floor)
+        feet = [0 if s in character.contacts.get("left", ()) else 1 for s in self.sites]
+        self.locks = FootPlanter(
+            model, self.sites, fps, lock_opt, floor=floor, rest_distances=self._rest_distances(character), feet=feet
+        )
         #: per site, its role while only the toes are down (offline; :meth:`_toe_roles`)
         self._foot_bodies = {side: self._subtree_bodies(model, character, side) for side in ("left", "right")}
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
@@ -429,6 +480,22 @@ class Planting:
                 ref[j] = (tf.kind, model.site(tf.name).id if tf.kind == "site" else model.body(tf.name).id)
             moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
+
+    def _rest_distances(self, character) -> np.ndarray:
+        """``(n, n)`` horizontal rest-pose distances between contact sites on the same body
+        (NaN between bodies and on the diagonal), for :meth:`FootPlanter._anchor_for`:
+        only a rigid pair keeps its rest distance when both of its sites are down (toes
+        may be bent)."""
+        model = character.model
+        data = mujoco.MjData(model)
+        data.qpos[:] = character.rest_qpos
+        mujoco.mj_kinematics(model, data)
+        xy = np.array([data.site(s).xpos[:2] for s in self.sites]).reshape(-1, 2)
+        body = np.array([int(model.site(s).bodyid[0]) for s in self.sites])
+        d = np.linalg.norm(xy[:, None] - xy[None], axis=-1)
+        d[body[:, None] != body[None]] = np.nan
+        np.fill_diagonal(d, np.nan)
+        return d
 
     @staticmethod
     def _subtree_bodies(model: mujoco.MjModel, character, side: str) -> list[int]:
@@ -544,12 +611,12 @@ class Planting:
         hints = None
         if not self.anchored:
             flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
-            # The toes of a flat foot are held only once the ball of the foot is (pulled down
-            # before): a foot landing with curled toes flattens them instead of being locked in
-            # its landing shape by a toe tip held where it first touched.  Toes rolling with the
-            # actor's (their height planned by the toe segment, .footplan) are held, not pulled.
-            ball_down = {side: any(self.locks.locked[k] and self._release[k] for k in ks) for side, ks in self._side_sites.items()}
-            waiting = toe & heel & self._toe_segment & ~np.array([ball_down[side] for side in self._site_side], dtype=bool)
+            # The toes of a flat foot (heel and toes labelled) are pulled down, never held: its
+            # heel and ball already fix it, a tip held where it first touched would lock the
+            # toes in their landing bend, and a third held point over a straight leg made the
+            # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
+            # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
+            waiting = toe & heel & self._toe_segment
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only

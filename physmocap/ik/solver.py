@@ -102,6 +102,12 @@ class SolverOptions:
             QP with that error subtracted (:meth:`FrameSolver._corrected`) before halving
             it.  Off by default (the default output is unchanged); on, far fewer line
             searches fail on takes with planted feet under straight knees.
+        upper_body_follows_pelvis: The targets above the chest (neck, head, clavicles,
+            arms) move with the pelvis where it lags its own target
+            (:class:`~physmocap.ik.frame.FrameRetargeter`), so a body that cannot reach
+            its target (a robot's stance ankle at its roll limit under a leaning actor)
+            keeps its arms in the actor's pose instead of twisting them to reach hand
+            targets placed for a body elsewhere.
     """
 
     max_iterations: int = 4
@@ -123,6 +129,7 @@ class SolverOptions:
     weights: dict[str, tuple[float, float]] = field(default_factory=dict)
     solver: str = "daqp"
     second_order_correction: bool = False
+    upper_body_follows_pelvis: bool = True
 
     def __post_init__(self) -> None:
         check_fields(

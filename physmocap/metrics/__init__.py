@@ -58,6 +58,7 @@ __all__ = [
     "source_labelled_skating",
     "hovering",
     "character_hovering",
+    "character_flat_feet",
     "source_hovering",
     "source_penetration",
     "source_metrics",
@@ -284,6 +285,7 @@ def trajectory_metrics(traj, contacts=None) -> dict:
         out["skating"] = skating(pos, traj.fps, character_stance(pos[..., 2]))
         if contacts is not None:
             out["hovering"] = _character_hovering(traj, contacts, pos)
+            out["flat_feet"] = _flat_foot_lift(traj, contacts, pos)
             out["skating_labelled"] = labelled_skating(traj, contacts, sites, pos)
     return out
 
@@ -434,6 +436,33 @@ def _character_hovering(traj, contacts, pos: np.ndarray, floor: float = 0.0) -> 
         labelled.append(contacts.foot(side))
         k += n
     return hovering(np.column_stack(lowest), np.column_stack(labelled))
+
+
+def _flat_foot_lift(traj, contacts, pos: np.ndarray, floor: float = 0.0) -> dict:
+    """Lift of feet the actor has flat: on the frames both of a foot's labels (heel and
+    toe) are on, the height of its *highest* contact site (mm; hovering takes the lowest,
+    so a foot standing tilted on its ball or heel passes it), median, 95th percentile and
+    the share of those frames over the stance band (:data:`STANCE_TOLERANCE`)."""
+    _check_frames(traj.num_frames, contacts, "trajectory")
+    ch = traj.character.contacts
+    highest, flat = [], []
+    k = 0
+    for side in sorted(ch):
+        n = len(ch[side])
+        highest.append(pos[:, k : k + n, 2].max(axis=1) - floor)
+        flat.append(np.asarray(contacts.labels[f"{side}_heel"], bool) & np.asarray(contacts.labels[f"{side}_toe"], bool))
+        k += n
+    h, m = np.column_stack(highest), np.column_stack(flat)
+    out = hovering(h, m)
+    up = h[m & np.isfinite(h)]
+    out["share_over_band"] = float(np.mean(up > STANCE_TOLERANCE)) if up.size else None
+    return out
+
+
+def character_flat_feet(traj, contacts, floor: float = 0.0) -> dict:
+    """:func:`_flat_foot_lift` of a trajectory's contact sites (see docs/metrics.md)."""
+    _, pos = _contact_sites(traj)
+    return _flat_foot_lift(traj, contacts, pos, floor)
 
 
 def character_hovering(traj, contacts, floor: float = 0.0) -> dict:

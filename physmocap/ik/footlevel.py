@@ -43,7 +43,7 @@ from scipy.spatial.transform import Rotation
 
 from ..rotations import quat_apply, quat_between
 
-__all__ = ["FootLevel", "level_feet", "MIN_STANCE_TIME"]
+__all__ = ["FootLevel", "FootLeveller", "level_feet", "MIN_STANCE_TIME"]
 
 #: Least time (seconds) a foot must stand flat on both contact points to be levelled.
 MIN_STANCE_TIME = 0.1
@@ -68,6 +68,32 @@ def _heading(rot: Rotation, forward: np.ndarray) -> np.ndarray:
     """Heading (radians about +Z) of ``forward`` turned by ``rot``, projected on the floor."""
     f = rot.apply(forward)
     return np.arctan2(f[..., 1], f[..., 0])
+
+
+def _foot_rest(rest: Mapping[str, tuple[np.ndarray, np.ndarray]], side: str) -> tuple[Rotation, np.ndarray] | None:
+    """The character's rest foot orientation :math:`Q_{c,0}` and its forward direction on the
+    floor (towards the toe, else the ankle site's x axis); None where it has none."""
+    ankle, toe = f"{side}_ankle", f"{side}_toe"
+    q_c0 = Rotation.from_quat(rest[ankle][1])
+    fwd = rest[toe][0] - rest[ankle][0] if toe in rest else q_c0.apply([1.0, 0.0, 0.0])
+    fwd = np.array([fwd[0], fwd[1], 0.0])
+    if np.linalg.norm(fwd) < 1e-9:
+        return None
+    return q_c0, fwd / np.linalg.norm(fwd)
+
+
+def _flat_corrections(Q: Rotation, toe_dir: np.ndarray | None, q_c0: Rotation, fwd: np.ndarray) -> Rotation:
+    r"""Per stance frame, the rotation :math:`Q^{-1} R_z(\psi) Q_{c,0}` that makes the foot flat
+    with the actor's heading :math:`\psi` (from ``toe_dir``, ankle to toe, where given)."""
+    heading = np.arctan2(toe_dir[:, 1], toe_dir[:, 0]) if toe_dir is not None else _heading(Q * q_c0.inv(), fwd)
+    psi = heading - np.arctan2(fwd[1], fwd[0])
+    return Q.inv() * (Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])) * q_c0)
+
+
+def _toe_offset(foot: Rotation, q_c0: Rotation, rest: Mapping, side: str) -> np.ndarray:
+    """``(F, 3)`` the toe joint relative to the ankle for feet oriented ``foot``: the
+    character's rest offset turned rigidly with the foot."""
+    return (foot * q_c0.inv()).apply(rest[f"{side}_toe"][0] - rest[f"{side}_ankle"][0])
 
 
 def level_feet(
@@ -115,24 +141,12 @@ def level_feet(
         if toe in col:
             good &= np.all(np.isfinite(pos[:, col[toe]]), axis=1)
         stance = np.asarray(heel_l, dtype=bool)[:F] & np.asarray(toe_l, dtype=bool)[:F] & good
-        if int(stance.sum()) < need:
+        frame = _foot_rest(rest, side)
+        if int(stance.sum()) < need or frame is None:
             continue
-        q_c0 = Rotation.from_quat(rest[ankle][1])
-        # the foot's rest forward direction on the floor (towards the toe, else the site's x axis)
-        fwd = rest[toe][0] - rest[ankle][0] if toe in rest else q_c0.apply([1.0, 0.0, 0.0])
-        fwd = np.array([fwd[0], fwd[1], 0.0])
-        if np.linalg.norm(fwd) < 1e-9:
-            continue
-        fwd /= np.linalg.norm(fwd)
-        Q = Rotation.from_quat(ori[stance, ia])
-        if toe in col:  # the heading the actor's foot points in (toe-in, toe-out kept)
-            d = positions[stance, col[toe]] - positions[stance, ia]
-            heading = np.arctan2(d[:, 1], d[:, 0])
-        else:
-            heading = _heading(Q * q_c0.inv(), fwd)
-        psi = heading - np.arctan2(fwd[1], fwd[0])
-        flat = Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])) * q_c0
-        C = (Q.inv() * flat).mean()
+        q_c0, fwd = frame
+        toe_dir = positions[stance, col[toe]] - positions[stance, ia] if toe in col else None
+        C = _flat_corrections(Rotation.from_quat(ori[stance, ia]), toe_dir, q_c0, fwd).mean()
         old_ankle_q = ori[good, ia].copy()
         new = Rotation.from_quat(old_ankle_q) * C
         q_new = new.as_quat()
@@ -144,7 +158,7 @@ def level_feet(
             continue
         it = col[toe]
         old_dir = positions[good, it] - positions[good, ia]
-        pos[good, it] = pos[good, ia] + (new * q_c0.inv()).apply(rest[toe][0] - rest[ankle][0])
+        pos[good, it] = pos[good, ia] + _toe_offset(new, q_c0, rest, side)
         if tip in col and tip in rest:
             ie = col[tip]
             turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
@@ -181,3 +195,80 @@ def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: R
         return toe_dir
     D = quat_between(mean, want)
     return foot.apply(quat_apply(D, local))
+
+
+class FootLeveller:
+    r"""The causal counterpart of :func:`level_feet`, for streaming: one frame at a time.
+
+    The correction :math:`C` of each foot is the mean of the per-frame corrections over
+    the flat-stance frames seen so far (a normalised, sign-aligned quaternion sum), so it
+    settles within the first stance and then barely moves (it is a property of the two
+    skeletons, not of the motion).  Until :data:`MIN_STANCE_TIME` of flat stance has been
+    seen a foot is left as it is; then the correction is eased in over ``ease_time``
+    (slerp from the identity), so the foot does not snap.  The toe joint is placed
+    rigidly from the corrected foot, blended the same way; toe tips are left to the
+    actor's (the offline :func:`_level_toes` needs the whole clip's stance).
+
+    Args:
+        names: Canonical joint of each target column.
+        has_orientation: ``(N,)`` which targets have an orientation.
+        rest: The character's rest frames (:func:`~physmocap.ik.targets.character_rest_frames`).
+        fps: Frame rate.
+        ease_time: Seconds over which a foot's correction is eased in.
+    """
+
+    def __init__(self, names, has_orientation: np.ndarray, rest: Mapping, fps: float, ease_time: float) -> None:
+        self.names = tuple(names)
+        self.rest = rest
+        self.need = max(2, int(round(MIN_STANCE_TIME * fps)))
+        self.ease_frames = max(1, int(round(ease_time * fps)))
+        col = {n: i for i, n in enumerate(self.names)}
+        #: side -> (ankle column, toe column or None, rest orientation, rest forward direction)
+        self.feet: dict[str, tuple[int, int | None, Rotation, np.ndarray]] = {}
+        for side in ("left", "right"):
+            ankle, toe = f"{side}_ankle", f"{side}_toe"
+            if ankle not in col or not has_orientation[col[ankle]] or ankle not in rest:
+                continue
+            frame = _foot_rest(rest, side)
+            if frame is not None:
+                self.feet[side] = (col[ankle], col[toe] if toe in col and toe in rest else None, *frame)
+        self._sum = {side: np.zeros(4) for side in self.feet}
+        self._count = {side: 0 for side in self.feet}
+        self._eased = {side: 0 for side in self.feet}
+
+    def correction(self, side: str) -> Rotation | None:
+        """The foot's current correction :math:`C` (None before enough flat stance)."""
+        if self._count.get(side, 0) < self.need:
+            return None
+        return Rotation.from_quat(self._sum[side] / np.linalg.norm(self._sum[side]))
+
+    def step(self, positions: np.ndarray, orientations: np.ndarray, labels: Mapping[str, bool]) -> tuple[np.ndarray, np.ndarray]:
+        """``(positions, orientations)`` of one frame ``(N, 3)``, ``(N, 4)`` with the feet
+        levelled (new arrays; the inputs are not modified)."""
+        pos = np.array(positions, dtype=float, copy=True)
+        ori = np.array(orientations, dtype=float, copy=True)
+        for side, (ia, it, q_c0, fwd) in self.feet.items():
+            q = ori[ia]
+            if not (np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5 and np.all(np.isfinite(pos[ia]))):
+                continue
+            Q = Rotation.from_quat(q)
+            if labels.get(f"{side}_heel", False) and labels.get(f"{side}_toe", False):
+                toe_dir = None if it is None else (positions[it] - positions[ia])[None]
+                sample = _flat_corrections(Rotation.from_quat(q[None]), toe_dir, q_c0, fwd).as_quat()[0]
+                if sample @ self._sum[side] < 0:
+                    sample = -sample
+                self._sum[side] += sample
+                self._count[side] += 1
+            C = self.correction(side)
+            if C is None:
+                continue
+            self._eased[side] = min(self._eased[side] + 1, self.ease_frames)
+            w = self._eased[side] / self.ease_frames
+            applied = Rotation.from_rotvec(w * C.as_rotvec())
+            new = Q * applied
+            q_new = new.as_quat()
+            ori[ia] = -q_new if q_new @ q < 0 else q_new
+            if it is not None and np.all(np.isfinite(pos[it])):
+                rigid = pos[ia] + _toe_offset(Rotation.from_quat(q_new[None]), q_c0, self.rest, side)[0]
+                pos[it] = (1.0 - w) * positions[it] + w * rigid
+        return pos, ori

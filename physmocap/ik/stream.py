@@ -16,6 +16,13 @@ Everything it does looks only at the current frame and a short, bounded past:
 * **Contacts** from :class:`~physmocap.ik.contacts.ContactStream`: a look-behind
   of a few tens of milliseconds; its labels lag offline detection's
   back-dated ones by about 50 ms.
+* **Feet levelled** where the actor stands flat
+  (:class:`~physmocap.ik.footlevel.FootLeveller`, the causal counterpart of the
+  offline :func:`~physmocap.ik.footlevel.level_feet`): each foot's correction is
+  learnt from the flat-stance frames seen so far and eased in after the first
+  0.1 s of stance; the toe tips keep the actor's (offline levels them too), and
+  a skeleton whose zero-length toe ends offline retargeting extends
+  (:mod:`~physmocap.ik.toetips`) keeps them.
 * **The per-frame pipeline** (:class:`~physmocap.ik.frame.FrameRetargeter`:
   planting, then the IK) is the one offline retargeting runs, with causal
   anchoring of the feet (offline plans them over the whole clip instead).
@@ -43,10 +50,11 @@ from ..trajectory import SolverStats, Trajectory
 from .config import RetargetConfig
 from .body_contacts import BodyContactAnchor, BodyContactStream, release_kneeling_feet
 from .contacts import ContactStream, Contacts, FloorPlane, contact_points
+from .footlevel import FootLeveller
 from .footplan import body_part_target
 from .frame import FrameRetargeter
 from .retarget import map_motion
-from .targets import build_targets
+from .targets import build_targets, character_rest_frames
 
 __all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS"]
 
@@ -110,6 +118,7 @@ class StreamingRetargeter:
         self.calibration = None
         self.pipeline: FrameRetargeter | None = None
         self.contacts: ContactStream | None = None
+        self.leveller: FootLeveller | None = None
         self.body_contacts: BodyContactStream | None = None
         self.body_anchors: dict[str, BodyContactAnchor] = {}
         self.latencies: list[float] = []
@@ -163,6 +172,10 @@ class StreamingRetargeter:
             levels[p] = max(0.0, min(h, heights.get(other, h)))
         self.contacts = ContactStream(
             list(self.points), self.fps, FloorPlane(height=floor, levels=levels), self.config.contacts
+        )
+        self.leveller = FootLeveller(
+            targets.names, targets.has_orientation, character_rest_frames(self.character), self.fps,
+            self.config.plant.ease_time,
         )
         canonical = {c: world[j][None] for c, j in self.joint_indices.items()}
         self.body_contacts = BodyContactStream.for_actor(canonical, self.fps, FloorPlane(height=floor), self.config.body_contacts)
@@ -225,12 +238,13 @@ class StreamingRetargeter:
         )
         world = fk[0][0]
         labels = self.contacts.step(np.array([world[j] for j in self.points.values()]))
-        positions = targets.positions[0]
+        assert self.leveller is not None
+        positions, orientations = self.leveller.step(targets.positions[0], targets.orientations[0], labels)
         assert self.body_contacts is not None
         body = self.body_contacts.step({c: world[j] for c, j in self.joint_indices.items()})
         if self.body_anchors:
             positions, labels = self._hold_body_parts(positions, targets.names, labels, body)
-        result = self.pipeline.solve(positions, targets.orientations[0], targets.valid[0], labels)
+        result = self.pipeline.solve(positions, orientations, targets.valid[0], labels)
         self.frame += 1
         self.labels.append(labels)
         self.iterations.append(result.iterations)

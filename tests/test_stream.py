@@ -127,3 +127,23 @@ def test_nite_stream_retargets_close_to_the_clean_stream(walk, tmp_path):
     names = [ch.tracked[n].name for n in ("left_ankle", "right_ankle", "left_wrist", "right_wrist")]
     d = np.linalg.norm(noisy.site_positions(names) - clean.site_positions(names), axis=-1) * 100.0
     assert d.mean() < 5.0, d.mean(axis=0)
+
+
+def test_the_stream_follows_the_actor_on_a_second_vendor():
+    """Offline, the upper body follows a pelvis that lags its target (physmocap.ik.frame).  In a
+    stream the planting shifts the targets onto the planted feet; that shift was first taken
+    for a lag and added to the arms again: the PyMO stream's right upper arm went 45 degrees off
+    (11 without the option)."""
+    from physmocap.ik.retarget import map_motion
+    from physmocap.ik.stream import stream_motion
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    motion = load_motion(shared_file("pymo_walk.bvh"))
+    traj = stream_motion(motion, load_character())
+    traj.source_motion, traj.joint_indices = motion, map_motion(motion)
+    fid = trajectory_fidelity(traj, floor_contact=False)
+    arms = ("left_upper_arm", "right_upper_arm", "left_forearm", "right_forearm")
+    assert max(fid.segments[s].median_deg for s in arms) < 8.0, {s: fid.segments[s].median_deg for s in arms}
+    assert fid.worst_segment_median_deg < 15.0

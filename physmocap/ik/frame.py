@@ -131,8 +131,9 @@ class FrameRetargeter:
         return out
 
     def _measure_lag(self, positions: np.ndarray, valid: np.ndarray) -> None:
-        r"""Update the low-passed offset :math:`e` of the pelvis from its target after this
-        frame's solve: :math:`e \leftarrow e + a (x - T - e)`, :math:`a = 1 - e^{-1/(\tau f)}`."""
+        r"""Update the low-passed offset :math:`e` of the pelvis from the target the solver was
+        given (after the planting's shift: a stream's body following its planted feet is not
+        a lag) after this frame's solve: :math:`e \leftarrow e + a (x - T - e)`, :math:`a = 1 - e^{-1/(\tau f)}`."""
         if "pelvis" not in self.names or not self._upper.size:
             return
         i = self.names.index("pelvis")
@@ -173,8 +174,8 @@ class FrameRetargeter:
         t0 = time.perf_counter()
         first = self.frame == 0
         solver = self.solver
-        given = positions
         positions = self._follow_pelvis(positions)
+        aimed = positions  # the targets the solver is given (streaming: shifted onto the planted feet)
         if self.planting is None or labels is None:
             q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first)
         else:
@@ -186,6 +187,7 @@ class FrameRetargeter:
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )
             q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds)
-        self._measure_lag(given, valid)
+            aimed = shifted
+        self._measure_lag(aimed, valid)
         self.frame += 1
         return FrameResult(q.copy(), int(iterations), int(level), time.perf_counter() - t0)

@@ -65,3 +65,16 @@ RETARGET_DIAGNOSTICS = pytest.mark.filterwarnings(
         )
     )
 )
+
+
+def example_clip_folder(root: Path) -> Path:
+    """``root/in`` holding the bundled example as ``a.bvh`` and ``sub/b.bvh`` (batch tests)."""
+    import shutil
+
+    from physmocap.resources import resolve_input
+
+    src = resolve_input("example")
+    (root / "in" / "sub").mkdir(parents=True)
+    shutil.copy(src, root / "in" / "a.bvh")
+    shutil.copy(src, root / "in" / "sub" / "b.bvh")
+    return root

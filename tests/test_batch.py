@@ -4,21 +4,17 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import time
 
 import pytest
 
+from conftest import example_clip_folder
 from physmocap.cli import main
-from physmocap.resources import resolve_input
 
 
 @pytest.fixture()
 def folder(tmp_path):
-    src = resolve_input("example")
-    (tmp_path / "in" / "sub").mkdir(parents=True)
-    shutil.copy(src, tmp_path / "in" / "a.bvh")
-    shutil.copy(src, tmp_path / "in" / "sub" / "b.bvh")
+    example_clip_folder(tmp_path)
     (tmp_path / "in" / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")
     return tmp_path
 

@@ -16,8 +16,8 @@ import pytest
 
 import physmocap.batch
 from physmocap.batch import run_job
+from conftest import example_clip_folder
 from physmocap.cli import main
-from physmocap.resources import resolve_input
 
 
 def _exits_or_is_killed(job, options, on_frames=None):
@@ -52,10 +52,7 @@ def _dies_once_before_starting(conn, func):
 
 @pytest.fixture()
 def folder(tmp_path):
-    src = resolve_input("example")
-    (tmp_path / "in" / "sub").mkdir(parents=True)
-    shutil.copy(src, tmp_path / "in" / "a.bvh")
-    shutil.copy(src, tmp_path / "in" / "sub" / "b.bvh")
+    example_clip_folder(tmp_path)
     return tmp_path
 
 

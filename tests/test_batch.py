@@ -197,3 +197,11 @@ def test_a_failing_metric_fails_the_file(folder, monkeypatch):
     rows = {r["input"]: r for r in json.loads((folder / "out" / "summary.json").read_text())["files"]}
     assert rows[os.path.join("..", "in", "a.bvh")]["status"] == "failed"
     assert "metric broke" in rows[os.path.join("..", "in", "a.bvh")]["error"]
+
+
+def test_a_failed_file_is_named_once(folder, capsys):
+    assert _batch(folder, "out") == 1
+    err = capsys.readouterr().err
+    broken = str(folder / "in" / "broken.bvh")
+    line = next(x for x in err.splitlines() if x.startswith("failed:"))
+    assert line.count(broken) == 1, line

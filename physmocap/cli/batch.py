@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(results) - len(failed)} of {len(results)} files done ({frames} frames); summary in "
           f"{os.path.join(args.output, 'summary.csv')}", file=sys.stderr)
     for r in failed:
-        print(f"failed: {r.input}: {_failure(r)}", file=sys.stderr)
+        error = _failure(r)
+        named = error.startswith(f"{r.input}:")  # most errors already name their file
+        print(f"failed: {error}" if named else f"failed: {r.input}: {error}", file=sys.stderr)
     return 0 if not failed else 1
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from physmocap.errors import InputError
+from physmocap.errors import InputError, PhysmocapWarning
 from physmocap.sources.trc import read_trc_markers
 from test_markers import _c3d_copy, _standing_markers, _write_trc, solve_fails_cleanly
 
@@ -105,3 +105,18 @@ def test_the_rigid_fit_is_public_and_recovers_a_pose():
     X = (A @ R.T + t)[None]
     Rf, tf = kabsch(A, X, np.ones((1, 5)))
     assert np.allclose(Rf[0], R) and np.allclose(tf[0], t)
+
+
+def test_two_markers_read_as_one_role_are_warned():
+    """Two different labels that the aliases both read as one role (LKNE and LFLE, the
+    lateral femoral epicondyle): the first takes it, and one warning names both."""
+    import warnings as _w
+
+    from physmocap.markers.markerset import detect_marker_set
+
+    with pytest.warns(PhysmocapWarning, match=r"LFLE \(LKNE: LKNE is used\)"):
+        ms = detect_marker_set(["LKNE", "LFLE", "RKNE"])
+    assert ms.roles["LKNE"] == 0
+    with _w.catch_warnings():
+        _w.simplefilter("error")
+        assert detect_marker_set(["LKNE", "LFLE", "RKNE"], {"LKNE": "LFLE"}).roles["LKNE"] == 1

@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from ..errors import InputError, MappingError
+from ..errors import InputError, MappingError, warn
 from ..fileio import read_toml
 from .recording import plain_label
 
@@ -102,10 +102,20 @@ class MarkerSet:
 def detect_marker_set(labels: tuple[str, ...] | list[str], overrides: dict[str, str] | None = None) -> MarkerSet:
     """Roles of ``labels`` by the built-in aliases, then ``overrides`` (role -> label)."""
     roles: dict[str, int] = {}
+    clashes: list[tuple[str, str]] = []  # (role, label left without it)
     for i, lab in enumerate(labels):
         role = ALIASES.get(plain_label(lab))
         if role is not None and role not in roles:
             roles[role] = i
+        elif role is not None and plain_label(lab) != plain_label(labels[roles[role]]):
+            clashes.append((role, lab))
+    clashes = [(role, lab) for role, lab in clashes if role not in (overrides or {})]
+    if clashes:
+        warn(
+            "markers read as a role another marker already has: "
+            + ", ".join(f"{lab} ({role}: {labels[roles[role]]} is used)" for role, lab in clashes)
+            + "; give the role its marker in a marker set file (--marker-set) to choose"
+        )
     origin = "aliases"
     if overrides:
         plain = {plain_label(lab): i for i, lab in enumerate(labels)}

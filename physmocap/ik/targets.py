@@ -83,6 +83,10 @@ RIGID_SEGMENT = {
 }
 #: A character without a chest carries the upper torso on its spine (or pelvis).
 TORSO_BELOW = {"chest": ("spine", "pelvis")}
+#: Source joints whose rotation turns the upper torso when there is no chest, highest first.
+TORSO_CARRIERS = ("spine", "pelvis")
+#: Frames of the actor's kinematics held at once while the targets' inputs are gathered.
+BLOCK_FRAMES = 8192
 
 
 def weight_of(name: str) -> tuple[float, float]:
@@ -369,6 +373,58 @@ def _ankle_heights(S, valid, col, char_pts, floor, floor_s, present) -> tuple[fl
     return ankle_a, ankle_c
 
 
+class _ActorKinematics:
+    """The actor's world kinematics that the targets read, levelled onto the character's floor.
+
+    Forward kinematics runs :data:`BLOCK_FRAMES` frames at a time and keeps only the
+    positions of the tracked joints and the world rotations of the joints that turn
+    targets, so the whole skeleton's kinematics is never held (each frame is computed
+    on its own: the same numbers as one pass over the clip).  The floor levelling is
+    :math:`x \mapsto L (x - c) + (c_x, c_y, 0)`, :math:`R \mapsto L R` (``level`` L,
+    ``centre`` c; none without a level).
+
+    Attributes:
+        positions: ``(F, N, 3)`` world positions (metres) of the joints ``idx``.
+        rotations: Source joint -> ``(F, 4)`` world rotation x-y-z-w of the joints
+            ``turning``, or None for a positional source (or kinematics without rotations).
+    """
+
+    def __init__(self, motion: Motion, idx: np.ndarray, turning: list[int], level: np.ndarray | None,
+                 centre: np.ndarray | None, kinematics: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+        self.motion, self.level, self.centre, self.kinematics = motion, level, centre, kinematics
+        F = motion.num_frames
+        # laid out joint-major, as numpy lays out ``positions[:, idx]`` (the clip's joints picked
+        # from the whole skeleton's kinematics): arrays derived from it (``valid``) keep that
+        # layout, and the NPZ writer records it (``fortran_order``), so outputs keep their bytes
+        self.positions = np.empty((len(idx), F, 3)).transpose(1, 0, 2)
+        rotational = motion.is_rotational and (kinematics is None or kinematics[1] is not None)
+        self.rotations = {j: np.empty((F, 4)) for j in turning} if rotational else None
+        for s in range(0, F, BLOCK_FRAMES):
+            e = min(F, s + BLOCK_FRAMES)
+            pos, rot = self._block(s, e)
+            self.positions[s:e] = pos[:, idx]
+            for j, out in (self.rotations or {}).items():
+                out[s:e] = rot[:, j]
+
+    def _block(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Levelled ``(positions (n, J, 3), rotations (n, J, 4) or None)`` of frames ``[s, e)``."""
+        if self.kinematics is not None:
+            pos, rot = self.kinematics[0][s:e], None if self.kinematics[1] is None else self.kinematics[1][s:e]
+        else:
+            pos, rot = self.motion.slice_frames(s, e).forward_kinematics()
+        if self.level is None:
+            return pos, rot
+        assert self.centre is not None
+        pos = quat_apply(self.level, pos - self.centre) + np.array([self.centre[0], self.centre[1], 0.0])
+        return pos, None if rot is None else quat_mul(self.level, rot)
+
+    def frame_rotations(self, frame: int, joints: list[int]) -> list[np.ndarray]:
+        """The levelled world rotations ``(4,)`` of ``joints`` on one frame."""
+        _, rot = self._block(frame, frame + 1)
+        assert rot is not None
+        return [rot[0, j] for j in joints]
+
+
 def _first_child(name: str, present: set[str]) -> str | None:
     for c in CANONICAL_NAMES:
         if c in present and canonical_parent(c, present) == name:
@@ -420,7 +476,6 @@ def build_targets(
         raise MappingError("the pelvis must be mapped in both the source and the character")
     pset = set(present)
     idx = np.array([joint_indices[c] for c in present])
-    pos_all, rot_all = kinematics if kinematics is not None else motion.forward_kinematics()
     level_info = {} if cal is None else dict(cal.info)
     level, centre = (None, None) if cal is None else (cal.level, cal.level_centre)
     if cal is None and floor is not None:
@@ -429,11 +484,9 @@ def build_targets(
         centre = np.array([ox, oy, float(floor.height)])
         level = _min_rotation(np.array([-sx, -sy, 1.0]), np.array([0.0, 0.0, 1.0]))
         level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
-    if level is not None:
-        pos_all = quat_apply(level, pos_all - centre) + np.array([centre[0], centre[1], 0.0])
-        if rot_all is not None:
-            rot_all = quat_mul(level, rot_all)
-    S = pos_all[:, idx]  # (F, N, 3) actor canonical positions
+    turning = [joint_indices[c] for c in present if c in opt.oriented or c in RIGID_PARENTS or c in TORSO_CARRIERS]
+    actor = _ActorKinematics(motion, idx, turning, level, centre, kinematics)
+    S, rot_all = actor.positions, actor.rotations  # (F, N, 3) actor canonical positions; rotations by joint
     F, N = S.shape[:2]
     valid = np.all(np.isfinite(S), axis=-1)
     if motion.confidence is not None:
@@ -461,7 +514,7 @@ def build_targets(
             calib_pts = {c: S_rest[col[c]] for c in present}
         else:
             calib_pts = {c: S[pose.frame, col[c]] for c in present}
-            pose_rot = {c: rot_all[pose.frame, joint_indices[c]] for c in present}
+            pose_rot = dict(zip(present, actor.frame_rotations(pose.frame, [joint_indices[c] for c in present])))
         if not pose.standing:
             warn(
                 f"{motion.source}: no usable calibration pose: neither the rest pose nor any frame shows "
@@ -524,7 +577,7 @@ def build_targets(
         i = col[c]
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
-            R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
+            R_a = rot_all[joint_indices[c]]  # rest world rotation is identity for BVH
             if c not in offsets:
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
@@ -552,12 +605,12 @@ def build_targets(
             delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
         elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
             A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+            delta[seg] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
     if "chest" not in delta:  # the upper torso turns with the highest source torso joint
-        for seg in ("spine", "pelvis"):
+        for seg in TORSO_CARRIERS:
             if motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
                 A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+                delta["chest"] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
                 break
             if seg in delta:
                 delta["chest"] = delta[seg]

@@ -86,7 +86,7 @@ TORSO_BELOW = {"chest": ("spine", "pelvis")}
 #: Source joints whose rotation turns the upper torso when there is no chest, highest first.
 TORSO_CARRIERS = ("spine", "pelvis")
 #: Frames of the actor's kinematics held at once while the targets' inputs are gathered.
-BLOCK_FRAMES = 8192
+BLOCK_FRAMES = 1024
 
 
 def weight_of(name: str) -> tuple[float, float]:

@@ -156,7 +156,7 @@ class Fidelity:
 
 #: Frames whose kinematics are held at once while joint positions are gathered: the
 #: figures keep ``(F, 3)`` per joint they read, never every joint of the skeleton.
-BLOCK_FRAMES = 8192
+BLOCK_FRAMES = 1024
 
 
 def figure_joints() -> frozenset[str]:

@@ -374,7 +374,7 @@ def _ankle_heights(S, valid, col, char_pts, floor, floor_s, present) -> tuple[fl
 
 
 class _ActorKinematics:
-    """The actor's world kinematics that the targets read, levelled onto the character's floor.
+    r"""The actor's world kinematics that the targets read, levelled onto the character's floor.
 
     Forward kinematics runs :data:`BLOCK_FRAMES` frames at a time and keeps only the
     positions of the tracked joints and the world rotations of the joints that turn

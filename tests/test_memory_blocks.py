@@ -155,3 +155,12 @@ def test_bvh_rows_need_a_complete_layout(traj, tmp_path):
     with pytest.raises(OptionError, match="three rotation"):
         bvh_mod.write_bvh_rows(tmp_path / "x.bvh", motion.skeleton, np.array([0]), channels, motion.num_frames,
                                motion.fps, lambda s, e: (motion.rotations[s:e], motion.translations[s:e]))
+
+
+def test_retarget_lets_the_source_positions_go_and_gives_them_back_the_same(walk, humanoid, traj):
+    motion, joints, contacts = walk
+    assert traj.targets.__dict__["_source_positions"] is None  # not held after retargeting
+    built = build_targets(traj.source_motion, traj.joint_indices, humanoid, floor=contacts.floor)
+    assert _same(traj.targets.source_positions, built.source_positions)
+    by_hand = dataclasses.replace(built, source_recipe=None)
+    assert not by_hand.release_source_positions() and by_hand.source_positions is not None

@@ -195,6 +195,8 @@ def retarget(
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
                                found.body_labels, own_orientations=ours)
+    if ours:
+        targets.release_source_positions()  # recomputed from the motion if ever read (the MCAP writer)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
     del targets
     traj.contacts = found

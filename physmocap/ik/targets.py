@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Callable
 
 import mujoco
 import numpy as np
@@ -159,7 +161,11 @@ class Targets:
         valid: ``(F, N)`` False where the source lost the joint (task off that frame).
         fps: Frames per second.
         scale: Root scale factor :math:`k` used.
-        source_positions: ``(F, N, 3)`` the actor's joints in the source world.
+        source_positions: ``(F, N, 3)`` the actor's joints in the source world
+            (metres; 0 where lost); recomputed when read after
+            :meth:`release_source_positions`.
+        source_recipe: How :func:`build_targets` recomputes ``source_positions`` from
+            the motion (None for targets built from given kinematics or by hand).
     """
 
     names: tuple[str, ...]
@@ -172,6 +178,7 @@ class Targets:
     source_positions: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     calibration: Calibration | None = None
+    source_recipe: Callable[[], np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def num_frames(self) -> int:
@@ -179,6 +186,39 @@ class Targets:
 
     def index(self, name: str) -> int:
         return self.names.index(name)
+
+    def release_source_positions(self) -> bool:
+        """Stop holding ``source_positions`` (``24 N`` bytes per frame) when they can be
+        recomputed: reading them again runs the actor's kinematics again (the same
+        numbers, the same memory layout).  False, and kept, without a recipe."""
+        if self.source_recipe is None:
+            return False
+        self.__dict__["_source_positions"] = None
+        return True
+
+
+def _get_source_positions(self: Targets) -> np.ndarray | None:
+    held = self.__dict__.get("_source_positions")
+    return self.source_recipe() if held is None and self.source_recipe is not None else held
+
+
+def _set_source_positions(self: Targets, value: np.ndarray | None) -> None:
+    self.__dict__["_source_positions"] = value
+
+
+# a property over the dataclass field: held, or recomputed once released
+Targets.source_positions = property(_get_source_positions, _set_source_positions)  # type: ignore[assignment]
+
+
+def _masked_positions(positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The actor's positions with 0 where the joint is lost (``valid`` False)."""
+    return np.where(valid[..., None], positions, 0.0)
+
+
+def _source_positions_again(motion: Motion, idx: np.ndarray, level: np.ndarray | None, centre: np.ndarray | None,
+                            valid: np.ndarray) -> np.ndarray:
+    """``Targets.source_positions`` recomputed from the motion, as :func:`build_targets` computed them."""
+    return _masked_positions(_ActorKinematics(motion, idx, [], level, centre).positions, valid)
 
 
 def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -491,7 +531,7 @@ def build_targets(
     valid = np.all(np.isfinite(S), axis=-1)
     if motion.confidence is not None:
         valid &= motion.confidence[:, idx] > 0.0
-    S = np.where(valid[..., None], S, 0.0)
+    S = _masked_positions(S, valid)
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
@@ -718,5 +758,6 @@ def build_targets(
             **level_info,
         },
         calibration=cal,
+        source_recipe=None if kinematics is not None else partial(_source_positions_again, motion, idx, level, centre, valid),
     )
 

@@ -11,7 +11,7 @@ retargeter runs) over every frame.  It returns a
 
 from __future__ import annotations
 
-import dataclasses
+import copy
 import warnings
 from typing import Any
 
@@ -183,6 +183,7 @@ def retarget(
     if targets is None:
         floor = found.floor if found is not None else None
         targets = build_targets(motion, joint_indices, character, config.targets, floor=floor)
+        targets.release_source_positions()  # nothing below reads them: recomputed if ever read
         if found is None and contacts is not False:
             # no planting, but the feet are still levelled where the actor stands flat
             stance = _stance_labels(motion, joint_indices, config)
@@ -195,8 +196,6 @@ def retarget(
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
                                found.body_labels, own_orientations=ours)
-    if ours:
-        targets.release_source_positions()  # recomputed from the motion if ever read (the MCAP writer)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
     del targets
     traj.contacts = found
@@ -274,12 +273,10 @@ def level_targets(targets: Targets, character, labels: dict[str, np.ndarray], *,
         targets.positions[:, cols], targets.orientations[:, cols], targets.has_orientation[cols],
         tuple(targets.names[i] for i in cols), labels, character_rest_frames(character), targets.fps,
     )
-    levelled = dataclasses.replace(
-        targets,
-        positions=targets.positions.copy(),
-        orientations=targets.orientations if own_orientations else targets.orientations.copy(),
-        info={**targets.info, "foot_levels": levels},
-    )
+    levelled = copy.copy(targets)  # not dataclasses.replace: released source positions stay released
+    levelled.positions = targets.positions.copy()
+    levelled.orientations = targets.orientations if own_orientations else targets.orientations.copy()
+    levelled.info = {**targets.info, "foot_levels": levels}
     levelled.positions[:, cols] = positions
     levelled.orientations[:, cols] = orientations
     return levelled

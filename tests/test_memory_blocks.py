@@ -164,3 +164,21 @@ def test_retarget_lets_the_source_positions_go_and_gives_them_back_the_same(walk
     assert _same(traj.targets.source_positions, built.source_positions)
     by_hand = dataclasses.replace(built, source_recipe=None)
     assert not by_hand.release_source_positions() and by_hand.source_positions is not None
+
+
+def test_large_frees_are_returned_where_the_c_library_can(monkeypatch):
+    import ctypes
+
+    from physmocap.cli.retarget import return_large_frees_to_the_system
+
+    try:
+        glibc = hasattr(ctypes.CDLL(None), "mallopt")
+    except (OSError, TypeError):
+        glibc = False
+    assert return_large_frees_to_the_system() is glibc
+
+    def no_libc(*args, **kwargs):
+        raise OSError("no C library")
+
+    monkeypatch.setattr(ctypes, "CDLL", no_libc)
+    assert return_large_frees_to_the_system() is False

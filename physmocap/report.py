@@ -168,12 +168,12 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
     ch = traj.character
     fid = None
     if source_motion is not None and joint_indices is not None:
-        from .metrics.fidelity import actor_joint_positions, character_joint_positions, fidelity
+        from .metrics.fidelity import actor_joint_positions, character_joint_positions, fidelity, figure_joints
 
         scale = float(getattr(traj.targets, "scale", 1.0)) if getattr(traj, "targets", None) is not None else 1.0
         fid = fidelity(
-            actor_joint_positions(source_motion, joint_indices),
-            character_joint_positions(traj),
+            actor_joint_positions(source_motion, joint_indices, figure_joints()),
+            character_joint_positions(traj, figure_joints()),
             traj.fps,
             scale,
             model=ch.model,

@@ -17,10 +17,14 @@ held by each structure of the result (motion, targets and what they carry, conta
 trajectory, solver statistics, fidelity) and the peak of each writer (``tracemalloc``, which
 numpy reports its buffers to), per frame.
 
+``--stages`` runs the command on the shortest clip in this process and prints the peak of each
+stage (``tracemalloc``, sampled every few milliseconds and filed under the functions the main
+thread is in), in bytes per frame.
+
 ``--identity REF_DIR`` instead retargets every shared BVH clip with the checkout ``REF_DIR``
 (``PYTHONPATH=REF_DIR``) and with this one, and compares the BVH and NPZ files byte for byte.
 
-Usage:  python scripts/bench_memory.py [--minutes 1 5 15] [--clip cmu_12_01_walk.bvh] [--breakdown]
+Usage:  python scripts/bench_memory.py [--minutes 1 5 15] [--clip cmu_12_01_walk.bvh] [--breakdown] [--stages]
         python scripts/bench_memory.py --identity ../main
 """
 
@@ -151,7 +155,9 @@ def breakdown(clip: Path, tmp: Path) -> None:
             ("contact labels", traj.contacts), ("fidelity", traj.fidelity)]
     targets = traj.targets
     kept += [(f"targets.info[{k!r}]", v) for k, v in sorted(targets.info.items())]  # raw positions first: shared
-    kept += [(f"targets.{name}", getattr(targets, name)) for name in targets.__dataclass_fields__ if name != "info"]
+    held = {name: getattr(targets, name) for name in targets.__dataclass_fields__ if name not in ("info", "source_positions")}
+    held["source_positions"] = targets.__dict__.get("_source_positions")  # None once let go (read: recomputed)
+    kept += [(f"targets.{name}", value) for name, value in held.items()]
     for name, obj in kept:
         nbytes = array_bytes(obj, seen)
         if nbytes >= F:  # a few bytes per frame at least: the per-frame structures
@@ -164,6 +170,62 @@ def breakdown(clip: Path, tmp: Path) -> None:
         print(f"  {name:40s} {nbytes / F:10.1f}")
     held = sum(b for n, b in rows if "peak" not in n)
     print(f"  {'held after retargeting (sum)':40s} {held / F:10.1f}")
+
+
+def _stage(frame, depth: int) -> str:
+    """The physmocap functions on a thread's stack, outermost first, below the command's own
+    two (``main``, ``run``), ``depth`` of them: ``retarget.retarget > targets.build_targets``."""
+    names = []
+    while frame is not None:
+        code = frame.f_code
+        if f"{os.sep}physmocap{os.sep}" in code.co_filename:
+            names.append(f"{Path(code.co_filename).stem}.{code.co_name}")
+        frame = frame.f_back
+    return " > ".join(reversed(names[:-2][-depth:])) if len(names) > 2 else "-"
+
+
+def stages(clip: Path, frames: int, tmp: Path, depth: int = 3, every: float = 0.003) -> None:
+    """Run the command on ``clip`` (``frames`` frames) in this process and print the peak of each stage
+    (``tracemalloc``: what Python and numpy allocate), in MB and in bytes per frame above
+    what was traced before the clip was read.  A thread samples the peak every ``every``
+    seconds and files it under the stage the main thread is in (:func:`_stage`); block-sized
+    temporaries are a constant, so their bytes per frame shrink on longer clips."""
+    import importlib
+    import threading
+
+    for module in ("physmocap.ik.retarget", "physmocap.export.character_bvh", "physmocap.export.trajectory"):
+        importlib.import_module(module)  # imported before tracing: not the clip's memory
+    from physmocap.cli import main as cli_main
+
+    main_thread = threading.get_ident()
+    peaks: dict[str, float] = {}
+    order: list[str] = []
+    done = threading.Event()
+
+    def sample() -> None:
+        while not done.wait(every):
+            _, peak = tracemalloc.get_traced_memory()
+            tracemalloc.reset_peak()
+            key = _stage(sys._current_frames().get(main_thread), depth)
+            if key not in peaks:
+                order.append(key)
+            peaks[key] = max(peaks.get(key, 0.0), peak)
+
+    argv = ["retarget", str(clip), "-o", str(tmp / "s.bvh"), "--qpos", str(tmp / "s.npz"), "--quiet"]
+    tracemalloc.start()
+    base = tracemalloc.get_traced_memory()[0]
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    try:
+        cli_main(argv)
+    finally:
+        done.set()
+        thread.join()
+        tracemalloc.stop()
+    print(f"\nstages on {frames} frames: peak traced MB, and bytes per frame above the start")
+    for key in order:
+        if "<module>" not in key and peaks[key] - base > 0.05 * frames * 1000:  # imports, small stages: skipped
+            print(f"  {peaks[key] / MB:7.1f} MB {(peaks[key] - base) / frames:8.0f} B/frame  {key}")
 
 
 def retarget_with(checkout: Path, clip: Path, out: Path) -> None:
@@ -199,6 +261,8 @@ def main() -> int:
     ap.add_argument("--minutes", type=float, nargs="+", default=[1.0, 5.0, 15.0])
     ap.add_argument("--clip", default="cmu_12_01_walk.bvh", help="shared clip to loop (default: the CMU walk)")
     ap.add_argument("--breakdown", action="store_true", help="also print bytes per frame by structure (shortest clip)")
+    ap.add_argument("--stages", action="store_true",
+                    help="also print the traced peak of each stage of the command (shortest clip, in this process)")
     ap.add_argument("--extrapolate", type=float, default=60.0, metavar="MIN",
                     help="print the peak extrapolated to this many minutes (default 60)")
     ap.add_argument("--identity", type=Path, metavar="REF_DIR",
@@ -235,11 +299,14 @@ def main() -> int:
             print(f"growth {slope:.0f} B/frame between {f0} and {f1} frames; "
                   f"{args.extrapolate:g} min ({target:.0f} frames) extrapolates to "
                   f"{m1 + slope * (target - f1) / MB:.0f} MB")
-        if args.breakdown:
+        if args.breakdown or args.stages:
             frames = int(round(min(args.minutes) * 60.0 * fps))
             clip = tmp / "breakdown.bvh"
             ping_pong_bvh(src, frames, clip)
-            breakdown(clip, tmp)
+            if args.stages:
+                stages(clip, frames, tmp)
+            if args.breakdown:
+                breakdown(clip, tmp)
     return 0
 
 

@@ -31,19 +31,20 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from ..errors import OptionError, OutputError, warn
 from ..fileio import atomic_open, check_writable
-from ..motion import Motion
+from ..motion import Motion, Skeleton
 from ..rotations import quat_to_euler, unwrap_euler, up_axis_matrix
 from ..sources.bvh import CHANNEL_NAMES, axis_permutation, resolve_units
 
 __all__ = [
     "write_bvh",
     "write_bvh_channels",
+    "write_bvh_rows",
     "bvh_channel_layout",
     "check_bvh_options",
     "DEFAULT_ROTATION_ORDER",
@@ -102,10 +103,14 @@ def bvh_channel_layout(
     have none.  Position channels are only kept for joints that have animated
     translations.
     """
-    sk = motion.skeleton
     known = motion.meta.get("bvh_channels") if isinstance(motion.meta, dict) else None
-    known = known if isinstance(known, dict) else {}
-    translated = set(int(k) for k in motion.translated)
+    return _channel_layout(motion.skeleton, motion.translated, known if isinstance(known, dict) else {}, rotation_order)
+
+
+def _channel_layout(sk: Skeleton, translated_joints: np.ndarray, known: dict, rotation_order: str | None) -> list[list[str]]:
+    """:func:`bvh_channel_layout` from its parts: the skeleton, the joints with animated
+    translations and the known channel lists (joint name -> channels)."""
+    translated = set(int(k) for k in translated_joints)
     has_children = np.zeros(sk.num_joints, dtype=bool)
     has_children[sk.parents[sk.parents >= 0]] = True
     layout: list[list[str]] = []
@@ -201,50 +206,114 @@ def write_bvh(
     for s in range(0, F, 1 << 16):  # refuse non-finite values before anything else
         _check_block(motion.rotations[s : s + (1 << 16)], motion.translations[s : s + (1 << 16)],
                      motion.translated, sk.names, s, path)
-    conv = _Converter(motion, up, unit_scale, precision)
-    layout, plans, widened = conv.plan(bvh_channel_layout(motion, rotation_order), rotation_order)
+    conv = _Converter(sk, motion.translated, up, unit_scale, precision)
+    layout, plans, widened = conv.plan(bvh_channel_layout(motion, rotation_order), rotation_order,
+                                       motion.rotations, motion.translations)
     if widened:
         warn(
             f"{path}: the source channel layout cannot hold this motion for "
             + ", ".join(widened)
             + "; added those channels"
         )
+    rows = (lambda s, e: (motion.rotations[s:e], motion.translations[s:e]))  # type: ignore[index]
+    return _write_frames(path, conv, layout, plans, F, motion.fps, rows, precision)
+
+
+def _write_frames(path: Path, conv: "_Converter", layout: list[list[str]], plans, frames: int, fps: float,
+                  rows: Callable[[int, int], tuple[np.ndarray, np.ndarray]], precision: int) -> Path:
+    """The header, then the rows of ``frames`` frames, :data:`_ROWS_PER_BLOCK` at a time:
+    ``rows(s, e)`` gives frames ``[s, e)`` (local rotations, translations, world axes, metres)."""
+    sk = conv.skeleton
     header, dfs = _hierarchy(sk.names, sk.parents, conv.offsets, sk.end_site, layout, precision)
     columns = [(j, c) for j in dfs for c in layout[j]]
     with atomic_open(path, "w") as fh:
-        fh.write(_header_text(header, F, 1.0 / motion.fps))
-        for s in range(0, F, _ROWS_PER_BLOCK):
-            block = conv.block(s, min(F, s + _ROWS_PER_BLOCK), plans, columns)
-            fh.write(_format_rows(block, precision))
+        fh.write(_header_text(header, frames, 1.0 / fps))
+        for s in range(0, frames, _ROWS_PER_BLOCK):
+            rot, tra = rows(s, min(frames, s + _ROWS_PER_BLOCK))
+            fh.write(_format_rows(conv.block(rot, tra, plans, columns), precision))
     return path
+
+
+def write_bvh_rows(
+    path: str | os.PathLike,
+    skeleton: Skeleton,
+    translated: np.ndarray,
+    channels: dict[str, list[str]],
+    frames: int,
+    fps: float,
+    rows: Callable[[int, int], tuple[np.ndarray, np.ndarray]],
+    precision: int = 6,
+    units: str | float = "m",
+    up: str = "Y",
+) -> Path:
+    """Write a rotational motion that is never held whole, as BVH (atomically).
+
+    ``rows(s, e)`` gives frames ``[s, e)``: ``(local rotations (n, J, 4) x-y-z-w,
+    translations (n, K, 3) in metres of the joints in ``translated``)``, world (Z-up)
+    axes, as :class:`~physmocap.motion.Motion` holds them; it is called once per block of
+    :data:`_ROWS_PER_BLOCK` frames, in order.  ``channels`` gives every joint with
+    channels its full channel list (three rotations; three positions on translated
+    joints), so no frame has to be seen before writing.  The bytes are those
+    :func:`write_bvh` writes for the same motion with ``meta["bvh_channels"] = channels``.
+    Non-finite values are refused block by block; the file is only renamed into place
+    once every block is written.
+
+    Raises:
+        OptionError: A layout that would need widening (an incomplete channel list).
+        OutputError: Non-finite values, or the path cannot be written.
+    """
+    path = Path(path)
+    precision = _check_precision(precision)
+    _, unit_scale = resolve_units(units, path)
+    up = str(up).strip().upper()
+    if up not in ("Y", "Z"):
+        raise OptionError(f"up axis must be 'Y' or 'Z', got {up!r}", path=path)
+    check_writable(path)
+    if not np.all(np.isfinite(skeleton.offsets)):
+        j = int(np.flatnonzero(~np.isfinite(skeleton.offsets).all(axis=1))[0])
+        raise OutputError(f"offset of joint {skeleton.names[j]!r} is not finite; refusing to write it", path=path)
+    translated = np.asarray(translated, dtype=np.int64).reshape(-1)
+    conv = _Converter(skeleton, translated, up, unit_scale, precision)
+    layout, plans, _ = conv.plan(_channel_layout(skeleton, translated, channels, None), None, None, None)
+
+    def checked(s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
+        rot, tra = rows(s, e)
+        _check_block(rot, tra, translated, skeleton.names, s, path)
+        return rot, tra
+
+    return _write_frames(path, conv, layout, plans, frames, fps, checked, precision)
 
 
 class _Converter:
     """World-frame motion to file channels (units, axes, Euler angles), block by block."""
 
-    def __init__(self, motion: Motion, up: str, unit_scale: float, precision: int) -> None:
-        assert motion.rotations is not None and motion.translations is not None
-        self.m = motion
+    def __init__(self, skeleton: Skeleton, translated: np.ndarray, up: str, unit_scale: float, precision: int) -> None:
+        self.skeleton = skeleton
         self.perm, self.sign = axis_permutation(up_axis_matrix("Z", up))
         self.scale = unit_scale
-        self.offsets = motion.skeleton.offsets[:, self.perm] * self.sign / unit_scale
+        self.offsets = skeleton.offsets[:, self.perm] * self.sign / unit_scale
         self.tol = 0.5 * 10.0 ** (-precision)
-        self.t_index = {int(k): i for i, k in enumerate(motion.translated)}
+        self.t_index = {int(k): i for i, k in enumerate(translated)}
         self.last: dict = {}  # continuity state between blocks
 
     def quats(self, q: np.ndarray) -> np.ndarray:
         """World-axis quaternions to file axes: ``(M v, w)``."""
         return np.concatenate([q[..., :3][..., self.perm] * self.sign, q[..., 3:]], axis=-1)
 
-    def translations(self, s: int, e: int, k: int) -> np.ndarray:
-        return self.m.translations[s:e, k][:, self.perm] * self.sign / self.scale
+    def translations(self, tra: np.ndarray, k: int) -> np.ndarray:
+        """Translations ``(n, K, 3)`` of joint slot ``k`` in file axes and units ``(n, 3)``."""
+        return tra[:, k][:, self.perm] * self.sign / self.scale
 
-    def plan(self, layout: list[list[str]], rotation_order: str | None):
-        """Final channel lists (widened where the motion needs it) and, per joint,
-        ``(padded rotation order or None, number of rotation axes written)``."""
-        sk, F = self.m.skeleton, self.m.num_frames
-        rot = self.m.rotations
-        assert rot is not None
+    def plan(self, layout: list[list[str]], rotation_order: str | None, rot: np.ndarray | None, tra: np.ndarray | None):
+        """Final channel lists (widened where the motion ``rot``, ``tra`` (whole clip) needs
+        it) and, per joint, ``(padded rotation order or None, number of rotation axes
+        written)``.  Without the motion (None) the layout must be complete.
+
+        Raises:
+            OptionError: No motion given and a joint's channel list is incomplete.
+        """
+        sk = self.skeleton
+        F = 0 if rot is None else rot.shape[0]
         widened: list[str] = []
         plans: list[tuple[str | None, int]] = []
         out: list[list[str]] = []
@@ -252,6 +321,11 @@ class _Converter:
             chans = list(chans)
             name = sk.names[j]
             axes = [c[0] for c in chans if c.endswith("rotation")]
+            present = {c[0] for c in chans if c.endswith("position")}
+            complete = len(axes) == 3 or (not chans and sk.end_site[j])
+            complete &= j not in self.t_index or len(present) == 3
+            if rot is None and not complete:
+                raise OptionError(f"joint {name!r} needs three rotation (and position) channels to be written in blocks")
             if not axes and (chans or not sk.end_site[j]) and F:
                 w = np.clip(np.abs(rot[:, j, 3]) / np.linalg.norm(rot[:, j], axis=-1).clip(1e-300), 0.0, 1.0)
                 if np.degrees(2.0 * np.arccos(w.min())) > self.tol:
@@ -265,9 +339,8 @@ class _Converter:
                     chans += [f"{a}rotation" for a in order[k:]]
                     widened.append(f"{name} (rotation)")
                     k = 3
-            if j in self.t_index and F:
-                t = self.translations(0, F, self.t_index[j])
-                present = {c[0] for c in chans if c.endswith("position")}
+            if j in self.t_index and F and len(present) < 3:
+                t = self.translations(tra, self.t_index[j])
                 for a, axis in enumerate("XYZ"):
                     if axis not in present and np.abs(t[:, a] - self.offsets[j, a]).max() > self.tol:
                         chans.append(f"{axis}position")
@@ -276,10 +349,10 @@ class _Converter:
             plans.append((order, k))
         return out, plans, widened
 
-    def block(self, s: int, e: int, plans, columns) -> np.ndarray:
-        """Channel values of frames ``[s, e)``, columns in file (depth-first) order."""
-        rot = self.m.rotations[s:e]  # type: ignore[index]
-        tra = self.m.translations[s:e]  # type: ignore[index]
+    def block(self, rot: np.ndarray, tra: np.ndarray, plans, columns) -> np.ndarray:
+        """Channel values of consecutive frames (rotations ``rot (n, J, 4)``, translations
+        ``tra (n, K, 3)``, the frames after the previous block), columns in file
+        (depth-first) order."""
         euler: dict[int, np.ndarray] = {}
         groups: dict[str, list[int]] = {}
         for j, (order, k) in enumerate(plans):
@@ -307,7 +380,7 @@ class _Converter:
             self.last[("grp", order)] = ang[-1]
             for i, j in enumerate(js):
                 euler[j] = ang[:, i]
-        block = np.empty((e - s, len(columns)))
+        block = np.empty((rot.shape[0], len(columns)))
         trans: dict[int, np.ndarray] = {}
         for c, (j, ch) in enumerate(columns):
             axis = "XYZ".index(ch[0])
@@ -316,7 +389,7 @@ class _Converter:
                     block[:, c] = self.offsets[j, axis]
                     continue
                 if j not in trans:
-                    trans[j] = tra[:, self.t_index[j]][:, self.perm] * self.sign / self.scale
+                    trans[j] = self.translations(tra, self.t_index[j])
                 block[:, c] = trans[j][:, axis]
             else:
                 block[:, c] = euler[j][:, plans[j][0].index(ch[0])]

@@ -131,6 +131,52 @@ def _channel_order(model: mujoco.MjModel, body: int, up: str, default: str) -> s
     return "".join(letters[:3])
 
 
+class _LocalRotations:
+    """The BVH joints' local rotations and the root position of a trajectory, computed
+    for any range of frames (see the module docstring for the maths)."""
+
+    def __init__(self, traj: Trajectory, skel: Skeleton, body_of: list[int], rest: mujoco.MjData) -> None:
+        self.traj = traj
+        self.skel = skel
+        self.root = body_of[0]
+        self.data = mujoco.MjData(traj.model)
+        self.bodies = np.array([b for b in body_of if b >= 0])
+        self.cols = np.array([i for i, b in enumerate(body_of) if b >= 0])
+        self.inv_rest = quat_conj(wxyz_to_xyzw(rest.xquat)[self.bodies])
+
+    def rows(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray]:
+        """Frames ``[s, e)``: ``(local rotations (n, J, 4) x-y-z-w (identity on end sites),
+        root positions (n, 1, 3) metres)``, world axes."""
+        model, data = self.traj.model, self.data
+        D = np.zeros((e - s, self.skel.num_joints, 4))
+        D[..., 3] = 1.0
+        root = np.zeros((e - s, 1, 3))
+        for t in range(s, e):
+            data.qpos[:] = self.traj.qpos[t]
+            mujoco.mj_kinematics(model, data)
+            D[t - s, self.cols] = quat_mul(wxyz_to_xyzw(data.xquat[self.bodies]), self.inv_rest)
+            root[t - s, 0] = data.xpos[self.root]
+        local = D.copy()
+        for j in range(self.skel.num_joints):
+            p = int(self.skel.parents[j])
+            if p >= 0:
+                local[:, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
+        local[:, self.skel.end_site] = np.array([0.0, 0.0, 0.0, 1.0])
+        return local, root
+
+
+def _channels(model: mujoco.MjModel, skel: Skeleton, body_of: list[int], up: str, rotation_order: str) -> dict[str, list[str]]:
+    """Joint name -> BVH channels for a file with ``up`` as its up axis: the root's three
+    positions, then every body's three rotations (:func:`_channel_order`)."""
+    channels = {}
+    for j in range(skel.num_joints):
+        if body_of[j] < 0:
+            continue
+        rot = [f"{a}rotation" for a in _channel_order(model, body_of[j], up, rotation_order)]
+        channels[skel.names[j]] = (["Xposition", "Yposition", "Zposition"] if j == 0 else []) + rot
+    return channels
+
+
 def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY") -> Motion:
     """The character's trajectory as a rotational :class:`Motion` (metres, Z-up).
 
@@ -138,38 +184,14 @@ def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY
     file written with ``up`` as its up axis (read by :func:`~physmocap.export.bvh.write_bvh`).
     """
     character = traj.character
-    model = character.model
     skel, body_of, rest = character_skeleton(character)
-    J = skel.num_joints
-    rest_q = wxyz_to_xyzw(rest.xquat)
+    frames = _LocalRotations(traj, skel, body_of, rest)
     F = traj.num_frames
-    data = mujoco.MjData(model)
-    local = np.zeros((F, J, 4))
-    local[..., 3] = 1.0
-    root_pos = np.zeros((F, 1, 3))
-    bodies = np.array([b for b in body_of if b >= 0])
-    cols = np.array([i for i, b in enumerate(body_of) if b >= 0])
-    inv_rest = quat_conj(rest_q[bodies])
+    local = np.empty((F, skel.num_joints, 4))
+    root_pos = np.empty((F, 1, 3))
     for s in range(0, F, BLOCK_FRAMES):  # the world rotations D are held a block at a time
         e = min(F, s + BLOCK_FRAMES)
-        D = local[s:e].copy()
-        for t in range(s, e):
-            data.qpos[:] = traj.qpos[t]
-            mujoco.mj_kinematics(model, data)
-            D[t - s, cols] = quat_mul(wxyz_to_xyzw(data.xquat[bodies]), inv_rest)
-            root_pos[t, 0] = data.xpos[body_of[0]]
-        local[s:e] = D
-        for j in range(J):
-            p = int(skel.parents[j])
-            if p >= 0:
-                local[s:e, j] = quat_mul(quat_conj(D[:, p]), D[:, j])
-    local[:, skel.end_site] = np.array([0.0, 0.0, 0.0, 1.0])
-    channels = {}
-    for j in range(J):
-        if body_of[j] < 0:
-            continue
-        rot = [f"{a}rotation" for a in _channel_order(model, body_of[j], up, rotation_order)]
-        channels[skel.names[j]] = (["Xposition", "Yposition", "Zposition"] if j == 0 else []) + rot
+        local[s:e], root_pos[s:e] = frames.rows(s, e)
     return Motion(
         skeleton=skel,
         fps=traj.fps,
@@ -180,7 +202,8 @@ def character_motion(traj: Trajectory, up: str = "Y", rotation_order: str = "ZXY
         units="m",
         unit_scale=1.0,
         file_up=up,
-        meta={"bvh_channels": channels, "character": str(character.name)},
+        meta={"bvh_channels": _channels(character.model, skel, body_of, up, rotation_order),
+              "character": str(character.name)},
     )
 
 
@@ -192,16 +215,17 @@ def write_character_bvh(
     rotation_order: str = "ZXY",
     precision: int = 6,
 ) -> Path:
-    """Write the character's motion as BVH (atomically); see the module docstring."""
-    from .bvh import write_bvh
+    """Write the character's motion as BVH (atomically); see the module docstring.
 
-    motion = character_motion(traj, up=up, rotation_order=rotation_order)
-    write_bvh(
-        motion,
-        path,
-        rotation_order=None,
-        precision=precision,
-        units=units,
-        up=up,
-    )
-    return Path(path)
+    The rotations are computed a block of frames at a time while the file is written
+    (never the whole clip's); the bytes are those of ``write_bvh(character_motion(traj))``.
+    """
+    from .bvh import check_bvh_options, write_bvh_rows
+
+    check_bvh_options(rotation_order, precision, units, up)
+    up = str(up).strip().upper()
+    skel, body_of, rest = character_skeleton(traj.character)
+    frames = _LocalRotations(traj, skel, body_of, rest)
+    channels = _channels(traj.model, skel, body_of, up, rotation_order)
+    return write_bvh_rows(path, skel, np.array([0]), channels, traj.num_frames, traj.fps, frames.rows,
+                          precision=precision, units=units, up=up)

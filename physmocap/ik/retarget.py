@@ -11,7 +11,7 @@ retargeter runs) over every frame.  It returns a
 
 from __future__ import annotations
 
-import dataclasses
+import copy
 import warnings
 from typing import Any
 
@@ -179,25 +179,25 @@ def retarget(
         joint_indices = map_motion(motion, profile=profile, mapping=mapping)
         motion, joint_indices = extend_toe_tips(motion, joint_indices, character.rest_positions())
     found = resolve_contacts(motion, joint_indices, contacts if plant else False, config)
+    ours = targets is None  # targets built here are ours to change (the caller's are not)
     if targets is None:
         floor = found.floor if found is not None else None
         targets = build_targets(motion, joint_indices, character, config.targets, floor=floor)
+        targets.release_source_positions()  # nothing below reads them: recomputed if ever read
         if found is None and contacts is not False:
             # no planting, but the feet are still levelled where the actor stands flat
             stance = _stance_labels(motion, joint_indices, config)
             if stance is not None:
-                targets = level_targets(targets, character, stance)
-    traj = solve_targets(
-        targets,
-        character,
-        config.solver,
-        source=motion.source,
-        progress=progress,
-        labels=found.labels if found is not None else None,
-        plant=config.plant,
-        body_labels=found.body_labels if found is not None else None,
-    )
-    del targets  # the unplanned targets: traj.targets holds the planned ones (their raw positions too)
+                targets = level_targets(targets, character, stance, own_orientations=True)
+    labels = None
+    if found is not None and config.plant.plant:
+        labels = release_kneeling_feet(found.labels, found.body_labels or {})
+        # the unplanned targets are let go before tracking (the planned ones keep their raw
+        # positions); orientations built here are levelled where they are
+        targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
+                               found.body_labels, own_orientations=ours)
+    traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
+    del targets
     traj.contacts = found
     traj.source_motion = motion  # as retargeted: cut and resampled
     traj.joint_indices = dict(joint_indices)
@@ -226,34 +226,60 @@ def plan_targets(
     plant: PlantOptions,
     floor_height: float,
     body_labels: dict[str, np.ndarray] | None = None,
+    *,
+    own_orientations: bool = False,
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
     feet levelled on their flat-stance frames (:func:`~physmocap.ik.footlevel.level_feet`),
     then (and knees, hands, pelvis in contact) held where they land, eased in and out
     (``labels`` as planted: :func:`~physmocap.ik.body_contacts.release_kneeling_feet` applied).
     The unplanned positions are kept in ``info["raw_positions"]``, the feet's
-    horizontal offsets in ``info["foot_offsets"]``."""
+    horizontal offsets in ``info["foot_offsets"]``.  With ``own_orientations`` the caller
+    gives up ``targets.orientations``: the feet are levelled in that array (no copy)."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
-    levelled = level_targets(targets, character, labels)
+    levelled = level_targets(targets, character, labels, own_orientations=own_orientations)
     positions, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
         planting.toe_contacts(),
     )
+    levelled.positions = positions  # the levelled copy is let go before the next one is made
     if body_labels:
-        positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
-    info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
-    return dataclasses.replace(levelled, positions=positions, info=info)
+        levelled.positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
+    del positions
+    levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
+    return levelled
 
 
-def level_targets(targets: Targets, character, labels: dict[str, np.ndarray]) -> Targets:
+#: The joints of a foot that :func:`~physmocap.ik.footlevel.level_feet` reads and levels.
+LEVELLED_FOOT_JOINTS = ("ankle", "toe", "toe_end")
+
+
+def _foot_columns(names: tuple[str, ...]) -> list[int]:
+    """Target columns of the joints :func:`~physmocap.ik.footlevel.level_feet` works on
+    (:data:`LEVELLED_FOOT_JOINTS` of both feet), in target order."""
+    feet = {f"{side}_{j}" for side in ("left", "right") for j in LEVELLED_FOOT_JOINTS}
+    return [i for i, n in enumerate(names) if n in feet]
+
+
+def level_targets(targets: Targets, character, labels: dict[str, np.ndarray], *, own_orientations: bool = False) -> Targets:
     """A copy of ``targets`` with the feet levelled on the actor's flat-stance frames
-    (:func:`~physmocap.ik.footlevel.level_feet`); what was done is in ``info["foot_levels"]``."""
+    (:func:`~physmocap.ik.footlevel.level_feet`); what was done is in ``info["foot_levels"]``.
+
+    Only the feet's columns are handed to ``level_feet`` (it reads and changes nothing
+    else), then written into a copy of the positions and of the orientations, or into
+    ``targets.orientations`` itself with ``own_orientations`` (the caller gives it up)."""
+    cols = _foot_columns(targets.names)
     positions, orientations, levels = level_feet(
-        targets.positions, targets.orientations, targets.has_orientation, targets.names, labels,
-        character_rest_frames(character), targets.fps,
+        targets.positions[:, cols], targets.orientations[:, cols], targets.has_orientation[cols],
+        tuple(targets.names[i] for i in cols), labels, character_rest_frames(character), targets.fps,
     )
-    info = {**targets.info, "foot_levels": levels}
-    return dataclasses.replace(targets, positions=positions, orientations=orientations, info=info)
+    levelled = copy.copy(targets)  # not dataclasses.replace: released source positions stay released
+    levelled.positions = targets.positions.copy()
+    levelled.orientations = targets.orientations if own_orientations else targets.orientations.copy()
+    levelled.info = {**targets.info, "foot_levels": levels}
+    levelled.positions[:, cols] = positions
+    levelled.orientations[:, cols] = orientations
+    return levelled
 
 
 def solve_targets(
@@ -277,10 +303,27 @@ def solve_targets(
     """
     options = options or SolverOptions()
     plant = plant or PlantOptions()
-    planted = labels is not None and plant.plant
-    if planted:
+    if labels is not None and plant.plant:
         labels = release_kneeling_feet(labels, body_labels or {})
         targets = plan_targets(targets, character, labels, plant, options.floor_height, body_labels)
+    else:
+        labels = None
+    return _track(targets, character, options, source, progress, labels, plant)
+
+
+def _track(
+    targets: Targets,
+    character,
+    options: SolverOptions,
+    source: str,
+    progress: bool | None,
+    labels: dict[str, np.ndarray] | None,
+    plant: PlantOptions,
+) -> Trajectory:
+    """Run the per-frame pipeline over (planned) targets, holding the contact points of
+    ``labels`` (None: track the targets as they are); the solver's per-frame figures are
+    kept in compact arrays (int32, int8 and float64 seconds per frame)."""
+    planted = labels is not None
     pipeline = FrameRetargeter(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False
     )
@@ -291,7 +334,7 @@ def solve_targets(
     latency = np.zeros(F)
     with Progress(F, "retarget", enabled=progress) as bar:
         for t in range(F):
-            frame_labels = {k: bool(v[t]) for k, v in labels.items()} if planted else None
+            frame_labels = {k: bool(v[t]) for k, v in labels.items()} if labels is not None else None
             result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels)
             qpos[t] = result.qpos
             iterations[t] = result.iterations

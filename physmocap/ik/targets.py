@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Callable
 
 import mujoco
 import numpy as np
@@ -83,6 +85,10 @@ RIGID_SEGMENT = {
 }
 #: A character without a chest carries the upper torso on its spine (or pelvis).
 TORSO_BELOW = {"chest": ("spine", "pelvis")}
+#: Source joints whose rotation turns the upper torso when there is no chest, highest first.
+TORSO_CARRIERS = ("spine", "pelvis")
+#: Frames of the actor's kinematics held at once while the targets' inputs are gathered.
+BLOCK_FRAMES = 1024
 
 
 def weight_of(name: str) -> tuple[float, float]:
@@ -155,7 +161,11 @@ class Targets:
         valid: ``(F, N)`` False where the source lost the joint (task off that frame).
         fps: Frames per second.
         scale: Root scale factor :math:`k` used.
-        source_positions: ``(F, N, 3)`` the actor's joints in the source world.
+        source_positions: ``(F, N, 3)`` the actor's joints in the source world
+            (metres; 0 where lost); recomputed when read after
+            :meth:`release_source_positions`.
+        source_recipe: How :func:`build_targets` recomputes ``source_positions`` from
+            the motion (None for targets built from given kinematics or by hand).
     """
 
     names: tuple[str, ...]
@@ -168,6 +178,7 @@ class Targets:
     source_positions: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     calibration: Calibration | None = None
+    source_recipe: Callable[[], np.ndarray] | None = field(default=None, repr=False)
 
     @property
     def num_frames(self) -> int:
@@ -175,6 +186,39 @@ class Targets:
 
     def index(self, name: str) -> int:
         return self.names.index(name)
+
+    def release_source_positions(self) -> bool:
+        """Stop holding ``source_positions`` (``24 N`` bytes per frame) when they can be
+        recomputed: reading them again runs the actor's kinematics again (the same
+        numbers, the same memory layout).  False, and kept, without a recipe."""
+        if self.source_recipe is None:
+            return False
+        self.__dict__["_source_positions"] = None
+        return True
+
+
+def _get_source_positions(self: Targets) -> np.ndarray | None:
+    held = self.__dict__.get("_source_positions")
+    return self.source_recipe() if held is None and self.source_recipe is not None else held
+
+
+def _set_source_positions(self: Targets, value: np.ndarray | None) -> None:
+    self.__dict__["_source_positions"] = value
+
+
+# a property over the dataclass field: held, or recomputed once released
+Targets.source_positions = property(_get_source_positions, _set_source_positions)  # type: ignore[assignment]
+
+
+def _masked_positions(positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """The actor's positions with 0 where the joint is lost (``valid`` False)."""
+    return np.where(valid[..., None], positions, 0.0)
+
+
+def _source_positions_again(motion: Motion, idx: np.ndarray, level: np.ndarray | None, centre: np.ndarray | None,
+                            valid: np.ndarray) -> np.ndarray:
+    """``Targets.source_positions`` recomputed from the motion, as :func:`build_targets` computed them."""
+    return _masked_positions(_ActorKinematics(motion, idx, [], level, centre).positions, valid)
 
 
 def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -369,6 +413,58 @@ def _ankle_heights(S, valid, col, char_pts, floor, floor_s, present) -> tuple[fl
     return ankle_a, ankle_c
 
 
+class _ActorKinematics:
+    r"""The actor's world kinematics that the targets read, levelled onto the character's floor.
+
+    Forward kinematics runs :data:`BLOCK_FRAMES` frames at a time and keeps only the
+    positions of the tracked joints and the world rotations of the joints that turn
+    targets, so the whole skeleton's kinematics is never held (each frame is computed
+    on its own: the same numbers as one pass over the clip).  The floor levelling is
+    :math:`x \mapsto L (x - c) + (c_x, c_y, 0)`, :math:`R \mapsto L R` (``level`` L,
+    ``centre`` c; none without a level).
+
+    Attributes:
+        positions: ``(F, N, 3)`` world positions (metres) of the joints ``idx``.
+        rotations: Source joint -> ``(F, 4)`` world rotation x-y-z-w of the joints
+            ``turning``, or None for a positional source (or kinematics without rotations).
+    """
+
+    def __init__(self, motion: Motion, idx: np.ndarray, turning: list[int], level: np.ndarray | None,
+                 centre: np.ndarray | None, kinematics: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+        self.motion, self.level, self.centre, self.kinematics = motion, level, centre, kinematics
+        F = motion.num_frames
+        # laid out joint-major, as numpy lays out ``positions[:, idx]`` (the clip's joints picked
+        # from the whole skeleton's kinematics): arrays derived from it (``valid``) keep that
+        # layout, and the NPZ writer records it (``fortran_order``), so outputs keep their bytes
+        self.positions = np.empty((len(idx), F, 3)).transpose(1, 0, 2)
+        rotational = motion.is_rotational and (kinematics is None or kinematics[1] is not None)
+        self.rotations = {j: np.empty((F, 4)) for j in turning} if rotational else None
+        for s in range(0, F, BLOCK_FRAMES):
+            e = min(F, s + BLOCK_FRAMES)
+            pos, rot = self._block(s, e)
+            self.positions[s:e] = pos[:, idx]
+            for j, out in (self.rotations or {}).items():
+                out[s:e] = rot[:, j]
+
+    def _block(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Levelled ``(positions (n, J, 3), rotations (n, J, 4) or None)`` of frames ``[s, e)``."""
+        if self.kinematics is not None:
+            pos, rot = self.kinematics[0][s:e], None if self.kinematics[1] is None else self.kinematics[1][s:e]
+        else:
+            pos, rot = self.motion.slice_frames(s, e).forward_kinematics()
+        if self.level is None:
+            return pos, rot
+        assert self.centre is not None
+        pos = quat_apply(self.level, pos - self.centre) + np.array([self.centre[0], self.centre[1], 0.0])
+        return pos, None if rot is None else quat_mul(self.level, rot)
+
+    def frame_rotations(self, frame: int, joints: list[int]) -> list[np.ndarray]:
+        """The levelled world rotations ``(4,)`` of ``joints`` on one frame."""
+        _, rot = self._block(frame, frame + 1)
+        assert rot is not None
+        return [rot[0, j] for j in joints]
+
+
 def _first_child(name: str, present: set[str]) -> str | None:
     for c in CANONICAL_NAMES:
         if c in present and canonical_parent(c, present) == name:
@@ -420,7 +516,6 @@ def build_targets(
         raise MappingError("the pelvis must be mapped in both the source and the character")
     pset = set(present)
     idx = np.array([joint_indices[c] for c in present])
-    pos_all, rot_all = kinematics if kinematics is not None else motion.forward_kinematics()
     level_info = {} if cal is None else dict(cal.info)
     level, centre = (None, None) if cal is None else (cal.level, cal.level_centre)
     if cal is None and floor is not None:
@@ -429,16 +524,14 @@ def build_targets(
         centre = np.array([ox, oy, float(floor.height)])
         level = _min_rotation(np.array([-sx, -sy, 1.0]), np.array([0.0, 0.0, 1.0]))
         level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
-    if level is not None:
-        pos_all = quat_apply(level, pos_all - centre) + np.array([centre[0], centre[1], 0.0])
-        if rot_all is not None:
-            rot_all = quat_mul(level, rot_all)
-    S = pos_all[:, idx]  # (F, N, 3) actor canonical positions
+    turning = [joint_indices[c] for c in present if c in opt.oriented or c in RIGID_PARENTS or c in TORSO_CARRIERS]
+    actor = _ActorKinematics(motion, idx, turning, level, centre, kinematics)
+    S, rot_all = actor.positions, actor.rotations  # (F, N, 3) actor canonical positions; rotations by joint
     F, N = S.shape[:2]
     valid = np.all(np.isfinite(S), axis=-1)
     if motion.confidence is not None:
         valid &= motion.confidence[:, idx] > 0.0
-    S = np.where(valid[..., None], S, 0.0)
+    S = _masked_positions(S, valid)
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
@@ -461,7 +554,7 @@ def build_targets(
             calib_pts = {c: S_rest[col[c]] for c in present}
         else:
             calib_pts = {c: S[pose.frame, col[c]] for c in present}
-            pose_rot = {c: rot_all[pose.frame, joint_indices[c]] for c in present}
+            pose_rot = dict(zip(present, actor.frame_rotations(pose.frame, [joint_indices[c] for c in present])))
         if not pose.standing:
             warn(
                 f"{motion.source}: no usable calibration pose: neither the rest pose nor any frame shows "
@@ -524,7 +617,7 @@ def build_targets(
         i = col[c]
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
-            R_a = rot_all[:, joint_indices[c]]  # rest world rotation is identity for BVH
+            R_a = rot_all[joint_indices[c]]  # rest world rotation is identity for BVH
             if c not in offsets:
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
@@ -552,12 +645,12 @@ def build_targets(
             delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
         elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
             A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-            delta[seg] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+            delta[seg] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
     if "chest" not in delta:  # the upper torso turns with the highest source torso joint
-        for seg in ("spine", "pelvis"):
+        for seg in TORSO_CARRIERS:
             if motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
                 A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-                delta["chest"] = quat_mul(rot_all[:, joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+                delta["chest"] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
                 break
             if seg in delta:
                 delta["chest"] = delta[seg]
@@ -665,5 +758,6 @@ def build_targets(
             **level_info,
         },
         calibration=cal,
+        source_recipe=None if kinematics is not None else partial(_source_positions_again, motion, idx, level, centre, valid),
     )
 

@@ -42,6 +42,7 @@ __all__ = [
     "SEGMENTS",
     "SegmentError",
     "Fidelity",
+    "figure_joints",
     "actor_joint_positions",
     "character_joint_positions",
     "segment_direction_errors",
@@ -153,29 +154,51 @@ class Fidelity:
         }
 
 
-def actor_joint_positions(motion, joint_indices: dict[str, int]) -> dict[str, np.ndarray]:
-    """Canonical joint -> ``(F, 3)`` world positions of the actor (metres, Z-up; NaN where lost)."""
-    world = motion.world_positions()
-    out = {}
-    for name, j in joint_indices.items():
-        p = np.array(world[:, j], dtype=float)
-        if motion.confidence is not None:
-            p[motion.confidence[:, j] <= 0.0] = np.nan
-        out[name] = p
+#: Frames whose kinematics are held at once while joint positions are gathered: the
+#: figures keep ``(F, 3)`` per joint they read, never every joint of the skeleton.
+BLOCK_FRAMES = 1024
+
+
+def figure_joints() -> frozenset[str]:
+    """The canonical joints the figures read: both ends of every segment of
+    :data:`SEGMENTS` (``mid_hip`` as the two hips), and the pelvis (the mid-hip of a
+    skeleton without hips)."""
+    ends = {j for seg in SEGMENTS.values() for j in seg} - {"mid_hip"}
+    return frozenset(ends | {"left_hip", "right_hip", "pelvis"})
+
+
+def actor_joint_positions(motion, joint_indices: dict[str, int], names=None) -> dict[str, np.ndarray]:
+    """Canonical joint -> ``(F, 3)`` world positions of the actor (metres, Z-up; NaN where lost).
+
+    Only the joints in ``names`` are kept (None: every mapped joint); the skeleton's forward
+    kinematics runs :data:`BLOCK_FRAMES` frames at a time (each frame on its own, so the same
+    numbers as one pass over the clip)."""
+    wanted = {n: j for n, j in joint_indices.items() if names is None or n in names}
+    F = motion.num_frames
+    out = {n: np.empty((F, 3)) for n in wanted}
+    for s in range(0, F, BLOCK_FRAMES):
+        e = min(F, s + BLOCK_FRAMES)
+        world = motion.slice_frames(s, e).world_positions()
+        for name, j in wanted.items():
+            block = out[name][s:e]
+            block[:] = world[:, j]
+            if motion.confidence is not None:
+                block[motion.confidence[s:e, j] <= 0.0] = np.nan
     return out
 
 
-def character_joint_positions(traj) -> dict[str, np.ndarray]:
-    """Canonical joint -> ``(F, 3)`` world positions of the character's mapped sites/bodies."""
+def character_joint_positions(traj, names=None) -> dict[str, np.ndarray]:
+    """Canonical joint -> ``(F, 3)`` world positions of the character's mapped sites/bodies
+    (only the joints in ``names``; None: every tracked joint)."""
     ch = traj.character
     model = ch.model
     data = mujoco.MjData(model)
-    names = list(ch.tracked)
-    sites = [(k, model.site(ch.tracked[n].name).id) for k, n in enumerate(names) if ch.tracked[n].kind == "site"]
-    bodies = [(k, model.body(ch.tracked[n].name).id) for k, n in enumerate(names) if ch.tracked[n].kind != "site"]
+    wanted = [n for n in ch.tracked if names is None or n in names]
+    sites = [(k, model.site(ch.tracked[n].name).id) for k, n in enumerate(wanted) if ch.tracked[n].kind == "site"]
+    bodies = [(k, model.body(ch.tracked[n].name).id) for k, n in enumerate(wanted) if ch.tracked[n].kind != "site"]
     s_k, s_id = (np.array([a for a, _ in sites], int), np.array([b for _, b in sites], int))
     b_k, b_id = (np.array([a for a, _ in bodies], int), np.array([b for _, b in bodies], int))
-    out = np.empty((traj.num_frames, len(names), 3))
+    out = np.empty((traj.num_frames, len(wanted), 3))
     for t, q in enumerate(traj.qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
@@ -183,7 +206,7 @@ def character_joint_positions(traj) -> dict[str, np.ndarray]:
             out[t, s_k] = data.site_xpos[s_id]
         if b_k.size:
             out[t, b_k] = data.xpos[b_id]
-    return {n: out[:, k] for k, n in enumerate(names)}
+    return {n: out[:, k] for k, n in enumerate(wanted)}
 
 
 def _point(joints: dict[str, np.ndarray], name: str) -> np.ndarray | None:
@@ -275,13 +298,19 @@ def vertical_speed_p99(z: np.ndarray, fps: float) -> float | None:
 
 def saturation_matrix(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float]) -> np.ndarray:
     """``(F-1, J)`` bool: joint ``j`` (in ``limits`` order) moves at :data:`SATURATION_RATIO`
-    of its velocity limit or faster on transition ``t -> t+1``."""
-    if qpos.shape[0] < 2 or not limits:
-        return np.zeros((max(qpos.shape[0] - 1, 0), len(limits)), dtype=bool)
+    of its velocity limit or faster on transition ``t -> t+1`` (speeds in rad/s or m/s,
+    computed :data:`BLOCK_FRAMES` transitions at a time)."""
+    F = qpos.shape[0]
+    if F < 2 or not limits:
+        return np.zeros((max(F - 1, 0), len(limits)), dtype=bool)
     adr = np.array([int(model.joint(n).qposadr[0]) for n in limits])
     vmax = np.array([limits[n] for n in limits], dtype=float)
-    speed = np.abs(np.diff(qpos[:, adr], axis=0)) * fps
-    return speed >= SATURATION_RATIO * vmax
+    out = np.empty((F - 1, len(limits)), dtype=bool)
+    for s in range(0, F - 1, BLOCK_FRAMES):
+        e = min(F - 1, s + BLOCK_FRAMES)
+        speed = np.abs(np.diff(qpos[s : e + 1, adr], axis=0)) * fps
+        out[s:e] = speed >= SATURATION_RATIO * vmax
+    return out
 
 
 def velocity_saturation(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float]) -> np.ndarray:
@@ -491,8 +520,9 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
     motion = traj.source_motion
     joints = traj.joint_indices
-    actor = actor_joint_positions(motion, joints)
-    character = character_joint_positions(traj)
+    used = figure_joints()
+    actor = actor_joint_positions(motion, joints, used)
+    character = character_joint_positions(traj, used)
     scale = float(getattr(traj.targets, "scale", 1.0)) if traj.targets is not None else 1.0
     ch = traj.character
     return fidelity(

@@ -265,8 +265,9 @@ class QPBuilder:
         np.matmul(eps[:r], Wm, out=c)
         np.negative(c, out=c)
         H.flat[self._diag] += damping + mu
-        if posture is not None:
-            self._posture(configuration, posture)
+        for p in (posture if isinstance(posture, (tuple, list)) else (posture,)):
+            if p is not None:
+                self._posture(configuration, p)
         return H, c
 
     def _posture(self, configuration: mink.Configuration, posture: mink.PostureTask) -> None:

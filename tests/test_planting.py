@@ -209,3 +209,18 @@ def test_joints_do_not_chatter_at_their_velocity_caps(clip):
     fid = traj.fidelity
     assert fid.saturated_share < 0.015, (fid.saturated_share, fid.saturated_joint)
     assert fid.saturated_joint_share < 0.01, (fid.saturated_joint_share, fid.saturated_joint)
+
+
+def test_flat_feet_figure_takes_a_label_file_without_every_point():
+    """metrics.character_flat_feet: a contact-label file that leaves a point out (no
+    left_toe here) measures the other foot instead of failing on the missing key."""
+    _, traj = retargeted("cmu_12_01_walk.bvh", "humanoid")
+    contacts = traj.contacts
+    full = metrics.character_flat_feet(traj, contacts)
+    kept = dict(contacts.labels)
+    try:
+        contacts.labels = {k: v for k, v in kept.items() if k != "left_toe"}
+        partial = metrics.character_flat_feet(traj, contacts)
+    finally:
+        contacts.labels = kept
+    assert 0 < partial["contact_samples"] < full["contact_samples"]

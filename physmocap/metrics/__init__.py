@@ -450,7 +450,9 @@ def _flat_foot_lift(traj, contacts, pos: np.ndarray, floor: float = 0.0) -> dict
     for side in sorted(ch):
         n = len(ch[side])
         highest.append(pos[:, k : k + n, 2].max(axis=1) - floor)
-        flat.append(np.asarray(contacts.labels[f"{side}_heel"], bool) & np.asarray(contacts.labels[f"{side}_toe"], bool))
+        none = np.zeros(traj.num_frames, dtype=bool)  # a label file may leave a point out
+        heel, toe = contacts.labels.get(f"{side}_heel", none), contacts.labels.get(f"{side}_toe", none)
+        flat.append(np.asarray(heel, bool) & np.asarray(toe, bool))
         k += n
     h, m = np.column_stack(highest), np.column_stack(flat)
     out = hovering(h, m)

@@ -101,7 +101,7 @@ def test_lean_qp_matches_mink_build_ik(name, seed, level):
     # what the lean path builds
     tasks = [*solver.tasks, *solver._extra_tasks] + (list(solver._constraints) if level >= 1 else [])
     constraints = solver._constraints if level == 0 else []
-    qp = solver._builder.build(conf, tasks, 1e-4, posture=solver.posture, trust=solver._trust,
+    qp = solver._builder.build(conf, tasks, 1e-4, posture=(solver.posture,), trust=solver._trust,
                                config_limit=solver.config_limit, boxes=boxes, limits=general, constraints=constraints)
     H, c, lb, ub = qp.H.copy(), qp.c.copy(), qp.lb.copy(), qp.ub.copy()
     G, h, A, b = qp.G.copy(), qp.h.copy(), qp.A.copy(), qp.b.copy()

@@ -208,9 +208,9 @@ class QPBuilder:
         configuration: mink.Configuration,
         tasks: Sequence[mink.Task],
         damping: float,
-        posture: mink.PostureTask | None = None,
+        posture: Sequence[mink.PostureTask] = (),
     ) -> tuple[np.ndarray, np.ndarray]:
-        r"""``(H, c)`` of ``tasks`` plus the diagonal posture term (see the module docstring).
+        r"""``(H, c)`` of ``tasks`` plus the diagonal posture terms (see the module docstring).
 
         ``H`` and ``c`` are the builder's buffers, overwritten by the next call.
         """
@@ -265,9 +265,8 @@ class QPBuilder:
         np.matmul(eps[:r], Wm, out=c)
         np.negative(c, out=c)
         H.flat[self._diag] += damping + mu
-        for p in (posture if isinstance(posture, (tuple, list)) else (posture,)):
-            if p is not None:
-                self._posture(configuration, p)
+        for p in posture:
+            self._posture(configuration, p)
         return H, c
 
     def _posture(self, configuration: mink.Configuration, posture: mink.PostureTask) -> None:
@@ -327,7 +326,7 @@ class QPBuilder:
         configuration: mink.Configuration,
         tasks: Sequence[mink.Task],
         damping: float,
-        posture: mink.PostureTask | None = None,
+        posture: Sequence[mink.PostureTask] = (),
         trust: float | np.ndarray | None = None,
         config_limit: mink.ConfigurationLimit | None = None,
         boxes: Sequence[FrameStepLimit | RootStepLimit] = (),
@@ -340,7 +339,7 @@ class QPBuilder:
             configuration: Current configuration :math:`q` (kinematics and ``mj_comPos`` done).
             tasks: Cost terms (mink tasks), in order.
             damping: Global Levenberg-Marquardt damping :math:`\mu`.
-            posture: The posture task, added as a diagonal (None: none).
+            posture: Posture-like tasks (rest pose, smoothness prior), each added as a diagonal.
             trust: Trust region :math:`\rho` (rad or m), scalar or ``(nv,)``; None: none.
             config_limit: Joint-range limit folded into the bounds (its ball-joint rows,
                 if any, become general rows).

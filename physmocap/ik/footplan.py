@@ -127,7 +127,9 @@ def foot_offsets(
             anchor = anchors[(name, a)]
             o = np.empty((F, 3))
             o[a : b + 1, :2] = anchor - x[a : b + 1, :2]
-            o[a : b + 1, 2] = heights[name] - x[a : b + 1, 2]
+            # vertically the point rests at its stance height while the actor's rests, and
+            # rises with the actor's own rise above the interval's median height
+            o[a : b + 1, 2] = heights[name] - np.minimum(x[a : b + 1, 2], np.median(x[a : b + 1, 2]))
             o[:a] = o[a]
             o[b + 1 :] = o[b]
             # another point of the foot already down at the start (still down at the end):
@@ -135,11 +137,14 @@ def foot_offsets(
             others = [v for k, v in down.items() if k != name]
             before = any(v[a - 1] for v in others) if a > 0 else False
             after = any(v[b + 1] for v in others) if b + 1 < F else False
-            w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
+            n_ease = min(ease, (b - a) // 2)
+            w = ease_weights(F, a, b, n_ease, (before, after))
             num += w[:, None] * o[:, :2]
             den += w
-            z_num += w * o[:, 2]
-            z_den += w
+            # heights ease outside the interval: within it the point rests at its stance height
+            wz = ease_weights(F, a, b, ease)
+            z_num += wz * o[:, 2]
+            z_den += wz
         z[name] = z_num / np.maximum(z_den, 1.0)
     return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
 

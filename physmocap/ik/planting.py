@@ -137,10 +137,14 @@ class PlanHints:
             with the actor's, :mod:`.footplan`): held horizontally while labelled,
             whatever its height, and not pulled down.
         holdable: The site may be held (the others are only pulled down).
+        lifting: The site is held horizontally while it stays down but not pulled
+            down: the ball of a foot rolling over its toes, which rests where it is
+            while the heel rises and lifts as the toes bend (None: no such site).
     """
 
     rolling: np.ndarray
     holdable: np.ndarray
+    lifting: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -277,7 +281,8 @@ class FootPlanter:
             else:
                 self.locked[k] = False
             self.free[k] = not flags[k] and not engaged[k]
-            if flags[k] and not rolling:
+            lifting = hints is not None and hints.lifting is not None and bool(hints.lifting[k])
+            if flags[k] and not rolling and not lifting:
                 # pulled onto the floor, the pull ramping in over onset_time
                 self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
                 ramp = _smooth((self.age[k] + 1) / self.onset_frames)
@@ -610,14 +615,16 @@ class Planting:
         toes_only = np.zeros(len(self.sites), dtype=bool) if self.anchored else toe & ~heel
         hints = None
         if not self.anchored:
-            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
+            # heel up, toes down: the foot rolls over its toes; its ball is held where it rests
+            # (not pulled down) until it lifts, so it rolls about its contact instead of sliding
+            # round the toe joint above it
             # The toes of a flat foot (heel and toes labelled) are pulled down, never held: its
             # heel and ball already fix it, a tip held where it first touched would lock the
             # toes in their landing bend, and a third held point over a straight leg made the
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
             waiting = toe & heel & self._toe_segment
-            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
+            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

@@ -49,15 +49,39 @@ def _flat_stance_skating(traj) -> dict:
     return metrics.skating(pos, traj.fps, resting & np.stack(masks, axis=1))
 
 
+def _flat_stance_foot_slip(traj) -> np.ndarray:
+    """cm/s per flat-foot transition: the slip of a foot's resting contact sites taken as a
+    whole (:func:`~physmocap.metrics.fidelity.pivot_slip`): a foot turning about a site it
+    stands on pivots with the actor and does not slip."""
+    from physmocap.metrics.fidelity import RESTING_HEIGHT, pivot_slip
+
+    labels = traj.contacts.labels
+    out = []
+    for side in sorted(traj.character.contacts):
+        sites = list(traj.character.contacts[side])
+        pos = traj.site_positions(sites)
+        flat = labels[f"{side}_heel"] & labels[f"{side}_toe"]
+        down = pos[..., 2] <= RESTING_HEIGHT
+        for t in np.flatnonzero(flat[:-1] & flat[1:]):
+            rest = down[t] & down[t + 1]
+            if rest.any():
+                out.append(pivot_slip(pos[t, rest, :2], pos[t + 1, rest, :2]) * traj.fps * 100.0)
+    return np.asarray(out)
+
+
 @pytest.mark.parametrize("clip,character", CASES)
 def test_planted_feet_do_not_skate_sink_or_hover(clip, character):
     _, traj = retargeted(clip, character)
     contacts = traj.contacts
     assert contacts is not None and any(lab.any() for lab in contacts.labels.values())
+    slip = _flat_stance_foot_slip(traj)
+    assert slip.size > 0
+    assert slip.mean() < 1.0 and np.percentile(slip, 95) < 3.0, (slip.mean(), np.percentile(slip, 95))
+    # every site on its own, pivots about another site included (an actor's flat foot turns
+    # by a few degrees over a stance; the foot holds still up to PlantOptions.pivot_threshold)
     skating = _flat_stance_skating(traj)
     assert skating["stance_samples"] > 0
-    assert skating["mean_cm_s"] < 1.0, skating
-    assert skating["p95_cm_s"] < 3.0, skating
+    assert skating["mean_cm_s"] < 2.0, skating
     pen = metrics.penetration(traj.model, traj.qpos)
     assert pen["max_mm"] < 2.0, pen
     hover = metrics.character_hovering(traj, contacts)

@@ -46,7 +46,7 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
-from ..models.geometry import character_geoms, geom_candidates
+from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, ToeContact, knee_between
 from .tasks import SitePositionTask
@@ -101,6 +101,13 @@ class PlantOptions:
             its front edge, a tenth of ``cost_z``: without it the foot could tip
             onto its side edge instead of pitching (measured on the bundled robot:
             25 degrees of roll, its ankle roll limit, and 11 cm/s of slip).
+        pivot_threshold: Offline only: radians a foot held at two points may be turned
+            by the plan before its holds turn with it (beyond this they follow the
+            plan's heading, :meth:`FootPlanter.turn`, so an actor pivoting on a planted
+            foot is followed; below it the turn is taken as the capture's drift and the
+            foot stays put).  5 degrees: a walking actor's flat foot drifts by a median
+            1.4-4.2 degrees over a stance on the shared clips (PyMO, CMU and Bandai walks);
+            a spin turns it by 30 degrees and more.
     """
 
     plant: bool = True
@@ -117,6 +124,7 @@ class PlantOptions:
     root_follow_time: float = 0.15
     ease_time: float = 0.1
     pivot_cost: float = 40.0
+    pivot_threshold: float = 0.087
 
     def __post_init__(self) -> None:
         check_fields(self, "planting")
@@ -206,6 +214,25 @@ class FootPlanter:
         u = xy - self.anchor[j, :2]
         n = float(np.linalg.norm(u))
         return xy if n < 1e-9 else self.anchor[j, :2] + d[j] * u / n
+
+    def turn(self, foot: int, angle: float) -> None:
+        r"""Turn the holds of ``foot`` by ``angle`` radians about the vertical axis.
+
+        Two held points of one foot fix its heading, so a foot the plan turns
+        while it is planted (an actor pivoting on a flat foot) would stay where it
+        landed and swing round in one frame when a point is let go.  Its holds are
+        turned with the plan instead, about the foot's last held point (the most
+        distal: a foot pivots on its toes), :math:`a_k \leftarrow p + R_z(\alpha)(a_k - p)`.
+        Nothing happens with fewer than two points held (one point does not fix the heading).
+        """
+        held = np.flatnonzero(self.locked & (self.feet == foot))
+        if held.size < 2 or angle == 0.0:
+            return
+        pivot = self.anchor[held[-1], :2].copy()
+        c, s = np.cos(angle), np.sin(angle)
+        d = self.anchor[held, :2] - pivot
+        self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
+        self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
 
     def reset(self) -> None:
         self.locked[:] = False
@@ -440,7 +467,8 @@ class Planting:
             model, self.sites, fps, lock_opt, floor=floor, rest_distances=self._rest_distances(character), feet=feet
         )
         #: per site, its role while only the toes are down (offline; :meth:`_toe_roles`)
-        self._foot_bodies = {side: self._subtree_bodies(model, character, side) for side in ("left", "right")}
+        feet_bodies = foot_bodies(model, character.contacts)
+        self._foot_bodies = {side: feet_bodies.get(side, []) for side in ("left", "right")}
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
         self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
@@ -469,6 +497,12 @@ class Planting:
         self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
         #: horizontal offset of the whole body from the actor's (scaled) path, metres
         self.root_offset = np.zeros(2)
+        #: per side, the planned foot heading on the previous frame (radians; offline)
+        self._heading: dict[str, float] = {}
+        #: per side, the planned turn since the foot was last held at two points, and the
+        #: part of it the holds have followed (radians; :meth:`_turn_with_plan`)
+        self._planned_turn = np.zeros(2)
+        self._held_turn = np.zeros(2)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
         foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
@@ -501,19 +535,6 @@ class Planting:
         d[body[:, None] != body[None]] = np.nan
         np.fill_diagonal(d, np.nan)
         return d
-
-    @staticmethod
-    def _subtree_bodies(model: mujoco.MjModel, character, side: str) -> list[int]:
-        """The bodies of a foot's contact sites and every body below them (toes)."""
-        roots = {int(model.site(s).bodyid[0]) for s in character.contacts.get(side, ())}
-        out = []
-        for b in range(1, model.nbody):
-            a = b
-            while a > 0 and a not in roots:
-                a = int(model.body_parentid[a])
-            if a > 0:
-                out.append(b)
-        return out
 
     @staticmethod
     def _toe_roles(model: mujoco.MjModel, character, side: str) -> dict[str, str]:
@@ -595,6 +616,30 @@ class Planting:
             return {}
         return {t.site_id: c for t, free in zip(self.locks.tasks, self.locks.free) if free}
 
+    def _turn_with_plan(self, positions: np.ndarray) -> None:
+        """Turn each foot's holds (:meth:`FootPlanter.turn`) by its planned heading's change
+        since the previous frame: the heading of the foot's targets, ankle to toe, horizontal."""
+        for s, side in enumerate(("left", "right")):
+            if side not in self.feet:
+                continue
+            ia, it = self.feet[side][:2]
+            if ia == it:
+                continue
+            v = positions[it, :2] - positions[ia, :2]
+            heading = float(np.arctan2(v[1], v[0]))
+            step = 0.0
+            if side in self._heading:
+                step = (heading - self._heading[side] + np.pi) % (2.0 * np.pi) - np.pi
+            self._heading[side] = heading
+            if np.count_nonzero(self.locks.locked & (self.locks.feet == s)) < 2:
+                self._planned_turn[s] = self._held_turn[s] = 0.0
+                continue
+            self._planned_turn[s] += step
+            free = self.options.pivot_threshold
+            turn = np.sign(self._planned_turn[s]) * max(0.0, abs(self._planned_turn[s]) - free)
+            self.locks.turn(s, float(turn - self._held_turn[s]))
+            self._held_turn[s] = turn
+
     @staticmethod
     def _xy(data: mujoco.MjData, ref: tuple[str, int]) -> np.ndarray:
         kind, i = ref
@@ -625,6 +670,7 @@ class Planting:
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
             waiting = toe & heel & self._toe_segment
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release)
+            self._turn_with_plan(positions)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

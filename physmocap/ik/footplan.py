@@ -12,13 +12,21 @@ target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
   for the point that touches down first; the other points of the same contact
   get the location the same foot translation gives them (so heel and toe
   agree, :func:`_consistent_anchors`),
-  and vertically the height at which the character's joint carrying the point
+  and vertically the height :math:`h_p` at which the character's joint carrying the point
   stands when the point rests on the floor (from its rest pose);
-* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it and is held
-  at its end values outside it;
+* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` horizontally and
+  :math:`h_p - \min(z_p(t), m_k)` vertically inside it, with :math:`m_k` the median
+  height of the point's target over the interval: the joint stands at its stance
+  height while the actor's rests and rises with the actor's own rise above it (a heel
+  lifting before its label ends lifts the character's with it, instead of being held
+  down and catching up in one frame at toe-off); the offset is held at its end values
+  outside the interval;
 * its weight :math:`w_k(t)` is 1 inside the interval and falls to 0 along a
   smoothstep over ``ease_time`` seconds before :math:`a_k` and after
-  :math:`b_k` (ease-in, ease-out);
+  :math:`b_k` (ease-in, ease-out); horizontally, where another point of the foot is down
+  across an end, that ramp lies inside the interval instead (the planted point is not
+  disturbed); vertically it always lies outside (inside, it lifted the heel by the
+  actor's stance height difference from the character's while the actor's heel was down);
 * the foot's offset is :math:`o(t) = \sum_k w_k o_k / \max(1, \sum_k w_k)`.
 
 Offsets are three-dimensional: horizontally the plant location, vertically
@@ -108,9 +116,10 @@ def foot_offsets(
         ease_time: Seconds over which each contact's offset eases in and out.
         heights: The same names -> height (metres) of the joint above the floor
             when its contact point rests on the floor (the character's rest pose):
-            in contact that joint is held at that height (each joint on its own,
-            so a foot with heel and toe down lies flat), neither hovering nor
-            pulled into the floor.
+            in contact that joint is held at that height while the actor's joint is at
+            or below its median height over the contact, and rises by the actor's
+            excess above that median (each joint on its own, so a foot with heel and
+            toe down lies flat), neither hovering nor pulled into the floor.
     """
     F = next(iter(points.values())).shape[0]
     ease = int(round(max(ease_time, 0.0) * fps))
@@ -137,11 +146,10 @@ def foot_offsets(
             others = [v for k, v in down.items() if k != name]
             before = any(v[a - 1] for v in others) if a > 0 else False
             after = any(v[b + 1] for v in others) if b + 1 < F else False
-            n_ease = min(ease, (b - a) // 2)
-            w = ease_weights(F, a, b, n_ease, (before, after))
+            w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
             num += w[:, None] * o[:, :2]
             den += w
-            # heights ease outside the interval: within it the point rests at its stance height
+            # heights always ease outside the interval (module docstring)
             wz = ease_weights(F, a, b, ease)
             z_num += wz * o[:, 2]
             z_den += wz

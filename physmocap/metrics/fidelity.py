@@ -448,22 +448,24 @@ def pivot_slip(before: np.ndarray, after: np.ndarray) -> float:
     :math:`2|\sin(\theta/2)|\,|p - c|`.  The least moving point of the patch (its
     convex hull) therefore moves :math:`2|\sin(\theta/2)|\,d(c, \mathrm{hull})`: 0 for
     a foot turning about a point it stands on, the common displacement for a foot
-    sliding without turning.
+    sliding without turning.  Where the points do not move rigidly (toes bending), the
+    least displacement of any one of them bounds the figure.
     """
     before = np.asarray(before, dtype=float)
     after = np.asarray(after, dtype=float)
+    least = float(np.linalg.norm(after - before, axis=1).min())
     if len(before) == 1:
-        return float(np.linalg.norm(after[0] - before[0]))
+        return least
     pc, qc = before.mean(axis=0), after.mean(axis=0)
     H = (before - pc).T @ (after - qc)
     theta = float(np.arctan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1]))
     if abs(np.sin(theta / 2.0)) < 1e-9:
-        return float(np.linalg.norm(qc - pc))
+        return min(least, float(np.linalg.norm(qc - pc)))
     c_, s_ = np.cos(theta), np.sin(theta)
     R = np.array([[c_, -s_], [s_, c_]])
     T = qc - R @ pc
     pivot = np.linalg.solve(np.eye(2) - R, T)
-    return 2.0 * abs(np.sin(theta / 2.0)) * _distance_to_hull(pivot, before)
+    return min(least, 2.0 * abs(np.sin(theta / 2.0)) * _distance_to_hull(pivot, before))
 
 
 def _geom_groups(model: mujoco.MjModel, geoms: list[int], feet: Mapping[str, Sequence[int]]) -> np.ndarray:

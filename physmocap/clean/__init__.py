@@ -112,5 +112,5 @@ def clean(motion: Motion, options: CleanOptions | None = None, mapping=None) -> 
 
     _check_finite(motion)
     found = detect_glitches(motion, options, mapping)
-    fixed, done = correct_glitches(motion, found, options)
+    fixed, done = correct_glitches(motion, found, options, mapping=mapping)
     return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

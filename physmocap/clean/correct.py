@@ -14,7 +14,8 @@ positional glitch (bone stretch, gap, a held position) is bridged by the joint's
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked); a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
-may be the real one.
+may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
+through the hard-limited IK on an actor-fitted humanoid (:mod:`.resolve`, "re-solved").
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import dataclasses
 
 import numpy as np
 
+from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints
@@ -270,14 +272,73 @@ def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) 
     return (1 - w) * first + w * last, "linear"
 
 
+#: How :func:`correct_glitches` uses the hard-limited IK re-solve (:mod:`.resolve`).
+RESOLVE_MODES = ("never", "limits", "always")
+
+
+def _resolve_spans(
+    motion: Motion, rot: np.ndarray, done: list[Glitch], mode: str, opt: CleanOptions, mapping=None
+) -> list[Glitch]:
+    """``done`` (the repaired glitch list) with the rotational repairs re-solved through the
+    hard-limited IK (:mod:`.resolve`) where ``mode`` asks: "always" wherever the joint can be
+    re-solved, "limits" only where the interpolated pose leaves a range of motion
+    (:func:`.resolve.beyond_range_mask`: a movement the joint changes beyond its range, the
+    performer margin ``rom_soft_margin`` included) and the IK's pose is beyond it on fewer of
+    the span's frames.  ``rot (F, J, 4)`` is updated in place."""
+    from .detect import canonical_joints
+    from .resolve import actor_ik, beyond_range_mask
+
+    names = {n: j for j, n in enumerate(motion.skeleton.names)}
+    F = len(rot)
+    spans = [
+        (i, names[g.joint], g.start, g.end)
+        for i, g in enumerate(done)
+        if REPAIRED.get(g.kind) == "rotation" and g.corrected and g.start >= 1 and g.end + 1 < F
+    ]
+    if mode == "never" or not spans:
+        return done
+    ji = canonical_joints(motion, mapping)
+    if mode == "limits":
+        beyond = beyond_range_mask(dataclasses.replace(motion, rotations=rot), opt, ji)
+        spans = [x for x in spans if beyond[x[2] : x[3] + 1, x[1]].any()]
+    actor = actor_ik(motion, ji) if spans else None
+    if actor is None:
+        return done
+    interpolated = rot.copy()
+    out = list(done)
+    resolved = []
+    for i, j, s, e in spans:
+        ik = actor.resolve(motion, rot, j, s, e)
+        if ik is not None:
+            rot[s : e + 1, j] = ik
+            out[i] = dataclasses.replace(done[i], corrected="re-solved")
+            resolved.append((i, j, s, e))
+    if mode == "limits" and resolved:  # keep the IK only where it is within the ranges more often
+        after = beyond_range_mask(dataclasses.replace(motion, rotations=rot), opt, ji)
+        for i, j, s, e in resolved:
+            if after[s : e + 1, j].sum() >= beyond[s : e + 1, j].sum():
+                rot[s : e + 1, j] = interpolated[s : e + 1, j]
+                out[i] = done[i]
+    return out
+
+
 def correct_glitches(
-    motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None
+    motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None, resolve: str = "limits", mapping=None
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
+    "matched" (:class:`_Matcher`), "re-solved" (the hard-limited IK on an actor-fitted
+    humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "swapped back",
-    or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``)."""
+    or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
+
+    ``resolve`` (:data:`RESOLVE_MODES`): "limits" re-solves a rotational repair through the
+    hard-limited IK where the interpolated pose leaves a range of motion, "never" keeps every
+    interpolation, "always" re-solves wherever the joint can be (for measuring it)
+    (:func:`_resolve_spans`); ``mapping`` names the source's joints (as
+    :func:`.detect.detect_glitches` takes it)."""
+    if resolve not in RESOLVE_MODES:
+        raise OptionError(f"resolve must be one of {', '.join(RESOLVE_MODES)}, got {resolve!r}")
     opt = options or CleanOptions()
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     rot = None if motion.rotations is None else np.array(motion.rotations, copy=True)
@@ -316,6 +377,8 @@ def correct_glitches(
         parent = int(motion.skeleton.parents[j])
         arr[g.start : g.end + 1, j], how = _repair_position(arr, j, parent if parent >= 0 else None, g.start, g.end)
         out.append(dataclasses.replace(g, corrected=how))
+    if rot is not None:
+        out = _resolve_spans(motion, rot, out, resolve, opt, mapping)
     fixed = dataclasses.replace(motion, rotations=rot) if rot is not None else motion
     if pos is not None:
         fixed = dataclasses.replace(fixed, positions=pos)

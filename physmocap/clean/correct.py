@@ -154,6 +154,28 @@ def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matc
     return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows)
 
 
+def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
+    """First frames of the two pseudo-gaps :func:`_bridge` tests a glitch on frames ``s..e``
+    of an ``F``-frame clip on: ``n = e - s + 1`` frames just before the span and just after it
+    (one good frame left between, and two outside for the bridges' end speeds); where the
+    clip ends on one side, the second is the next ``n`` frames on the other side (one frame
+    between them), so a glitch near the clip's ends is judged on as much of its joint's own
+    motion as one in the middle."""
+    n = e - s + 1
+
+    def fits(a: int) -> bool:
+        return a >= 2 and a + n + 1 < F
+
+    before, after = s - 2 - n, e + 3
+    if fits(before) and fits(after):
+        return [before, after]
+    if fits(before):
+        return [before, before - n - 1] if fits(before - n - 1) else [before]
+    if fits(after):
+        return [after, after + n + 1] if fits(after + n + 1) else [after]
+    return []
+
+
 def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
     """The better of the Hermite curve and the matched motion (:class:`_Matcher`) over
     frames ``s..e`` of joint ``j`` of ``R (F, J, 4)``, judged on the joint's own good motion
@@ -167,10 +189,8 @@ def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> 
     F, n = len(R), e - s + 1
     err = np.zeros(2)
     tested = False
-    for a in (s - 2 - n, e + 3):  # the pseudo-gap's first frame, before and after
+    for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
-        if a < 2 or b + 2 >= F:
-            continue
         hidden = np.zeros(F, bool)
         hidden[a : b + 1] = True
         matched = matcher.bridge(j, a, b, hidden)

@@ -79,9 +79,10 @@ def test_interpolation_beyond_the_range_is_re_solved():
     _check_resolved(_load("example"), 200)
 
 
-@pytest.mark.parametrize(
-    "clip", ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "bandai_walk.bvh", "optitrack_hops_crouch.bvh", "cmu_05_10_dance_spins.bvh"]
-)
+RIGS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "bandai_walk.bvh", "optitrack_hops_crouch.bvh", "cmu_05_10_dance_spins.bvh"]
+
+
+@pytest.mark.parametrize("clip", RIGS)
 def test_interpolation_beyond_the_range_is_re_solved_on_shared_rigs(clip):
     motion = _load(clip)
     _check_resolved(motion, motion.num_frames // 2)
@@ -134,3 +135,25 @@ def test_clean_keeps_an_unglitched_clip_unchanged():
     changed = {t for g in report.glitches if g.corrected for t in range(g.start, g.end + 1)}
     keep = np.setdiff1d(np.arange(walk.num_frames), sorted(changed))
     assert np.array_equal(np.asarray(fixed.rotations)[keep], np.asarray(walk.rotations)[keep])
+
+
+def test_benchmark_compares_interpolation_and_ik():
+    """scripts/glitch_benchmark.py's repair comparison on the bundled walk's injected frozen
+    joints: the per-glitch oracle is never worse than interpolation alone or the IK alone."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
+    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    walk = _load("example")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        glitched, truth, _ = bench.inject(walk, np.random.default_rng([7, 3]), 3, ("frozen",))
+        fixed, report = clean(glitched)
+    frames = sorted({f for _, f in truth["frozen"]})
+    got = bench._method_errors(glitched, fixed, report, walk.world_positions(), frames, np.zeros(walk.num_frames, bool))
+    assert set(got) == set(bench.METHODS)
+    assert all(v[3] == got["never"][3] > 0 for v in got.values())  # the same repaired glitches
+    assert got["oracle"][0] <= min(got["never"][0], got["always"][0]) + 1e-12

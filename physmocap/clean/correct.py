@@ -14,7 +14,8 @@ positional glitch (bone stretch, gap, a held position) is bridged by the joint's
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked),
 then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
-from the parent and the child (:func:`_on_bones`); a left/right swap by trading the two joints' positions back over the span.
+from the parent and the child (:func:`_on_bones`); a left/right swap by trading the two
+joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
 through the hard-limited IK on an actor-fitted humanoid (:mod:`.resolve`, "re-solved").

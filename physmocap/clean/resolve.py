@@ -177,7 +177,10 @@ def _back_to_local(WB: np.ndarray, WP: np.ndarray, W: np.ndarray, parents: np.nd
     return quat_mul(quat_mul(quat_conj(Cp), joint), Cj)[1:-1]
 
 
-def _segment_lengths(motion: Motion, ji: dict[str, int], base: dict[tuple[str, str], float]) -> dict[tuple[str, str], float]:
+Segment = tuple[str, str]
+
+
+def _segment_lengths(motion: Motion, ji: dict[str, int], base: dict[Segment, float]) -> dict[Segment, float]:
     """The source's segment lengths (metres, its first frame: a BVH's bones are rigid) for the
     humanoid segments it has both ends of."""
     from ..models.scaling import segment_lengths_from_positions

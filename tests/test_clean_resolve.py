@@ -88,13 +88,15 @@ def test_interpolation_beyond_the_range_is_re_solved_on_shared_rigs(clip):
     _check_resolved(motion, motion.num_frames // 2)
 
 
-def test_interpolation_within_the_range_is_kept():
-    walk = _load("example")
-    j = walk.skeleton.names.index("LeftForeArm")
+def _twisted(walk, joint: str, s: int, e: int):
+    """``(walk with joint's rotation replaced by a 90-degree twist on s..e, the spike glitch)``."""
     R = np.array(walk.rotations, copy=True)
-    R[200:206, j] = [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)]
-    bad = dataclasses.replace(walk, rotations=R)
-    glitch = [Glitch("spike", "LeftForeArm", 200, 205, 90.0)]
+    R[s : e + 1, walk.skeleton.names.index(joint)] = [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)]
+    return dataclasses.replace(walk, rotations=R), [Glitch("spike", joint, s, e, 90.0)]
+
+
+def test_interpolation_within_the_range_is_kept():
+    bad, glitch = _twisted(_load("example"), "LeftForeArm", 200, 205)
     never, _ = correct_glitches(bad, glitch, resolve="never")
     fixed, done = correct_glitches(bad, glitch)
     assert done[0].corrected in ("cubic", "matched")
@@ -104,14 +106,11 @@ def test_interpolation_within_the_range_is_kept():
 def test_always_re_solves_close_to_the_clean_motion():
     """The IK itself (no choice): a spike of the knee re-solved lands within 2 cm of the clean pose."""
     walk = _load("example")
-    j = walk.skeleton.names.index("LeftLeg")
-    R = np.array(walk.rotations, copy=True)
-    R[300:306, j] = [0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)]
-    bad = dataclasses.replace(walk, rotations=R)
-    fixed, done = correct_glitches(bad, [Glitch("spike", "LeftLeg", 300, 305, 90.0)], resolve="always")
+    bad, glitch = _twisted(walk, "LeftLeg", 300, 305)
+    fixed, done = correct_glitches(bad, glitch, resolve="always")
     assert done[0].corrected == "re-solved"
     assert _span_error(fixed, walk, 300, 305) < 0.02
-    again, _ = correct_glitches(bad, [Glitch("spike", "LeftLeg", 300, 305, 90.0)], resolve="always")
+    again, _ = correct_glitches(bad, glitch, resolve="always")
     assert np.array_equal(np.asarray(again.rotations), np.asarray(fixed.rotations))  # deterministic
 
 

@@ -156,3 +156,14 @@ def test_benchmark_compares_interpolation_and_ik():
     assert set(got) == set(bench.METHODS)
     assert all(v[3] == got["never"][3] > 0 for v in got.values())  # the same repaired glitches
     assert got["oracle"][0] <= min(got["never"][0], got["always"][0]) + 1e-12
+
+
+def test_clean_command_takes_the_resolve_mode(tmp_path, capsys):
+    from physmocap.cli import main
+
+    out = tmp_path / "walk.bvh"
+    assert main(["clean", "example", "-o", str(out), "--resolve", "always"]) == 0
+    assert out.exists()
+    with pytest.raises(SystemExit):
+        main(["clean", "example", "--resolve", "sometimes"])
+    assert "invalid choice" in capsys.readouterr().err

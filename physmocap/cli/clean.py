@@ -39,6 +39,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         "hierarchy of a joint-position file's bones and the ranges of motion",
     )
     p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    p.add_argument(
+        "--resolve",
+        choices=("never", "limits", "always"),
+        default="limits",
+        help="re-solve rotational repairs through the hard-limited IK on an actor-fitted humanoid: where the "
+        "interpolated pose leaves a range of motion (limits, the default), never, or wherever the joint can be "
+        "(always; interpolation is better on average)",
+    )
     add_clean_options(p)
     p.set_defaults(func=run)
 
@@ -129,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     motion = load_motion(args.input, min_frames=1, **read_opts)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
-    fixed, report = clean(motion, options, mapping=args.source_map)
+    fixed, report = clean(motion, options, mapping=args.source_map, resolve=args.resolve)
     sys.stdout.write(report.table())
     with OutputSet():  # the BVH, the plots and the JSON renamed into place together, or none
         _write(motion, fixed, report, args)

@@ -41,7 +41,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
-    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc, marker .mcap): marker roles overriding the aliases")
     p.add_argument("--joint-centres", action="store_true",
                    help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
                    "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
@@ -183,18 +183,6 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             announce(f"wrote {out}")
 
 
-def is_marker_file(path: str) -> bool:
-    """A .c3d or .trc file, or an .mcap file holding a marker channel (labelled points)."""
-    suffix = Path(path).suffix.lower()
-    if suffix in (".c3d", ".trc"):
-        return True
-    if suffix == ".mcap" and Path(path).is_file():
-        from ..sources.mcap import has_markers
-
-        return has_markers(path)
-    return False
-
-
 def retarget_from_args(args: argparse.Namespace):
     """Load the input and the character and retarget with the options of
     :func:`add_retarget_options`; returns the trajectory.  A marker file is solved into the
@@ -204,6 +192,7 @@ def retarget_from_args(args: argparse.Namespace):
     from ..ik.retarget import retarget
     from ..models import load_character
     from ..sources import load_motion
+    from ..sources.markers import is_marker_file
 
     config = config_from_args(args)
     read_opts = {}

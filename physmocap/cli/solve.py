@@ -1,4 +1,4 @@
-"""``physmocap solve``: a marker recording (C3D, TRC) to the actor's own skeleton as BVH."""
+"""``physmocap solve``: a marker recording (C3D, TRC, marker MCAP) to the actor's own skeleton as BVH."""
 
 from __future__ import annotations
 
@@ -6,21 +6,21 @@ import argparse
 import json
 from pathlib import Path
 
-from ..errors import InputError, OptionError
+from ..errors import OptionError
 from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "solve",
-        help="solve optical markers (.c3d, .trc) into the actor's skeleton (BVH out)",
+        help="solve optical markers (.c3d, .trc, marker .mcap) into the actor's skeleton (BVH out)",
         description=(
             "Calibrate the actor from the markers (functional joint centres, fixed segment lengths), "
             "then solve every frame by marker-driven IK under the joint ranges and the floor, and write "
             "the actor's skeleton (canonical joint names) as BVH."
         ),
     )
-    p.add_argument("input", metavar="INPUT", help="marker file (.c3d or .trc)")
+    p.add_argument("input", metavar="INPUT", help="marker file (.c3d, .trc, or .mcap with labelled markers)")
     p.add_argument("-o", "--output", required=True,
                    help="output .bvh (the actor); with --character, the character's motion: .bvh, .npz, .csv or .mcap")
     p.add_argument("--character", metavar="PATH",
@@ -42,24 +42,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def read_markers(path: str, units: str | float | None = None):
-    """The :class:`~physmocap.markers.recording.MarkerRecording` of a .c3d or .trc file
-    (``units`` overriding the file's length unit)."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".c3d":
-        from ..sources.c3d import read_c3d_markers
-
-        return read_c3d_markers(path, units)
-    if suffix == ".trc":
-        from ..sources.trc import read_trc_markers
-
-        return read_trc_markers(path, units)
-    raise InputError(f"physmocap solve reads marker files (.c3d, .trc), not {suffix or 'files without a suffix'!r}", path=path)
-
-
 def run(args: argparse.Namespace) -> int:
     from ..markers.solve import MarkerSolveOptions, print_report, solve_markers, write_actor_bvh
     from ..options import check_frame_range
+    from ..sources.markers import read_markers
     from .retarget import WRITERS
 
     out = Path(args.output)

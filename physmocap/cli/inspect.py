@@ -224,6 +224,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
         "marker_height_m": height,
         "up_axis": up,
         "roles": {role: rec.labels[i] for role, i in sorted(ms.roles.items())},
+        "role_choices": dict(sorted(ms.choices.items())),
         "unused": list(ms.unused),
         "gaps": {lab: {"frames": n, "share": n / rec.num_frames} for lab, n in gaps.items()},
     }
@@ -235,6 +236,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
         f"frames:    {rec.num_frames} at {rec.fps:.6g} fps; {len(rec.labels)} markers; up axis {up} (from the markers)",
         f"units:     {rep['units']}; the markers span {_fmt(height, '.3g')} m vertically (median over frames)",
         f"roles:     {len(ms.roles)} found: " + ", ".join(f"{r}={rec.labels[i]}" for r, i in sorted(ms.roles.items())),
+        *(f"chosen:    {why}" for _, why in sorted(ms.choices.items())),
         f"unused:    {', '.join(ms.unused) if ms.unused else '(none)'}",
         "gaps:      " + (", ".join(f"{lab} {n} frames" for lab, n in sorted(gaps.items())) if gaps else "(none)"),
     ]

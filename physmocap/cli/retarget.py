@@ -35,7 +35,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_retarget_options(p: argparse.ArgumentParser) -> None:
-    """The options that say how to retarget (shared by ``retarget`` and ``preview``)."""
+    """The options that say how to retarget (shared by ``retarget``, ``preview``, ``view`` and
+    ``batch``), with the marker solve's (:func:`~physmocap.cli.solve.add_marker_solve_options`)."""
+    from .solve import add_marker_solve_options
+
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
@@ -46,6 +49,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
                    help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
                    "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
                    "and no joint ranges before the character's")
+    add_marker_solve_options(p, prefix="marker-")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -114,6 +118,9 @@ def config_from_args(args: argparse.Namespace):
         options["self_collision"] = False
     if args.no_plant:
         options["plant"] = False
+    from .solve import marker_solve_options
+
+    marker_solve_options(args)  # refused now, before anything is read
     return RetargetConfig().with_options(**options)
 
 
@@ -183,6 +190,31 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             announce(f"wrote {out}")
 
 
+def marker_read_options(args: argparse.Namespace) -> dict:
+    """What ``load_motion`` is told about a marker input by ``--joint-centres`` (``solve``
+    False) and the marker solve's flags (``solve_options``: one validated
+    :class:`~physmocap.markers.solve.MarkerSolveOptions`, as ``physmocap solve`` builds it).
+
+    Raises:
+        OptionError: These flags on an input that is not a marker file, or the solve's flags
+            with ``--joint-centres`` (which skips the solve).
+    """
+    from ..sources.markers import MARKER_FILE_TYPES, is_marker_file
+    from .solve import marker_solve_options
+
+    joint_centres = getattr(args, "joint_centres", False)
+    solve_options = marker_solve_options(args)
+    if not (joint_centres or solve_options):
+        return {}
+    flags = "--joint-centres is" if joint_centres else "--marker-max-iterations and --marker-no-floor are"
+    if not is_marker_file(args.input):
+        raise OptionError(f"{flags} for marker files ({MARKER_FILE_TYPES})", path=args.input)
+    if joint_centres and solve_options:
+        raise OptionError("--marker-max-iterations and --marker-no-floor shape the actor's solve, which "
+                          "--joint-centres skips", path=args.input)
+    return {"solve": False} if joint_centres else {"solve_options": solve_options}
+
+
 def retarget_from_args(args: argparse.Namespace):
     """Load the input and the character and retarget with the options of
     :func:`add_retarget_options`; returns the trajectory.  A marker file is solved into the
@@ -192,7 +224,6 @@ def retarget_from_args(args: argparse.Namespace):
     from ..ik.retarget import retarget
     from ..models import load_character
     from ..sources import load_motion
-    from ..sources.markers import is_marker_file
 
     config = config_from_args(args)
     read_opts = {}
@@ -200,10 +231,7 @@ def retarget_from_args(args: argparse.Namespace):
         read_opts["units"] = args.in_units
     if getattr(args, "marker_set", None):
         read_opts["marker_set"] = args.marker_set
-    if getattr(args, "joint_centres", False):
-        if not is_marker_file(args.input):
-            raise OptionError("--joint-centres is for marker files (.c3d, .trc, marker .mcap)", path=args.input)
-        read_opts["solve"] = False
+    read_opts.update(marker_read_options(args))
     motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)
     return retarget(

@@ -34,12 +34,41 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--marker-set", metavar="SET.toml", help="marker roles overriding the built-in aliases")
     p.add_argument("--start", type=int, help="first frame (inclusive)")
     p.add_argument("--end", type=int, help="last frame (exclusive)")
-    p.add_argument("--max-iterations", type=int, default=2, help="IK iterations per frame (default 2)")
-    p.add_argument("--no-floor", action="store_true", help="do not keep the feet above the floor")
+    add_marker_solve_options(p)
     p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
     p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--quiet", action="store_true", help="no residual table or 'wrote' lines")
     p.set_defaults(func=run)
+
+
+def add_marker_solve_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """The flags of :class:`~physmocap.markers.solve.MarkerSolveOptions` a user sets, read back
+    by :func:`marker_solve_options`: ``--{prefix}max-iterations N`` and ``--{prefix}no-floor``.
+    ``solve`` takes them bare; ``retarget`` (and ``preview``, ``view``, ``batch``), whose
+    ``--max-iterations`` and ``--no-floor`` are the character's, with ``prefix="marker-"``."""
+    what = "marker files: the actor's " if prefix else ""
+    p.add_argument(f"--{prefix}max-iterations", dest="marker_max_iterations", type=int, metavar="N",
+                   help=f"{what}marker-driven IK iterations per frame (default 2)")
+    p.add_argument(f"--{prefix}no-floor", dest="marker_no_floor", action="store_true",
+                   help=f"{what}marker solve without the floor constraint (feet may go below it)"
+                   + ("" if prefix else "; with --character, the character's too"))
+
+
+def marker_solve_options(args: argparse.Namespace):
+    """The :class:`~physmocap.markers.solve.MarkerSolveOptions` of the flags of
+    :func:`add_marker_solve_options`, validated; None when none is set (the defaults).
+
+    Raises:
+        OptionError: A value the options refuse (an iteration count below 1...).
+    """
+    from ..markers.solve import MarkerSolveOptions
+
+    changes: dict = {}
+    if getattr(args, "marker_max_iterations", None) is not None:
+        changes["max_iterations"] = args.marker_max_iterations
+    if getattr(args, "marker_no_floor", False):
+        changes["floor"] = False
+    return MarkerSolveOptions(**changes) if changes else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,15 +95,13 @@ def run(args: argparse.Namespace) -> int:
     check_not_input(outputs, [args.input, args.marker_set, args.map])
     check_distinct(outputs)
     check_frame_range(args.start, args.end)
-    if args.max_iterations < 1:
-        raise OptionError("--max-iterations must be at least 1")
+    opts = marker_solve_options(args) or MarkerSolveOptions()
     rec = read_markers(args.input, args.in_units).frames(args.start, args.end)
     character = None
     if args.character is not None:
         from ..models import load_character
 
         character = load_character(args.character, args.map)  # a bad character fails before the solve
-    opts = MarkerSolveOptions(max_iterations=args.max_iterations, floor=not args.no_floor)
     sol = solve_markers(rec, args.marker_set, opts)
     rep = sol.report()
     traj = None
@@ -83,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         from ..markers.solve import actor_motion
 
         traj = retarget(actor_motion(sol), character, progress=False if args.quiet else None,
-                        floor=not args.no_floor)
+                        floor=opts.floor)
     with OutputSet():
         if actor_out is not None:
             write_actor_bvh(sol, actor_out, up=args.up.upper(), units=args.units)

@@ -26,8 +26,8 @@ READERS: dict[str, tuple[str, str]] = {
     ".npz": ("physmocap.sources.positions", "read_positions"),
     ".jsonl": ("physmocap.sources.positions", "read_positions"),
     ".mcap": ("physmocap.sources.mcap", "read_mcap"),
-    ".c3d": ("physmocap.sources.c3d", "read_c3d"),
-    ".trc": ("physmocap.sources.trc", "read_trc"),
+    ".c3d": ("physmocap.sources.markers", "read_marker_motion"),
+    ".trc": ("physmocap.sources.markers", "read_marker_motion"),
 }
 
 

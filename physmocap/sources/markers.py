@@ -14,14 +14,16 @@ from __future__ import annotations
 import importlib
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError
 
 if TYPE_CHECKING:
     from ..markers.recording import MarkerRecording
+    from ..markers.solve import MarkerSolveOptions
+    from ..motion import Motion
 
-__all__ = ["MARKER_READERS", "MARKER_FILE_TYPES", "is_marker_file", "read_markers"]
+__all__ = ["MARKER_READERS", "MARKER_FILE_TYPES", "is_marker_file", "read_markers", "read_marker_motion"]
 
 #: suffix -> (module, function) of the marker readers, each ``(path, units) -> MarkerRecording``.
 MARKER_READERS: dict[str, tuple[str, str]] = {
@@ -69,3 +71,15 @@ def read_markers(path: str | os.PathLike, units: str | float | None = None) -> "
         raise InputError("file not found", path=p)
     module, func = MARKER_READERS[suffix]
     return getattr(importlib.import_module(module), func)(p, units)
+
+
+def read_marker_motion(path: str | os.PathLike, marker_set: str | os.PathLike | None = None,
+                       units: str | float | None = None, solve: bool = True,
+                       solve_options: "MarkerSolveOptions | None" = None, **options: Any) -> "Motion":
+    """``load_motion``'s reader of .c3d and .trc files: the solved actor skeleton (with
+    ``solve_options``), or with ``solve=False`` the canonical joint centres
+    (:func:`physmocap.markers.motion.marker_motion`, which takes ``options``); ``units``
+    overrides the file's."""
+    from ..markers.motion import marker_motion
+
+    return marker_motion(read_markers(path, units), marker_set, solve, solve_options, **options)

@@ -54,6 +54,22 @@ def load_motion(path: str | os.PathLike, *, min_frames: int = 0, **options) -> M
     return motion
 
 
+def pick_reader(path: str | os.PathLike, readers: dict, what: str):
+    """``(Path, readers[suffix])`` for a file that exists and whose suffix ``readers`` holds.
+
+    Raises:
+        InputError: Naming the file: not one of ``what`` (the suffixes known are listed), or
+            not found.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in readers:
+        raise InputError(f"not {what} (expected {', '.join(readers)}): {suffix or 'no suffix'!r}", path=p)
+    if not p.is_file():
+        raise InputError("file not found", path=p)
+    return p, readers[suffix]
+
+
 #: Plausible ranges of what a capture holds: frame rate (Hz), distances (metres).
 FPS_RANGE = (0.1, 10000.0)
 MAX_DISTANCE = 1000.0

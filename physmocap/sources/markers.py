@@ -16,7 +16,6 @@ import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import InputError
 
 if TYPE_CHECKING:
     from ..markers.recording import MarkerRecording
@@ -63,13 +62,9 @@ def read_markers(path: str | os.PathLike, units: str | float | None = None) -> "
         InputError: Another file type, a missing file, or anything the format's reader
             refuses (naming the file, and the line, message or frame where it can).
     """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix not in MARKER_READERS:
-        raise InputError(f"not a marker file ({MARKER_FILE_TYPES}): {suffix or 'no suffix'!r}", path=p)
-    if not p.is_file():
-        raise InputError("file not found", path=p)
-    module, func = MARKER_READERS[suffix]
+    from . import pick_reader
+
+    p, (module, func) = pick_reader(path, MARKER_READERS, "a marker file")
     return getattr(importlib.import_module(module), func)(p, units)
 
 

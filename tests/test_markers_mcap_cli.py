@@ -78,6 +78,19 @@ def test_retarget_and_clean_read_the_cloud(takes, tmp_path, capsys):
     assert json.loads(report.read_text())["frames"] == FRAMES
 
 
+def test_preview_renders_the_cloud(takes, tmp_path):
+    pytest.importorskip("imageio.v2", reason="imageio is not installed: pip install 'physmocap[render]'")
+    from physmocap.render.backend import RenderError, ensure_backend
+
+    try:
+        ensure_backend()
+    except RenderError as exc:
+        pytest.skip(f"no OpenGL backend on this machine: {exc}")
+    out = tmp_path / "sheet.png"
+    assert _run(["preview", takes / "cloud.mcap", "-o", out, "--end", "30", "--count", "2", "--size", "320x240"]) == 0
+    assert out.stat().st_size > 0
+
+
 def test_batch_reads_the_cloud_and_names_the_unlabelled_one(takes, tmp_path, capsys):
     folder = tmp_path / "in"
     folder.mkdir()

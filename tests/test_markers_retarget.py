@@ -72,7 +72,7 @@ def test_joint_centres_flag_is_for_marker_files(tmp_path, capsys):
     out = tmp_path / "o.bvh"
     assert main(["retarget", "example", "-o", str(out), "--joint-centres"]) == 2
     err = capsys.readouterr().err
-    assert "--joint-centres is for marker files" in err and "Traceback" not in err and not out.exists()
+    assert "--joint-centres: for marker files only" in err and "Traceback" not in err and not out.exists()
 
 
 def test_retarget_passes_the_marker_solve_options_of_solve(tmp_path):
@@ -97,7 +97,8 @@ def test_retarget_passes_the_marker_solve_options_of_solve(tmp_path):
 
 
 @pytest.mark.parametrize("argv,needle", [
-    (["example", "--marker-no-floor"], "example: --marker-max-iterations and --marker-no-floor are for marker files"),
+    (["example", "--marker-no-floor"], "example: --marker-max-iterations / --marker-no-floor: for marker files only"),
+    (["example", "--marker-set", "{SET}"], "example: --marker-set: for marker files only"),
     (["{C3D}", "--marker-max-iterations", "0"], "marker solve option max_iterations must be > 0, got 0"),
     (["{C3D}", "--joint-centres", "--marker-no-floor"], "shape the actor's solve, which --joint-centres skips"),
 ])
@@ -105,7 +106,8 @@ def test_bad_marker_solve_options_are_one_error(tmp_path, capsys, argv, needle):
     c3d = tmp_path / "take.c3d"
     _c3d_copy(c3d, frames=60)
     out = tmp_path / "o.bvh"
-    args = [a.replace("{C3D}", str(c3d)) for a in argv]
+    (tmp_path / "set.toml").write_text('[markers]\nLKNE = "LKNE"\n')
+    args = [a.replace("{C3D}", str(c3d)).replace("{SET}", str(tmp_path / "set.toml")) for a in argv]
     assert main(["retarget", *args, "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and needle in err[0] and not out.exists()
@@ -121,3 +123,24 @@ def test_marker_solve_options_are_validated_when_made():
             MarkerSolveOptions(**bad)
     with pytest.raises(dataclasses.FrozenInstanceError):
         MarkerSolveOptions().floor = False
+
+
+def test_batch_applies_its_marker_options_to_its_marker_files_only(tmp_path):
+    """A folder mixing a skeleton file and a marker file: ``--marker-set`` and the marker solve's
+    options reach the marker file and leave the BVH alone (a BVH used to fail with a TypeError
+    on --marker-set)."""
+    import json
+    import shutil
+
+    from physmocap.resources import resolve_input
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    shutil.copy(resolve_input("example"), folder / "walk.bvh")
+    _c3d_copy(folder / "take.c3d", frames=120)
+    (tmp_path / "set.toml").write_text('[markers]\nLKNE = "LKNE"\n')
+    argv = ["batch", str(folder), "-o", str(tmp_path / "out"), "--end", "30", "--quiet", "--jobs", "1",
+            "--marker-set", str(tmp_path / "set.toml"), "--marker-max-iterations", "3", "--marker-no-floor"]
+    assert main(argv) == 0
+    rows = json.loads((tmp_path / "out" / "summary.json").read_text())["files"]
+    assert sorted(r["status"] for r in rows) == ["done", "done"]

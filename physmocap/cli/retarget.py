@@ -190,29 +190,44 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             announce(f"wrote {out}")
 
 
+#: The options (argparse destinations) that concern marker inputs alone, unset: ``--marker-set``,
+#: ``--joint-centres`` and the marker solve's (:func:`~physmocap.cli.solve.add_marker_solve_options`).
+#: ``batch`` applies its own to its marker files only (:func:`physmocap.batch.job_options`).
+MARKER_OPTIONS_UNSET: dict = {"marker_set": None, "joint_centres": False, "marker_max_iterations": None,
+                              "marker_no_floor": False}
+
+
 def marker_read_options(args: argparse.Namespace) -> dict:
-    """What ``load_motion`` is told about a marker input by ``--joint-centres`` (``solve``
-    False) and the marker solve's flags (``solve_options``: one validated
-    :class:`~physmocap.markers.solve.MarkerSolveOptions`, as ``physmocap solve`` builds it).
+    """What ``load_motion`` is told about a marker input by :data:`MARKER_OPTIONS_UNSET`'s
+    options: ``marker_set``, ``solve`` False (``--joint-centres``) and ``solve_options`` (one
+    validated :class:`~physmocap.markers.solve.MarkerSolveOptions`, as ``physmocap solve``
+    builds it).
 
     Raises:
-        OptionError: These flags on an input that is not a marker file, or the solve's flags
+        OptionError: These options on an input that is not a marker file, or the solve's
             with ``--joint-centres`` (which skips the solve).
     """
     from ..sources.markers import MARKER_FILE_TYPES, is_marker_file
     from .solve import marker_solve_options
 
+    marker_set = getattr(args, "marker_set", None)
     joint_centres = getattr(args, "joint_centres", False)
     solve_options = marker_solve_options(args)
-    if not (joint_centres or solve_options):
+    given = [flag for flag, value in (("--marker-set", marker_set), ("--joint-centres", joint_centres),
+                                      ("--marker-max-iterations / --marker-no-floor", solve_options)) if value]
+    if not given:
         return {}
-    flags = "--joint-centres is" if joint_centres else "--marker-max-iterations and --marker-no-floor are"
     if not is_marker_file(args.input):
-        raise OptionError(f"{flags} for marker files ({MARKER_FILE_TYPES})", path=args.input)
+        raise OptionError(f"{', '.join(given)}: for marker files only ({MARKER_FILE_TYPES})", path=args.input)
     if joint_centres and solve_options:
         raise OptionError("--marker-max-iterations and --marker-no-floor shape the actor's solve, which "
                           "--joint-centres skips", path=args.input)
-    return {"solve": False} if joint_centres else {"solve_options": solve_options}
+    out: dict = {"marker_set": marker_set} if marker_set else {}
+    if joint_centres:
+        out["solve"] = False
+    elif solve_options:
+        out["solve_options"] = solve_options
+    return out
 
 
 def retarget_from_args(args: argparse.Namespace):
@@ -226,11 +241,7 @@ def retarget_from_args(args: argparse.Namespace):
     from ..sources import load_motion
 
     config = config_from_args(args)
-    read_opts = {}
-    if args.in_units:
-        read_opts["units"] = args.in_units
-    if getattr(args, "marker_set", None):
-        read_opts["marker_set"] = args.marker_set
+    read_opts = {"units": args.in_units} if args.in_units else {}
     read_opts.update(marker_read_options(args))
     motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)

@@ -162,6 +162,12 @@ def test_a_marker_set_file_decides_between_two_labels(tmp_path):
         warnings.simplefilter("error")
         ms = recording_marker_set(rec, path)
     assert rec.labels[ms.roles["LKNE"]] == "LKNE" and not ms.choices
+    # a file giving one of them another role leaves no choice: one marker, one role
+    path.write_text('[markers]\nLKNEM = "LFLE"\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ms = recording_marker_set(rec, path)
+    assert rec.labels[ms.roles["LKNE"]] == "LKNE" and rec.labels[ms.roles["LKNEM"]] == "LFLE" and not ms.choices
 
 
 def test_inspect_states_which_of_two_labels_was_used(tmp_path, capsys):

@@ -119,29 +119,41 @@ def detect_marker_set(labels: tuple[str, ...] | list[str], overrides: dict[str, 
     Labels alone cannot say which of two different labels read as one role is the better
     marker: such a role keeps them all in :attr:`MarkerSet.candidates` (the first holds it
     meanwhile) for :func:`.candidates.choose_candidates` to decide from the recording, unless
-    ``overrides`` assigns the role."""
-    roles: dict[str, int] = {}
+    ``overrides`` assigns the role.  A marker the file gives another role is no candidate."""
     claims: dict[str, list[int]] = {}
     for i, lab in enumerate(labels):
         role = ALIASES.get(plain_label(lab))
-        if role is None:
-            continue
-        roles.setdefault(role, i)
-        if all(plain_label(labels[k]) != plain_label(lab) for k in claims.get(role, [])):
+        if role is not None and all(plain_label(labels[k]) != plain_label(lab) for k in claims.get(role, [])):
             claims.setdefault(role, []).append(i)
-    candidates = {role: tuple(idx) for role, idx in claims.items() if len(idx) > 1 and role not in (overrides or {})}
-    origin = "aliases"
-    if overrides:
-        plain = {plain_label(lab): i for i, lab in enumerate(labels)}
-        for role, lab in overrides.items():
-            if role not in ROLES:
-                raise MappingError(f"unknown marker role {role!r}; roles are {' '.join(ROLES)}")
-            i = plain.get(plain_label(lab))
-            if i is None:
-                raise MappingError(f"marker {lab!r} (for {role}) is not in the recording; its labels are {', '.join(labels)}")
-            roles[role] = i
-        origin = "aliases + file"
+    given = _file_roles(labels, overrides or {})
+    roles, candidates = dict(given), {}
+    for role, idx in claims.items():
+        free = tuple(i for i in idx if i not in given.values())
+        if role in given or not free:
+            continue
+        roles[role] = free[0]
+        if len(free) > 1:
+            candidates[role] = free
+    origin = "aliases + file" if overrides else "aliases"
     return MarkerSet(roles=roles, unused=unused_labels(labels, roles), origin=origin, candidates=candidates)
+
+
+def _file_roles(labels: tuple[str, ...] | list[str], overrides: dict[str, str]) -> dict[str, int]:
+    """Role -> marker index of a marker set file's ``overrides`` (role -> label).
+
+    Raises:
+        MappingError: An unknown role, or a label not in the recording.
+    """
+    plain = {plain_label(lab): i for i, lab in enumerate(labels)}
+    out = {}
+    for role, lab in overrides.items():
+        if role not in ROLES:
+            raise MappingError(f"unknown marker role {role!r}; roles are {' '.join(ROLES)}")
+        i = plain.get(plain_label(lab))
+        if i is None:
+            raise MappingError(f"marker {lab!r} (for {role}) is not in the recording; its labels are {', '.join(labels)}")
+        out[role] = i
+    return out
 
 
 def recording_marker_set(rec, marker_set: "str | os.PathLike | MarkerSet | None" = None) -> MarkerSet:

@@ -100,6 +100,7 @@ def config_from_args(args: argparse.Namespace):
     from ..ik.config import RetargetConfig
     from ..motion import MAX_FPS
     from ..options import check_frame_range
+    from .solve import marker_solve_options
 
     check_frame_range(args.start, args.end)
     fps = getattr(args, "fps", None)
@@ -118,8 +119,6 @@ def config_from_args(args: argparse.Namespace):
         options["self_collision"] = False
     if args.no_plant:
         options["plant"] = False
-    from .solve import marker_solve_options
-
     marker_solve_options(args)  # refused now, before anything is read
     return RetargetConfig().with_options(**options)
 

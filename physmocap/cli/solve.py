@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import OptionError
 from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
+
+if TYPE_CHECKING:  # numpy and mujoco stay unimported until a command runs
+    from ..markers.solve import MarkerSolveOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,7 +58,7 @@ def add_marker_solve_options(p: argparse.ArgumentParser, prefix: str = "") -> No
                    + ("" if prefix else "; with --character, the character's too"))
 
 
-def marker_solve_options(args: argparse.Namespace):
+def marker_solve_options(args: argparse.Namespace) -> "MarkerSolveOptions | None":
     """The :class:`~physmocap.markers.solve.MarkerSolveOptions` of the flags of
     :func:`add_marker_solve_options`, validated; None when none is set (the defaults).
 

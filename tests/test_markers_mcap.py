@@ -31,6 +31,24 @@ def test_a_point_cloud_marker_mcap_reads_like_the_c3d(tmp_path):
     assert np.allclose(back.positions, rec.positions, atol=1e-9, equal_nan=True)
 
 
+def test_physmocap_writes_markers_as_a_point_cloud_read_back_exactly(tmp_path):
+    """``write_markers_pointcloud_mcap``: Foxglove PointCloud messages (float64, NaN where
+    unseen), the labels in metadata; read back exactly, the same bytes every time."""
+    from physmocap.export.mcap import write_markers_pointcloud_mcap
+    from physmocap.markers.recording import MarkerRecording
+    from physmocap.sources.mcap import read_mcap_markers
+
+    rec = _cmu(90)
+    rec = MarkerRecording(rec.labels, rec.positions, rec.fps, rec.source, first_frame=7)
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    write_markers_pointcloud_mcap(rec, a)
+    write_markers_pointcloud_mcap(rec, b)
+    assert a.read_bytes() == b.read_bytes()
+    back = read_mcap_markers(a)
+    assert back.labels == rec.labels and back.fps == rec.fps and back.first_frame == 7
+    assert np.array_equal(back.positions, rec.positions, equal_nan=True) and np.isnan(rec.positions).any()
+
+
 def test_point_cloud_ids_place_points_and_a_rotated_pose_is_applied(tmp_path):
     from physmocap.sources.mcap import read_mcap_markers
 

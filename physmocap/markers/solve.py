@@ -35,6 +35,7 @@ import mujoco
 import numpy as np
 
 from ..errors import InputError, warn
+from ..options import check_fields
 from .functional import Calibration, attach_by_rigidity, functional_joint_centres, warn_fallbacks
 from .joints import up_axis
 from .markerset import MarkerSet, recording_marker_set
@@ -60,17 +61,22 @@ CALIBRATION_TARGETS = (
 )
 
 
-@dataclass
+@dataclass(frozen=True)
 class MarkerSolveOptions:
-    """How markers are solved.
+    """How markers are solved: the one options object of ``physmocap solve``, of ``retarget``
+    on marker files (``--marker-max-iterations``, ``--marker-no-floor``) and of
+    ``load_motion(take.c3d, solve_options=...)``; its values are checked when it is made.
 
     Attributes:
-        max_iterations: QP iterations per frame (warm-started from the previous frame).
-        calibration_frames: Frames used to place the marker sites (spread over the clip).
+        max_iterations: QP iterations per frame (warm-started from the previous frame), >= 1.
+        calibration_frames: Frames used to place the marker sites (spread over the clip), >= 1.
         velocity_limits: Bound frame-to-frame joint steps by human joint speeds.
         floor: Keep the feet above the floor (found from the feet's lowest points).
-        min_weight_scatter: Scatter (metres) below which a marker's weight stops growing.
-        rigidity: Largest scatter (metres) of a marker on a segment for it to be attached.
+        min_weight_scatter: Scatter (metres) below which a marker's weight stops growing, > 0.
+        rigidity: Largest scatter (metres) of a marker on a segment for it to be attached, > 0.
+
+    Raises:
+        OptionError: A value out of its range, or of the wrong type.
     """
 
     max_iterations: int = 2
@@ -79,6 +85,10 @@ class MarkerSolveOptions:
     floor: bool = True
     min_weight_scatter: float = 0.005
     rigidity: float = 0.025
+
+    def __post_init__(self) -> None:
+        check_fields(self, "marker solve", counts=("max_iterations", "calibration_frames"),
+                     positive=("max_iterations", "calibration_frames", "min_weight_scatter", "rigidity"))
 
 
 @dataclass

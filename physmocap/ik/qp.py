@@ -128,13 +128,13 @@ class QPBuilder:
         self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
         self._M = np.zeros((0, 6, 6))
         self._E = np.zeros((0, 6))
-        self._C = np.zeros((0, 6))
-        self._g = np.zeros((0, 1))
-        self._jac3 = np.zeros((3, nv))
+        self._frame_views: dict[int, tuple] = {}  # slot -> views of the frame buffers
+        self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
+        self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
         self._diag = np.arange(nv) * (nv + 1)
-        self._ids: dict[int, tuple] = {}  # id(task) -> (task, frame type, frame id)
+        self._ids: dict[int, tuple] = {}  # id(task) -> (task, data, (jacobian function, id, xmat, xpos))
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
 
@@ -155,38 +155,42 @@ class QPBuilder:
             self._jacF = np.zeros((n, 6, self.nv))
             self._M = np.zeros((n, 6, 6))
             self._E = np.zeros((n, 6))
-            self._C = np.zeros((n, 6))
-            self._g = np.zeros((n, 1))
-        J, M, E, C, g = self._jacF, self._M, self._E, self._C, self._g
+            self._frame_views.clear()
+        J, M, E = self._jacF, self._M, self._E
         model = self.model
-        arrays: dict[str, tuple] = {}  # kind -> (jacobian function, xmat, xpos) of this data
+        jlog, inverse_multiply, adjoint = _native.se3_jlog, _native.se3_inverse_multiply, _native.se3_rotation_adjoint_from_xmat
+        to_se3, rminus, matmul = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus, np.matmul
         for i, task in enumerate(tasks):
-            kind, fid = self._frame_id(task)
-            fn_xmat_xpos = arrays.get(kind)
-            if fn_xmat_xpos is None:
-                fn_xmat_xpos = arrays[kind] = (_JAC[kind], getattr(data, _XMAT[kind]), getattr(data, _XPOS[kind]))
-            jac, xmats, xposs = fn_xmat_xpos
-            xmat = xmats[fid]
-            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, xposs[fid])
+            jac, fid, xmat, xpos = self._frame_of(task, data)
+            Jp, Jr, Mi, Ei = self._frame_slot(i)
+            frame = to_se3(xmat, xpos)
             target = task.transform_target_to_world.wxyz_xyz
-            Ji = J[i]
-            jac(model, data, Ji[:3], Ji[3:], fid)
-            np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)),
-                      _native.se3_rotation_adjoint_from_xmat(xmat), out=M[i])
-            E[i] = _native.se3_rminus(target, frame)
-            C[i] = task.cost
-            g[i] = task.gain
-        M[:n] *= -C[:n, :, None]
+            jac(model, data, Jp, Jr, fid)
+            matmul(jlog(inverse_multiply(target, frame)), adjoint(xmat), out=Mi)
+            Ei[:] = rminus(target, frame)
+        C = np.array([t.cost for t in tasks])
+        g = np.array([[t.gain] for t in tasks])
+        M[:n] *= -C[:, :, None]
         np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
-        np.multiply(C[:n], -g[:n] * E[:n], out=eps.reshape(n, 6))
+        np.multiply(C, -g * E[:n], out=eps.reshape(n, 6))
 
-    def _frame_id(self, task: mink.FrameTask) -> tuple[str, int]:
-        """``(frame type, id)`` of a ``FrameTask``'s frame, resolved once per task."""
+    def _frame_slot(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Views of the ``i``-th frame task's Jacobian (translation, rotation), product and error buffers."""
+        views = self._frame_views.get(i)
+        if views is None:
+            views = self._frame_views[i] = (self._jacF[i, :3], self._jacF[i, 3:], self._M[i], self._E[i])
+        return views
+
+    def _frame_of(self, task: mink.FrameTask, data: mujoco.MjData) -> tuple:
+        """``(Jacobian function, frame id, xmat row, xpos row)`` of a ``FrameTask``'s frame in
+        ``data`` (views into ``data``: they follow its kinematics), resolved once per task."""
         ids = self._ids.get(id(task))
-        if ids is None or ids[0] is not task:
+        if ids is None or ids[0] is not task or ids[1] is not data:
             kind = task.frame_type
-            ids = self._ids[id(task)] = (task, kind, _resolve(self.model, task.frame_name, kind))
-        return ids[1], ids[2]
+            fid = _resolve(self.model, task.frame_name, kind)
+            xmat, xpos = getattr(data, _XMAT[kind])[fid], getattr(data, _XPOS[kind])[fid]
+            ids = self._ids[id(task)] = (task, data, (_JAC[kind], fid, xmat, xpos))
+        return ids[2]
 
     def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
         r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked
@@ -203,6 +207,32 @@ class QPBuilder:
         W *= task.cost[:, None]
         np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
 
+    def site_terms(self, tasks: Sequence[SitePositionTask], data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        r"""``(J, e)`` of consecutive ``SitePositionTask`` s, one row per regulated axis in task
+        order: :math:`J` the site's world-position Jacobian row (``mj_jacSite``, ``(k, nv)``) and
+        :math:`e = -\alpha (x_s - x^*)` (metres, ``(k,)``), what ``compute_jacobian`` and
+        ``-gain * compute_error`` give task by task.  New arrays."""
+        key = tuple(map(id, tasks))
+        plan = self._site_plans.get(key)
+        if plan is None or any(a is not b for a, b in zip(plan[0], tasks)):
+            if len(self._site_plans) > 256:
+                self._site_plans.clear()
+            owner = np.concatenate([np.full(t.k, j) for j, t in enumerate(tasks)])
+            axes = np.concatenate([np.array(t.axes, dtype=int) for t in tasks])
+            sites = np.array([t.site_id for t in tasks])
+            plan = self._site_plans[key] = (tuple(tasks), owner, axes, sites[owner], sites.tolist())
+        _, owner, axes, row_sites, sites = plan
+        n = len(sites)
+        if n > len(self._jacS):
+            self._jacS = np.zeros((max(n, 2 * len(self._jacS)), 3, self.nv))
+        jac, model = self._jacS, self.model
+        for j, sid in enumerate(sites):
+            mujoco.mj_jacSite(model, data, jac[j], None, sid)
+        target = np.array([t.target for t in tasks])
+        gain = np.array([-t.gain for t in tasks])
+        e = gain[owner] * (data.site_xpos[row_sites, axes] - target[owner, axes])
+        return jac[owner, axes], e
+
     def objective(
         self,
         configuration: mink.Configuration,
@@ -212,53 +242,36 @@ class QPBuilder:
     ) -> tuple[np.ndarray, np.ndarray]:
         r"""``(H, c)`` of ``tasks`` plus the diagonal posture terms (see the module docstring).
 
-        ``H`` and ``c`` are the builder's buffers, overwritten by the next call.
+        ``H`` and ``c`` are the builder's buffers, overwritten by the next call.  Consecutive
+        tasks of one kind (``FrameTask``, ``SitePositionTask``) are written together.
         """
-        data, model = configuration.data, self.model
+        data = configuration.data
         m = 0
         for t in tasks:
             m += t.k if hasattr(t, "k") else len(t.cost)
         self._rows(m)
         W, eps = self._W, self._eps
         r = 0
-        mu = 0.0
-        i, ntask = 0, len(tasks)
-        while i < ntask:
-            task = tasks[i]
-            kind = type(task)
-            if kind is mink.FrameTask and _native is not None and task.transform_target_to_world is not None:
-                j = i + 1  # the run of frame tasks from i, done at once
-                while (
-                    j < ntask
-                    and type(tasks[j]) is mink.FrameTask
-                    and tasks[j].transform_target_to_world is not None
-                ):
-                    j += 1
-                k = 6 * (j - i)
-                self._frame_rows(tasks[i:j], data, W[r : r + k], eps[r : r + k])
-                for t in tasks[i:j]:
-                    if t.lm_damping:
-                        mu += t.lm_damping * float(eps[r : r + 6] @ eps[r : r + 6])
-                    r += 6
-                i = j
-                continue
-            elif kind is SitesPositionTask:
-                k = task.k
-                self._sites_rows(task, data, W[r : r + k], eps[r : r + k], r)
+        for kind, run in _runs(tasks):
+            if kind is mink.FrameTask:
+                k = 6 * len(run)
+                self._frame_rows(run, data, W[r : r + k], eps[r : r + k])
             elif kind is SitePositionTask:
-                k = task.k
-                mujoco.mj_jacSite(model, data, self._jac3, None, task.site_id)
-                np.multiply(task.cost[:, None], self._jac3[task.axes, :], out=W[r : r + k])
-                np.multiply(task.cost, -task.gain * task.compute_error(configuration), out=eps[r : r + k])
+                Jk, ek = self.site_terms(run, data)
+                k = len(ek)
+                cost = np.concatenate([t.cost for t in run])
+                np.multiply(cost[:, None], Jk, out=W[r : r + k])
+                np.multiply(cost, ek, out=eps[r : r + k])
+            elif type(run[0]) is SitesPositionTask:
+                k = run[0].k
+                self._sites_rows(run[0], data, W[r : r + k], eps[r : r + k], r)
             else:  # any other mink task: its own weighted residual
-                Wk, ek = _weighted_residual(task, configuration)
+                Wk, ek = _weighted_residual(run[0], configuration)
                 k = len(ek)
                 W[r : r + k] = Wk
                 eps[r : r + k] = ek
-            if task.lm_damping:
-                mu += task.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
             r += k
-            i += 1
+        mu = _lm_damping(tasks, eps)
         H, c = self.H, self.c
         Wm = W[:r]
         np.matmul(Wm.T, Wm, out=H)
@@ -363,13 +376,60 @@ class QPBuilder:
                 hs.append(con.h)
         G = np.vstack(Gs) if Gs else np.zeros((0, self.nv))
         h = np.concatenate(hs) if hs else np.zeros(0)
-        As, bs = [], []
-        for task in constraints:
-            As.append(task.compute_jacobian(configuration))
-            bs.append(-task.gain * task.compute_error(configuration))
-        A = np.vstack(As) if As else np.zeros((0, self.nv))
-        b = np.concatenate(bs) if bs else np.zeros(0)
+        A, b = self.equalities(configuration, constraints)
         return QP(H, c, lb, ub, G, h, A, b)
+
+    def equalities(self, configuration: mink.Configuration, constraints: Sequence[mink.Task]) -> tuple[np.ndarray, np.ndarray]:
+        r"""``(A, b)``: the rows :math:`J_c \Delta q = -\alpha_c e_c` of the equality tasks, in order
+        (runs of ``SitePositionTask`` s by :meth:`site_terms`)."""
+        if not constraints:
+            return np.zeros((0, self.nv)), np.zeros(0)
+        As, bs = [], []
+        for kind, run in _runs(constraints):
+            if kind is SitePositionTask:
+                Jk, ek = self.site_terms(run, configuration.data)
+            else:
+                Jk, ek = run[0].compute_jacobian(configuration), -run[0].gain * run[0].compute_error(configuration)
+            As.append(Jk)
+            bs.append(ek)
+        if len(As) == 1:
+            return As[0], bs[0]
+        return np.vstack(As), np.concatenate(bs)
+
+
+def _batched(task: mink.Task) -> type | None:
+    """The kind of rows ``task`` is written with in a run of its kind, or None (alone)."""
+    kind = type(task)
+    if kind is mink.FrameTask:
+        return kind if _native is not None and task.transform_target_to_world is not None else None
+    return kind if kind is SitePositionTask else None
+
+
+def _runs(tasks: Sequence[mink.Task]) -> list[tuple[type | None, list[mink.Task]]]:
+    """``tasks`` split into maximal runs of one batched kind (:func:`_batched`); any other
+    task is a run of its own, of kind None."""
+    runs: list[tuple[type | None, list]] = []
+    last = None
+    for t in tasks:
+        kind = _batched(t)
+        if kind is not None and kind is last:
+            runs[-1][1].append(t)
+        else:
+            runs.append((kind, [t]))
+        last = kind
+    return runs
+
+
+def _lm_damping(tasks: Sequence[mink.Task], eps: np.ndarray) -> float:
+    r""":math:`\sum_k \lambda_k \|\epsilon_k\|^2` over the tasks with LM damping, in task order
+    (each task's rows follow the previous one's in ``eps``)."""
+    mu, r = 0.0, 0
+    for t in tasks:
+        k = t.k if hasattr(t, "k") else len(t.cost)
+        if t.lm_damping:
+            mu += t.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
+        r += k
+    return mu
 
 
 def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:

@@ -29,24 +29,61 @@ __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "
 
 class PointJacobians:
     r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
-    of points fixed to bodies, by ``mj_jac`` (point by point, as the rows were first
-    written: the same round-off), into one preallocated buffer (the floor and
-    self-collision rows need a few dozen per iteration)."""
+    of points fixed to bodies, for many points at once.
 
-    def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
+    MuJoCo's ``mj_jac`` writes, for every dof :math:`i` in the body's kinematic chain (and 0
+    elsewhere), with :math:`(\omega_i, v_i)` the dof's motion axis ``cdof`` (``mj_comPos``)
+    and :math:`o = p - c` the point's offset from its tree's centre of mass ``subtree_com``:
+
+    .. math::
+
+        J_{:, i} = v_i + \omega_i \times o
+
+    This evaluates the same expression, component by component in the same order (so to the
+    same bits as ``mj_jac``, which ``tests/test_qp.py`` checks), for all points in a few array
+    operations instead of one ``mj_jac`` call per point (the floor and self-collision rows
+    need a few dozen per iteration)."""
+
+    def __init__(self, model: mujoco.MjModel) -> None:
         self.model = model
-        self._buf = np.zeros((capacity, 3, model.nv))
+        self.chain = _dof_chains(model)
+        self.root = np.asarray(model.body_rootid, dtype=int)
+
+    def _offsets(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The offsets' components :math:`o_x, o_y, o_z`, each ``(k, 1)`` (metres)."""
+        off = points - data.subtree_com[self.root[bodies]]
+        return off[:, 0:1], off[:, 1:2], off[:, 2:3]
 
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
-        a view of the buffer, valid until the next call."""
-        k = len(bodies)
-        if k > len(self._buf):
-            self._buf = np.zeros((max(k, 2 * len(self._buf)), 3, self.model.nv))
-        buf, model = self._buf, self.model
-        for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
-            mujoco.mj_jac(model, data, buf[i], None, p, b)
-        return buf[:k]
+        """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``."""
+        o0, o1, o2 = self._offsets(data, bodies, points)
+        w0, w1, w2, v0, v1, v2 = data.cdof.T
+        J = np.empty((len(bodies), 3, self.model.nv))
+        J[:, 0] = v0 + (w1 * o2 - w2 * o1)
+        J[:, 1] = v1 + (w2 * o0 - w0 * o2)
+        J[:, 2] = v2 + (w0 * o1 - w1 * o0)
+        return np.where(self.chain[bodies][:, None, :], J, 0.0)
+
+    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """``(k, nv)``: the vertical rows :math:`J_{z}` alone of :meth:`__call__`."""
+        o0, o1, _ = self._offsets(data, bodies, points)
+        w0, w1, _, _, _, v2 = data.cdof.T
+        return np.where(self.chain[bodies], v2 + (w0 * o1 - w1 * o0), 0.0)
+
+
+def _dof_chains(model: mujoco.MjModel) -> np.ndarray:
+    """``(nbody, nv)`` bool: the dofs that move each body (its own and its ancestors'), the
+    columns ``mj_jac`` writes (a body without dofs moves with its nearest ancestor that has)."""
+    chain = np.zeros((model.nbody, model.nv), dtype=bool)
+    for b in range(1, model.nbody):
+        a = b
+        while a > 0 and model.body_dofnum[a] == 0:
+            a = int(model.body_parentid[a])
+        i = int(model.body_dofadr[a] + model.body_dofnum[a] - 1) if a > 0 else -1
+        while i >= 0:
+            chain[b, i] = True
+            i = int(model.dof_parentid[i])
+    return chain
 
 
 class FrameStepLimit(mink.Limit):
@@ -141,11 +178,14 @@ class FrameStepLimit(mink.Limit):
 class GeomCandidates:
     """Stacked lowest-point candidates of a set of geoms, for vectorised queries."""
 
-    def __init__(self, model: mujoco.MjModel, geoms: Sequence[int]) -> None:
+    def __init__(self, model: mujoco.MjModel, geoms: Sequence[int], known: Mapping[int, np.ndarray] | None = None) -> None:
+        """``known``: geom id -> its :func:`geom_candidates`, where already computed (a mesh's
+        convex hull is the costly part of building this)."""
         rows, owner = [], []
         self.geoms = np.array(list(geoms), dtype=int)
-        for k, gid in enumerate(self.geoms):
-            cand = geom_candidates(model, int(gid))
+        known = known or {}
+        for k, gid in enumerate(self.geoms.tolist()):
+            cand = known[gid] if gid in known else geom_candidates(model, gid)
             if len(cand) == 0:  # planes and the like have no lowest point
                 cand = np.array([[0.0, 0.0, 0.0, -np.inf]])
             rows.append(cand)
@@ -266,13 +306,15 @@ class FloorLimit(mink.Limit):
         margin: float = 2e-4,
         activation: float = 0.15,
     ) -> None:
+        known: dict[int, np.ndarray] = {}
         if geoms is None:
             # visual-only meshes are skipped (a robot model draws every link twice)
-            geoms = [
-                g
-                for g in range(model.ngeom)
-                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(geom_candidates(model, g))
-            ]
+            for g in range(model.ngeom):
+                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g):
+                    cand = geom_candidates(model, g)
+                    if len(cand):
+                        known[g] = cand
+            geoms = list(known)
         self.model = model
         self.geoms = np.array(list(geoms), dtype=int)
         self.sites = np.array(list(sites), dtype=int)
@@ -280,9 +322,8 @@ class FloorLimit(mink.Limit):
         self.margin = float(margin)
         self.activation = float(activation)
         self.enabled = True
-        self._jacp = np.zeros((3, model.nv))
         self._pj = PointJacobians(model)
-        self._cand = GeomCandidates(model, self.geoms)
+        self._cand = GeomCandidates(model, self.geoms, known)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
@@ -374,7 +415,7 @@ class FloorLimit(mink.Limit):
         anchor = np.empty((n_act, 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
-        np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
+        np.negative(self._pj.vertical(data, b, anchor), out=G[:n_act])
         za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
         clear_sites, clear_heights, per_body = self._swing_arrays()
@@ -385,11 +426,10 @@ class FloorLimit(mink.Limit):
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, sid in enumerate(clear_sites.tolist(), start=n_act):
-            mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
-            np.negative(self._jacp[2], out=G[row])
-        if len(clear_sites):
-            zs = data.site_xpos[clear_sites, 2]
+        if len(clear_sites):  # mj_jacSite is mj_jac at the site's position
+            clear_xpos = data.site_xpos[clear_sites]
+            np.negative(self._pj.vertical(data, self.model.site_bodyid[clear_sites], clear_xpos), out=G[n_act:])
+            zs = clear_xpos[:, 2]
             h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 

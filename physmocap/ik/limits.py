@@ -29,46 +29,45 @@ __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "
 
 class PointJacobians:
     r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
-    of points fixed to bodies, for many points at once.
+    of points fixed to bodies.
 
-    MuJoCo's ``mj_jac`` writes, for every dof :math:`i` in the body's kinematic chain (and 0
-    elsewhere), with :math:`(\omega_i, v_i)` the dof's motion axis ``cdof`` (``mj_comPos``)
-    and :math:`o = p - c` the point's offset from its tree's centre of mass ``subtree_com``:
+    :meth:`__call__` calls ``mj_jac`` point by point into one preallocated buffer (the few
+    dozen points of the self-collision rows).  :meth:`vertical` evaluates the vertical rows
+    alone, for all points at once, from ``mj_jac``'s own expression: for every dof :math:`i`
+    in the body's kinematic chain (0 elsewhere), with :math:`(\omega_i, v_i)` the dof's
+    motion axis ``cdof`` (``mj_comPos``) and :math:`o = p - c` the point's offset from its
+    tree's centre of mass ``subtree_com``,
 
     .. math::
 
-        J_{:, i} = v_i + \omega_i \times o
+        J_{z, i} = v_{z,i} + (\omega_{x,i} o_y - \omega_{y,i} o_x)
 
-    This evaluates the same expression, component by component in the same order (so to the
-    same bits as ``mj_jac``, which ``tests/test_qp.py`` checks), for all points in a few array
-    operations instead of one ``mj_jac`` call per point (the floor and self-collision rows
-    need a few dozen per iteration)."""
+    component by component in the same order, so to the same bits as ``mj_jac``
+    (``tests/test_qp.py`` checks it); a call costs about ten ``mj_jac`` calls, whatever the
+    number of points (the floor needs a few dozen rows per iteration)."""
 
-    def __init__(self, model: mujoco.MjModel) -> None:
+    def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
+        self._buf = np.zeros((capacity, 3, model.nv))
         self.chain = _dof_chains(model)
         self.root = np.asarray(model.body_rootid, dtype=int)
 
-    def _offsets(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The offsets' components :math:`o_x, o_y, o_z`, each ``(k, 1)`` (metres)."""
-        off = points - data.subtree_com[self.root[bodies]]
-        return off[:, 0:1], off[:, 1:2], off[:, 2:3]
-
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``."""
-        o0, o1, o2 = self._offsets(data, bodies, points)
-        w0, w1, w2, v0, v1, v2 = data.cdof.T
-        J = np.empty((len(bodies), 3, self.model.nv))
-        J[:, 0] = v0 + (w1 * o2 - w2 * o1)
-        J[:, 1] = v1 + (w2 * o0 - w0 * o2)
-        J[:, 2] = v2 + (w0 * o1 - w1 * o0)
-        return np.where(self.chain[bodies][:, None, :], J, 0.0)
+        """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
+        a view of the buffer, valid until the next call."""
+        k = len(bodies)
+        if k > len(self._buf):
+            self._buf = np.zeros((max(k, 2 * len(self._buf)), 3, self.model.nv))
+        buf, model = self._buf, self.model
+        for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
+            mujoco.mj_jac(model, data, buf[i], None, p, b)
+        return buf[:k]
 
     def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """``(k, nv)``: the vertical rows :math:`J_{z}` alone of :meth:`__call__`."""
-        o0, o1, _ = self._offsets(data, bodies, points)
-        w0, w1, _, _, _, v2 = data.cdof.T
-        return np.where(self.chain[bodies], v2 + (w0 * o1 - w1 * o0), 0.0)
+        """``(k, nv)``: the vertical rows :math:`J_z` of points ``(k, 3)`` on ``bodies`` (a new array)."""
+        off = points - data.subtree_com[self.root[bodies]]
+        w0, w1, v2 = data.cdof[:, 0], data.cdof[:, 1], data.cdof[:, 5]
+        return np.where(self.chain[bodies], v2 + (w0 * off[:, 1:2] - w1 * off[:, 0:1]), 0.0)
 
 
 def _dof_chains(model: mujoco.MjModel) -> np.ndarray:
@@ -322,6 +321,7 @@ class FloorLimit(mink.Limit):
         self.margin = float(margin)
         self.activation = float(activation)
         self.enabled = True
+        self._jacp = np.zeros((3, model.nv))
         self._pj = PointJacobians(model)
         self._cand = GeomCandidates(model, self.geoms, known)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
@@ -426,10 +426,11 @@ class FloorLimit(mink.Limit):
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        if len(clear_sites):  # mj_jacSite is mj_jac at the site's position
-            clear_xpos = data.site_xpos[clear_sites]
-            np.negative(self._pj.vertical(data, self.model.site_bodyid[clear_sites], clear_xpos), out=G[n_act:])
-            zs = clear_xpos[:, 2]
+        for row, sid in enumerate(clear_sites.tolist(), start=n_act):
+            mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
+            np.negative(self._jacp[2], out=G[row])
+        if len(clear_sites):
+            zs = data.site_xpos[clear_sites, 2]
             h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 

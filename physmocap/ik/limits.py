@@ -540,14 +540,18 @@ class SelfCollisionLimit(mink.Limit):
         self._b1 = model.geom_bodyid[self.pairs[:, 0]]
         self._b2 = model.geom_bodyid[self.pairs[:, 1]]
         self._pj = PointJacobians(model)
+        self._i1, self._i2 = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
+        bound = self._rsum + self.activation
+        self._bound2 = bound * bound  # squared reach of each pair's bounding spheres (m^2)
+        self._fromto = np.zeros((len(self.pairs), 6))
+        self._fromto_rows = list(self._fromto)  # one row view per pair, for mj_geomDistance
 
     def near_pairs(self, data: mujoco.MjData) -> np.ndarray:
         """Indices of the pairs whose bounding spheres are within ``activation``."""
         if not len(self.pairs):
             return np.zeros(0, dtype=int)
-        diff = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
-        bound = self._rsum + self.activation
-        return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= bound * bound)
+        diff = data.geom_xpos[self._i1] - data.geom_xpos[self._i2]
+        return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= self._bound2)
 
     def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(pair indices (k,), signed distances (k,), fromto (k, 6))`` of the pairs closer
@@ -556,13 +560,10 @@ class SelfCollisionLimit(mink.Limit):
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         near = self.near_pairs(data)
-        d = np.empty(len(near))
-        fromto = np.empty((len(near), 6))
-        model, act, g1s, g2s = self.model, self.activation, self._g1, self._g2
-        for i, k in enumerate(near.tolist()):
-            d[i] = mujoco.mj_geomDistance(model, data, g1s[k], g2s[k], act, fromto[i])
+        model, act, g1s, g2s, rows, distance = self.model, self.activation, self._g1, self._g2, self._fromto_rows, mujoco.mj_geomDistance
+        d = np.array([distance(model, data, g1s[k], g2s[k], act, rows[i]) for i, k in enumerate(near.tolist())], dtype=float)
         keep = d < act
-        out = (near[keep], d[keep], fromto[keep])
+        out = (near[keep], d[keep], self._fromto[: len(near)][keep])
         self._cache = (key, out)
         return out
 
@@ -581,7 +582,7 @@ class SelfCollisionLimit(mink.Limit):
             return mink.Constraint()
         pa, pb = fromto[:, :3], fromto[:, 3:]
         n = pb - pa
-        norm = np.linalg.norm(n, axis=1)
+        norm = np.sqrt(np.add.reduce(n * n, axis=1))  # what np.linalg.norm(n, axis=1) computes
         ok = norm >= 1e-9
         if not ok.all():
             k, d, pa, pb, n, norm = k[ok], d[ok], pa[ok], pb[ok], n[ok], norm[ok]

@@ -199,7 +199,7 @@ class GeomCandidates:
         if len(self.owner):
             np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
         self._rows_key: bytes | None = None
-        self._rows = np.zeros(0, dtype=int)
+        self._rows: tuple = ()
         self._all = np.arange(len(self.gid))
 
     def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -227,28 +227,24 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def _near_rows(self, data: mujoco.MjData, below: float) -> np.ndarray | None:
-        """Candidate rows of the geoms whose bounding sphere reaches below ``below`` (None:
-        every geom does); the index array is kept while the same geoms stay near, which
-        they do over many iterations (a walking robot: its feet and shins)."""
+    def _near_rows(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(rows, their geom ids, their local points (k, 3), their radii)``: the candidates of
+        the geoms whose bounding sphere reaches below ``below``; kept while the same geoms
+        stay near, which they do over many iterations (a walking robot: its feet and shins)."""
         near = data.geom_xpos[self.geoms, 2] - self.radius < below
-        if near.all():
-            return None
         key = near.tobytes()
         if self._rows_key != key:
             self._rows_key = key
-            self._rows = np.flatnonzero(near[self.owner])
+            rows = self._all if near.all() else np.flatnonzero(near[self.owner])
+            self._rows = (rows, self.gid[rows], self.local[rows, :3], self.local[rows, 3])
         return self._rows
 
     def near_z(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray]:
         """``(rows (k,), z (k,))``: the candidates of the geoms whose bounding sphere reaches
         below ``below`` (ascending rows) and their lowest surface heights (metres)."""
-        rows = self._near_rows(data, below)
-        if rows is None:
-            rows = self._all
-        gid = self.gid[rows]
-        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
-        z -= self.local[rows, 3]
+        rows, gid, local, radius = self._near_rows(data, below)
+        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], local)
+        z -= radius
         return rows, z
 
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:

@@ -126,14 +126,13 @@ class QPBuilder:
         self._W = np.zeros((64, nv))  # stacked weighted Jacobians, grown on demand
         self._eps = np.zeros(64)
         self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
-        self._M = np.zeros((0, 6, 6))
-        self._E = np.zeros((0, 6))
         self._frame_views: dict[int, tuple] = {}  # slot -> views of the frame buffers
         self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
         self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
-        self._diag = np.arange(nv) * (nv + 1)
+        self._Hdiag = np.einsum("ii->i", self.H)  # a writable view of H's diagonal
+        self._postures: dict[int, tuple] = {}  # id(posture task) -> (task, its costs' bytes, weights)
         self._ids: dict[int, tuple] = {}  # id(task) -> (task, data, (jacobian function, id, xmat, xpos))
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
@@ -149,36 +148,38 @@ class QPBuilder:
         r"""Rows of consecutive ``FrameTask`` s, 6 each: :math:`W_k = -\mathrm{diag}(w_k)
         J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J_k`, :math:`\epsilon_k = -\alpha_k\, w_k \odot
         \log(T_{bt})` (metres, radians), :math:`J_k` the frame's ``(6, nv)`` Jacobian in world
-        axes (``mj_jacSite``/``mj_jacBody``); the products in one batched ``matmul``."""
+        axes (``mj_jacSite``/``mj_jacBody``).  The SE(3) terms are mink's compiled operations,
+        task by task; the products are batched ``matmul`` s (a stack of matrices gives each
+        product the same bits as one ``matmul`` per task)."""
         n = len(tasks)
         if n > len(self._jacF):
             self._jacF = np.zeros((n, 6, self.nv))
-            self._M = np.zeros((n, 6, 6))
-            self._E = np.zeros((n, 6))
             self._frame_views.clear()
-        J, M, E = self._jacF, self._M, self._E
         model = self.model
         jlog, inverse_multiply, adjoint = _native.se3_jlog, _native.se3_inverse_multiply, _native.se3_rotation_adjoint_from_xmat
-        to_se3, rminus, matmul = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus, np.matmul
+        to_se3, rminus = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus
+        logs, adjoints, errors = [], [], []
         for i, task in enumerate(tasks):
             jac, fid, xmat, xpos = self._frame_of(task, data)
-            Jp, Jr, Mi, Ei = self._frame_slot(i)
+            Jp, Jr = self._frame_slot(i)
             frame = to_se3(xmat, xpos)
             target = task.transform_target_to_world.wxyz_xyz
             jac(model, data, Jp, Jr, fid)
-            matmul(jlog(inverse_multiply(target, frame)), adjoint(xmat), out=Mi)
-            Ei[:] = rminus(target, frame)
+            logs.append(jlog(inverse_multiply(target, frame)))
+            adjoints.append(adjoint(xmat))
+            errors.append(rminus(target, frame))
+        M = np.matmul(np.array(logs), np.array(adjoints))
         C = np.array([t.cost for t in tasks])
         g = np.array([[t.gain] for t in tasks])
-        M[:n] *= -C[:, :, None]
-        np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
-        np.multiply(C, -g * E[:n], out=eps.reshape(n, 6))
+        M *= -C[:, :, None]
+        np.matmul(M, self._jacF[:n], out=W.reshape(n, 6, self.nv))
+        np.multiply(C, -g * np.array(errors), out=eps.reshape(n, 6))
 
-    def _frame_slot(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Views of the ``i``-th frame task's Jacobian (translation, rotation), product and error buffers."""
+    def _frame_slot(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Views of the ``i``-th frame task's Jacobian buffer (translation, rotation rows)."""
         views = self._frame_views.get(i)
         if views is None:
-            views = self._frame_views[i] = (self._jacF[i, :3], self._jacF[i, 3:], self._M[i], self._E[i])
+            views = self._frame_views[i] = (self._jacF[i, :3], self._jacF[i, 3:])
         return views
 
     def _frame_of(self, task: mink.FrameTask, data: mujoco.MjData) -> tuple:
@@ -277,7 +278,7 @@ class QPBuilder:
         np.matmul(Wm.T, Wm, out=H)
         np.matmul(eps[:r], Wm, out=c)
         np.negative(c, out=c)
-        H.flat[self._diag] += damping + mu
+        self._Hdiag += damping + mu
         for p in posture:
             self._posture(configuration, p)
         return H, c
@@ -286,15 +287,25 @@ class QPBuilder:
         r"""Adds the posture task: :math:`H \mathrel{+}= \mathrm{diag}(w^2)`,
         :math:`c \mathrel{+}= \alpha w^2 \odot (q \ominus q^*)`, free-joint columns excluded."""
         e = self._dq
-        mujoco.mj_differentiatePos(self.model, e, 1.0, posture.target_q, configuration.q)
-        w = posture.cost.copy()
-        if posture._v_ids is not None:
-            w[posture._v_ids] = 0.0
-            e[posture._v_ids] = 0.0
-        w2 = w * w
+        mujoco.mj_differentiatePos(self.model, e, 1.0, posture.target_q, configuration.data.qpos)
+        w, w2, free = self._posture_weights(posture)
+        if free is not None:
+            e[free] = 0.0
         eps = w * (-posture.gain * e)
-        self.H.flat[self._diag] += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
+        self._Hdiag += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
         self.c -= eps * w
+
+    def _posture_weights(self, posture: mink.PostureTask) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(w, w^2, free-joint dofs or None)`` of a posture task, its costs with the free
+        joint's zeroed; recomputed when the costs change."""
+        cached = self._postures.get(id(posture))
+        key = posture.cost.tobytes()
+        if cached is None or cached[0] is not posture or cached[1] != key:
+            w = posture.cost.copy()
+            if posture._v_ids is not None:
+                w[posture._v_ids] = 0.0
+            cached = self._postures[id(posture)] = (posture, key, (w, w * w, posture._v_ids))
+        return cached[2]
 
     # -- constraints --------------------------------------------------------------
     def bounds(

@@ -29,28 +29,13 @@ __all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "
 
 class PointJacobians:
     r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
-    of points fixed to bodies.
-
-    :meth:`__call__` calls ``mj_jac`` point by point into one preallocated buffer (the few
-    dozen points of the self-collision rows).  :meth:`vertical` evaluates the vertical rows
-    alone, for all points at once, from ``mj_jac``'s own expression: for every dof :math:`i`
-    in the body's kinematic chain (0 elsewhere), with :math:`(\omega_i, v_i)` the dof's
-    motion axis ``cdof`` (``mj_comPos``) and :math:`o = p - c` the point's offset from its
-    tree's centre of mass ``subtree_com``,
-
-    .. math::
-
-        J_{z, i} = v_{z,i} + (\omega_{x,i} o_y - \omega_{y,i} o_x)
-
-    component by component in the same order, so to the same bits as ``mj_jac``
-    (``tests/test_qp.py`` checks it); a call costs about ten ``mj_jac`` calls, whatever the
-    number of points (the floor needs a few dozen rows per iteration)."""
+    of points fixed to bodies, by ``mj_jac`` (point by point, as the rows were first
+    written: the same round-off), into one preallocated buffer (the floor and
+    self-collision rows need a few dozen per iteration)."""
 
     def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
         self._buf = np.zeros((capacity, 3, model.nv))
-        self.chain = _dof_chains(model)
-        self.root = np.asarray(model.body_rootid, dtype=int)
 
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
@@ -62,27 +47,6 @@ class PointJacobians:
         for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
             mujoco.mj_jac(model, data, buf[i], None, p, b)
         return buf[:k]
-
-    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """``(k, nv)``: the vertical rows :math:`J_z` of points ``(k, 3)`` on ``bodies`` (a new array)."""
-        off = points - data.subtree_com[self.root[bodies]]
-        w0, w1, v2 = data.cdof[:, 0], data.cdof[:, 1], data.cdof[:, 5]
-        return np.where(self.chain[bodies], v2 + (w0 * off[:, 1:2] - w1 * off[:, 0:1]), 0.0)
-
-
-def _dof_chains(model: mujoco.MjModel) -> np.ndarray:
-    """``(nbody, nv)`` bool: the dofs that move each body (its own and its ancestors'), the
-    columns ``mj_jac`` writes (a body without dofs moves with its nearest ancestor that has)."""
-    chain = np.zeros((model.nbody, model.nv), dtype=bool)
-    for b in range(1, model.nbody):
-        a = b
-        while a > 0 and model.body_dofnum[a] == 0:
-            a = int(model.body_parentid[a])
-        i = int(model.body_dofadr[a] + model.body_dofnum[a] - 1) if a > 0 else -1
-        while i >= 0:
-            chain[b, i] = True
-            i = int(model.dof_parentid[i])
-    return chain
 
 
 class FrameStepLimit(mink.Limit):
@@ -411,7 +375,7 @@ class FloorLimit(mink.Limit):
         anchor = np.empty((n_act, 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
-        np.negative(self._pj.vertical(data, b, anchor), out=G[:n_act])
+        np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
         za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
         clear_sites, clear_heights, per_body = self._swing_arrays()

@@ -69,6 +69,9 @@ __all__ = ["QP", "QPBuilder", "WarmSolver", "solve", "INFINITY"]
 #: What daqp reads as an absent bound.
 INFINITY = 1e30
 
+#: daqp's constraint sense array type (a C ``int``).
+_SENSE = np.dtype(c_int)
+
 _JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
 _XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
 _XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
@@ -128,7 +131,7 @@ class QPBuilder:
         self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
         self._frame_views: dict[int, tuple] = {}  # slot -> views of the frame buffers
         self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
-        self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites
+        self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites, targets (this frame)
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
         self._Hdiag = np.einsum("ii->i", self.H)  # a writable view of H's diagonal
@@ -208,31 +211,35 @@ class QPBuilder:
         W *= task.cost[:, None]
         np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
 
-    def site_terms(self, tasks: Sequence[SitePositionTask], data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        r"""``(J, e)`` of consecutive ``SitePositionTask`` s, one row per regulated axis in task
-        order: :math:`J` the site's world-position Jacobian row (``mj_jacSite``, ``(k, nv)``) and
-        :math:`e = -\alpha (x_s - x^*)` (metres, ``(k,)``), what ``compute_jacobian`` and
-        ``-gain * compute_error`` give task by task.  New arrays."""
+    def new_frame(self) -> None:
+        """Forget the ``SitePositionTask`` s' targets, gains and costs read so far (see
+        :meth:`site_terms`): call it whenever they may have changed (a new frame's holds)."""
+        self._site_plans.clear()
+
+    def site_terms(self, tasks: Sequence[SitePositionTask], data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""``(J, e, w)`` of consecutive ``SitePositionTask`` s, one row per regulated axis in task
+        order: :math:`J` the site's world-position Jacobian row (``mj_jacSite``, ``(k, nv)``),
+        :math:`e = -\alpha (x_s - x^*)` (metres, ``(k,)``) and the cost :math:`w` (per metre),
+        what ``compute_jacobian``, ``-gain * compute_error`` and ``cost`` give task by task.
+        The tasks' targets, gains and costs are read at the first call after :meth:`new_frame`."""
         key = tuple(map(id, tasks))
         plan = self._site_plans.get(key)
-        if plan is None or any(a is not b for a, b in zip(plan[0], tasks)):
-            if len(self._site_plans) > 256:
-                self._site_plans.clear()
+        if plan is None:
             owner = np.concatenate([np.full(t.k, j) for j, t in enumerate(tasks)])
             axes = np.concatenate([np.array(t.axes, dtype=int) for t in tasks])
             sites = np.array([t.site_id for t in tasks])
-            plan = self._site_plans[key] = (tuple(tasks), owner, axes, sites[owner], sites.tolist())
-        _, owner, axes, row_sites, sites = plan
-        n = len(sites)
-        if n > len(self._jacS):
-            self._jacS = np.zeros((max(n, 2 * len(self._jacS)), 3, self.nv))
+            target = np.array([t.target for t in tasks])[owner, axes]
+            gain = np.array([-t.gain for t in tasks])[owner]
+            cost = np.concatenate([t.cost for t in tasks])
+            # the tasks are kept so that their ids stay theirs until new_frame
+            plan = self._site_plans[key] = (tuple(tasks), owner, axes, sites[owner], sites.tolist(), target, gain, cost)
+        _, owner, axes, row_sites, sites, target, gain, cost = plan
         jac, model = self._jacS, self.model
+        if len(sites) > len(jac):
+            jac = self._jacS = np.zeros((max(len(sites), 2 * len(jac)), 3, self.nv))
         for j, sid in enumerate(sites):
             mujoco.mj_jacSite(model, data, jac[j], None, sid)
-        target = np.array([t.target for t in tasks])
-        gain = np.array([-t.gain for t in tasks])
-        e = gain[owner] * (data.site_xpos[row_sites, axes] - target[owner, axes])
-        return jac[owner, axes], e
+        return jac[owner, axes], gain * (data.site_xpos[row_sites, axes] - target), cost
 
     def objective(
         self,
@@ -258,9 +265,8 @@ class QPBuilder:
                 k = 6 * len(run)
                 self._frame_rows(run, data, W[r : r + k], eps[r : r + k])
             elif kind is SitePositionTask:
-                Jk, ek = self.site_terms(run, data)
+                Jk, ek, cost = self.site_terms(run, data)
                 k = len(ek)
-                cost = np.concatenate([t.cost for t in run])
                 np.multiply(cost[:, None], Jk, out=W[r : r + k])
                 np.multiply(cost, ek, out=eps[r : r + k])
             elif type(run[0]) is SitesPositionTask:
@@ -398,7 +404,7 @@ class QPBuilder:
         As, bs = [], []
         for kind, run in _runs(constraints):
             if kind is SitePositionTask:
-                Jk, ek = self.site_terms(run, configuration.data)
+                Jk, ek, _ = self.site_terms(run, configuration.data)
             else:
                 Jk, ek = run[0].compute_jacobian(configuration), -run[0].gain * run[0].compute_error(configuration)
             As.append(Jk)
@@ -457,15 +463,14 @@ def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:
 def _stack(qp: QP) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """daqp's ``(A, bupper, blower, sense)``: simple bounds first, then :math:`G`, then :math:`A` (sense 5)."""
     nv, m, p = qp.c.size, qp.h.size, qp.b.size
-    if m or p:
-        Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
-        bupper = np.concatenate([qp.ub, qp.h, qp.b])
-        blower = np.concatenate([qp.lb, np.full(m, -INFINITY), qp.b])
-    else:
-        Atot = np.zeros((0, nv))
-        bupper, blower = qp.ub, qp.lb
-    sense = np.zeros(nv + m + p, dtype=c_int)
+    sense = np.zeros(nv + m + p, dtype=_SENSE)
+    if not (m or p):
+        return np.zeros((0, nv)), qp.ub, qp.lb, sense
     sense[nv + m :] = 5
+    Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
+    bupper = np.concatenate([qp.ub, qp.h, qp.b])
+    blower = np.concatenate([qp.lb, qp.h, qp.b])
+    blower[nv : nv + m] = -INFINITY
     return Atot, bupper, blower, sense
 
 
@@ -483,7 +488,7 @@ def solve(qp: QP, dual_start: np.ndarray | None = None) -> np.ndarray:
 def _solve(qp: QP, dual_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     Atot, bupper, blower, sense = _stack(qp)
     x, _, exitflag, info = daqp.solve(qp.H, qp.c, Atot, bupper, blower, sense, dual_start=dual_start)
-    if exitflag <= 0 or x is None or not np.all(np.isfinite(x)):
+    if exitflag <= 0 or x is None or not np.isfinite(x).all():
         raise mink.NoSolutionFound("daqp")
     return np.asarray(x), info["lam"]
 

@@ -625,6 +625,7 @@ class FrameSolver:
         """
         self._set_targets(positions, orientations, valid)
         self._set_holds(holds or ContactHolds())
+        self._builder.new_frame()  # the holds' targets and costs are this frame's
         # converging from the rest pose is no motion: the limbs may pass each other on the way
         # (from the next frame on, a pair left overlapping is pushed apart)
         self._first = bool(first)

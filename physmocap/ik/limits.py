@@ -371,7 +371,7 @@ class FloorLimit(mink.Limit):
         h = np.empty(rows)
         b = self._bodies[active]
         ng = len(self._cand.gid)
-        split = int(np.searchsorted(active, ng))
+        split = int(active.searchsorted(ng))
         anchor = np.empty((n_act, 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
@@ -505,6 +505,7 @@ class SelfCollisionLimit(mink.Limit):
         self._bound2 = bound * bound  # squared reach of each pair's bounding spheres (m^2)
         self._fromto = np.zeros((len(self.pairs), 6))
         self._fromto_rows = list(self._fromto)  # one row view per pair, for mj_geomDistance
+        self._far = np.full(len(self.pairs), self.activation)  # every pair at the activation distance
 
     def near_pairs(self, data: mujoco.MjData) -> np.ndarray:
         """Indices of the pairs whose bounding spheres are within ``activation``."""
@@ -529,7 +530,7 @@ class SelfCollisionLimit(mink.Limit):
 
     def distances(self, data: mujoco.MjData) -> np.ndarray:
         """Signed distances of every pair (capped at ``activation``), metres."""
-        out = np.full(len(self.pairs), self.activation)
+        out = self._far.copy()
         k, d, _ = self._close(data)
         out[k] = d
         return out
@@ -551,7 +552,7 @@ class SelfCollisionLimit(mink.Limit):
         n /= norm[:, None]
         n[d < 0] *= -1.0  # overlapping: fromto runs from b's deepest point into a's surface
         m = len(k)
-        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.vstack([pa, pb]))
+        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.concatenate([pa, pb]))
         G = -np.einsum("ki,kij->kj", n, J[m:] - J[:m])
         # the distance may shrink to the margin; a pair inside it must move apart, by at
         # most ``recovery`` per iteration (so that the QP stays feasible)

@@ -391,7 +391,7 @@ class QPBuilder:
             if not con.inactive:
                 Gs.append(con.G)
                 hs.append(con.h)
-        G = np.vstack(Gs) if Gs else np.zeros((0, self.nv))
+        G = np.concatenate(Gs) if Gs else np.zeros((0, self.nv))
         h = np.concatenate(hs) if hs else np.zeros(0)
         A, b = self.equalities(configuration, constraints)
         return QP(H, c, lb, ub, G, h, A, b)
@@ -411,7 +411,7 @@ class QPBuilder:
             bs.append(ek)
         if len(As) == 1:
             return As[0], bs[0]
-        return np.vstack(As), np.concatenate(bs)
+        return np.concatenate(As), np.concatenate(bs)
 
 
 def _batched(task: mink.Task) -> type | None:

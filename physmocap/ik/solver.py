@@ -291,7 +291,7 @@ class FrameSolver:
         if self.points is not None:
             self.points.set_targets(positions[self._point_idx])
             on = np.asarray(valid, dtype=bool)[self._point_idx]
-            if np.any(on != self._points_on):
+            if (on != self._points_on).any():
                 self.points.set_costs(np.where(on, self._point_costs, 0.0))
                 self._points_on = on
 
@@ -437,7 +437,7 @@ class FrameSolver:
                 except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                     break
                 self._integrate(v, 1.0)
-                if np.max(np.abs(v)) < opt.tolerance:
+                if np.abs(v).max() < opt.tolerance:
                     break
         finally:
             self.posture.set_cost(opt.posture_cost)
@@ -487,7 +487,7 @@ class FrameSolver:
         """How far (metres, largest coordinate) the planted contacts are off their anchors."""
         rc = 0.0
         if self._hold_rows is not None:
-            rc = max(rc, float(np.max(np.abs(self._contact_errors()))))
+            rc = max(rc, float(np.abs(self._contact_errors()).max()))
         else:
             for task in self._constraints:
                 rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
@@ -661,12 +661,12 @@ class FrameSolver:
                 worst = 5
                 break
             self._line_search(v)
-            if np.max(np.abs(v)) < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
+            if np.abs(v).max() < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
                 break
         if opt.floor and worst < 3 and not self._floor_ok():
             self._project_floor(base)
         q = self.configuration.q.copy()
-        if worst == 5 or not np.all(np.isfinite(q)):
+        if worst == 5 or not np.isfinite(q).all():
             worst = 5
             q = (self.q_prev if self.q_prev is not None else np.array(self.character.rest_qpos)).copy()
         # remove solver round-off outside the joint ranges (the QP keeps within ~1e-9)

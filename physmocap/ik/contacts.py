@@ -397,6 +397,7 @@ class ContactDetector:
     def reset(self) -> None:
         n = len(self.h_enter)
         self.state = np.zeros(n, dtype=bool)
+        self._still = np.zeros(n)  # no vertical velocity (``climb`` not given)
         self.count = np.zeros(n, dtype=int)
         self.since = np.zeros(n, dtype=int)
         self.frame = 0
@@ -408,7 +409,7 @@ class ContactDetector:
         used) in; the labels ``(P,)`` out."""
         h = np.asarray(heights, dtype=float)
         v = np.asarray(speeds, dtype=float)
-        c = np.zeros_like(h) if climb is None else np.asarray(climb, dtype=float)
+        c = self._still if climb is None else np.asarray(climb, dtype=float)
         known = np.isfinite(h) & np.isfinite(v) & np.isfinite(c)
         with np.errstate(invalid="ignore"):
             enter = known & (h < self.h_enter) & (v < self.v_enter) & (c < self.lift)
@@ -419,7 +420,7 @@ class ContactDetector:
         self.count = np.where(want, self.count + 1, np.where(known, 0, self.count))
         need = np.where(self.state, self.n_off, self.n_on)
         flip = self.count >= need
-        for i in np.flatnonzero(flip):
+        for i in flip.nonzero()[0]:
             self.transitions.append((int(i), int(self.since[i]), not bool(self.state[i])))
         self.state = np.where(flip, ~self.state, self.state)
         self.count[flip] = 0

@@ -512,7 +512,7 @@ class SelfCollisionLimit(mink.Limit):
         if not len(self.pairs):
             return np.zeros(0, dtype=int)
         diff = data.geom_xpos[self._i1] - data.geom_xpos[self._i2]
-        return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= self._bound2)
+        return (np.einsum("ij,ij->i", diff, diff) <= self._bound2).nonzero()[0]
 
     def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(pair indices (k,), signed distances (k,), fromto (k, 6))`` of the pairs closer

@@ -225,7 +225,7 @@ class QPBuilder:
         key = tuple(map(id, tasks))
         plan = self._site_plans.get(key)
         if plan is None:
-            owner = np.concatenate([np.full(t.k, j) for j, t in enumerate(tasks)])
+            owner = np.repeat(np.arange(len(tasks)), [t.k for t in tasks])
             axes = np.concatenate([np.array(t.axes, dtype=int) for t in tasks])
             sites = np.array([t.site_id for t in tasks])
             target = np.array([t.target for t in tasks])[owner, axes]

@@ -301,7 +301,7 @@ class FrameSolver:
         # the planted contacts' residual rows at once: site, world axis, target (metres)
         self._hold_rows = None
         if self._constraints and all(type(t) is SitePositionTask for t in self._constraints):
-            sites = np.concatenate([np.full(t.k, t.site_id) for t in self._constraints])
+            sites = np.repeat([t.site_id for t in self._constraints], [t.k for t in self._constraints])
             axes = np.concatenate([np.array(t.axes, dtype=int) for t in self._constraints])
             target = np.concatenate([t.target[list(t.axes)] for t in self._constraints])
             self._hold_rows = (sites, axes, target)
@@ -511,7 +511,7 @@ class FrameSolver:
         if not self._constraints and not self.options.floor:
             self._integrate(v, 1.0)
             return
-        q0 = self.configuration.q.copy()
+        q0 = self.configuration.data.qpos.copy()
         r0 = self._residual if self._residual is not None else self._hard_residual()
         bound = max(r0, tol)
         qpos = self.configuration.data.qpos
@@ -665,7 +665,7 @@ class FrameSolver:
                 break
         if opt.floor and worst < 3 and not self._floor_ok():
             self._project_floor(base)
-        q = self.configuration.q.copy()
+        q = self.configuration.data.qpos.copy()
         if worst == 5 or not np.isfinite(q).all():
             worst = 5
             q = (self.q_prev if self.q_prev is not None else np.array(self.character.rest_qpos)).copy()

@@ -128,15 +128,13 @@ class QPBuilder:
         self.ub = np.zeros(nv)
         self._W = np.zeros((64, nv))  # stacked weighted Jacobians, grown on demand
         self._eps = np.zeros(64)
-        self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
-        self._frame_views: dict[int, tuple] = {}  # slot -> views of the frame buffers
+        self._frame_plans: dict[tuple, tuple] = {}  # frame tasks' ids -> their frames and Jacobian rows
         self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
         self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites, targets (this frame)
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
         self._Hdiag = np.einsum("ii->i", self.H)  # a writable view of H's diagonal
         self._postures: dict[int, tuple] = {}  # id(posture task) -> (task, its costs' bytes, weights)
-        self._ids: dict[int, tuple] = {}  # id(task) -> (task, data, (jacobian function, id, xmat, xpos))
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
 
@@ -155,16 +153,12 @@ class QPBuilder:
         task by task; the products are batched ``matmul`` s (a stack of matrices gives each
         product the same bits as one ``matmul`` per task)."""
         n = len(tasks)
-        if n > len(self._jacF):
-            self._jacF = np.zeros((n, 6, self.nv))
-            self._frame_views.clear()
         model = self.model
         jlog, inverse_multiply, adjoint = _native.se3_jlog, _native.se3_inverse_multiply, _native.se3_rotation_adjoint_from_xmat
         to_se3, rminus = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus
         logs, adjoints, errors = [], [], []
-        for i, task in enumerate(tasks):
-            jac, fid, xmat, xpos = self._frame_of(task, data)
-            Jp, Jr = self._frame_slot(i)
+        frames, jacobians = self._frames(tasks, data)
+        for task, (jac, fid, xmat, xpos, Jp, Jr) in zip(tasks, frames):
             frame = to_se3(xmat, xpos)
             target = task.transform_target_to_world.wxyz_xyz
             jac(model, data, Jp, Jr, fid)
@@ -175,26 +169,28 @@ class QPBuilder:
         C = np.array([t.cost for t in tasks])
         g = np.array([[t.gain] for t in tasks])
         M *= -C[:, :, None]
-        np.matmul(M, self._jacF[:n], out=W.reshape(n, 6, self.nv))
+        np.matmul(M, jacobians, out=W.reshape(n, 6, self.nv))
         np.multiply(C, -g * np.array(errors), out=eps.reshape(n, 6))
 
-    def _frame_slot(self, i: int) -> tuple[np.ndarray, np.ndarray]:
-        """Views of the ``i``-th frame task's Jacobian buffer (translation, rotation rows)."""
-        views = self._frame_views.get(i)
-        if views is None:
-            views = self._frame_views[i] = (self._jacF[i, :3], self._jacF[i, 3:])
-        return views
-
-    def _frame_of(self, task: mink.FrameTask, data: mujoco.MjData) -> tuple:
-        """``(Jacobian function, frame id, xmat row, xpos row)`` of a ``FrameTask``'s frame in
-        ``data`` (views into ``data``: they follow its kinematics), resolved once per task."""
-        ids = self._ids.get(id(task))
-        if ids is None or ids[0] is not task or ids[1] is not data:
-            kind = task.frame_type
-            fid = _resolve(self.model, task.frame_name, kind)
-            xmat, xpos = getattr(data, _XMAT[kind])[fid], getattr(data, _XPOS[kind])[fid]
-            ids = self._ids[id(task)] = (task, data, (_JAC[kind], fid, xmat, xpos))
-        return ids[2]
+    def _frames(self, tasks: Sequence[mink.FrameTask], data: mujoco.MjData) -> tuple[list[tuple], np.ndarray]:
+        """Per task ``(Jacobian function, frame id, xmat row, xpos row, translation and rotation
+        rows of its Jacobian)``, and the ``(n, 6, nv)`` Jacobians buffer those rows belong to,
+        resolved once per run of tasks (the rows are views into ``data``: they follow its
+        kinematics)."""
+        key = tuple(map(id, tasks))  # the plan keeps the tasks alive: their ids stay theirs
+        plan = self._frame_plans.get(key)
+        if plan is None or plan[1] is not data:
+            if len(self._frame_plans) > 64:
+                self._frame_plans.clear()
+            J = np.zeros((len(tasks), 6, self.nv))
+            frames = []
+            for i, task in enumerate(tasks):
+                kind = task.frame_type
+                fid = _resolve(self.model, task.frame_name, kind)
+                xmat, xpos = getattr(data, _XMAT[kind])[fid], getattr(data, _XPOS[kind])[fid]
+                frames.append((_JAC[kind], fid, xmat, xpos, J[i, :3], J[i, 3:]))
+            plan = self._frame_plans[key] = (tuple(tasks), data, frames, J)
+        return plan[2], plan[3]
 
     def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
         r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked

@@ -470,13 +470,14 @@ class FrameSolver:
             if self._floor_ok():
                 return
 
-    def _residuals(self) -> tuple[float, float]:
+    def _residuals(self, contacts: float | None = None) -> tuple[float, float]:
         """``(contacts, floor)``: how far the planted contacts are off their anchors
-        and the lowest point below the floor (metres), cached per configuration."""
+        and the lowest point below the floor (metres), cached per configuration
+        (``contacts``: the first, when just computed by :meth:`_contact_residual`)."""
         key = self.configuration.data.qpos.tobytes()
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
-        rc = self._contact_residual()
+        rc = self._contact_residual() if contacts is None else contacts
         rf = 0.0
         if self.options.floor:
             rf = max(0.0, self.options.floor_height - self.floor_limit.lowest(self.configuration.data))
@@ -567,9 +568,10 @@ class FrameSolver:
         """True (and the residual kept) if the current trial's hard-constraint residual is
         within ``bound``: the contacts' residual first, so that when it alone is too large
         the trial is refused without the floor's (the same decision as on their maximum)."""
-        if self._contact_residual() > bound:
+        rc = self._contact_residual()
+        if rc > bound:
             return False
-        r1 = self._hard_residual()
+        r1 = max(self._residuals(rc))
         if r1 > bound:
             return False
         self._residual = r1

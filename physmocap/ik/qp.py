@@ -130,6 +130,7 @@ class QPBuilder:
         self._eps = np.zeros(64)
         self._frame_plans: dict[tuple, tuple] = {}  # frame tasks' ids -> their frames and Jacobian rows
         self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
+        self._task_plans: dict[tuple, tuple] = {}  # task ids -> runs, rows, spans
         self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites, targets (this frame)
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
@@ -160,6 +161,8 @@ class QPBuilder:
         frames, jacobians = self._frames(tasks, data)
         for task, (jac, fid, xmat, xpos, Jp, Jr) in zip(tasks, frames):
             frame = to_se3(xmat, xpos)
+            if task.transform_target_to_world is None:
+                raise mink.TargetNotSet(type(task).__name__)
             target = task.transform_target_to_world.wxyz_xyz
             jac(model, data, Jp, Jr, fid)
             logs.append(jlog(inverse_multiply(target, frame)))
@@ -250,13 +253,11 @@ class QPBuilder:
         tasks of one kind (``FrameTask``, ``SitePositionTask``) are written together.
         """
         data = configuration.data
-        m = 0
-        for t in tasks:
-            m += t.k if hasattr(t, "k") else len(t.cost)
+        runs, m, spans = self._task_plan(tasks)
         self._rows(m)
         W, eps = self._W, self._eps
         r = 0
-        for kind, run in _runs(tasks):
+        for kind, run in runs:
             if kind is mink.FrameTask:
                 k = 6 * len(run)
                 self._frame_rows(run, data, W[r : r + k], eps[r : r + k])
@@ -274,7 +275,10 @@ class QPBuilder:
                 W[r : r + k] = Wk
                 eps[r : r + k] = ek
             r += k
-        mu = _lm_damping(tasks, eps)
+        mu = 0.0  # sum of lambda_k |eps_k|^2 over the tasks with LM damping, in task order
+        for t, r0, k in spans:
+            if t.lm_damping:
+                mu += t.lm_damping * float(eps[r0 : r0 + k] @ eps[r0 : r0 + k])
         H, c = self.H, self.c
         Wm = W[:r]
         np.matmul(Wm.T, Wm, out=H)
@@ -284,6 +288,23 @@ class QPBuilder:
         for p in posture:
             self._posture(configuration, p)
         return H, c
+
+    def _task_plan(self, tasks: Sequence[mink.Task]) -> tuple[list, int, list[tuple[mink.Task, int, int]]]:
+        """``(runs, rows, spans)`` of a sequence of tasks: its :func:`_runs`, its number of rows
+        and each task's ``(task, first row, rows)``, kept per sequence (with the tasks, so
+        that their ids stay theirs)."""
+        key = tuple(map(id, tasks))
+        plan = self._task_plans.get(key)
+        if plan is None:
+            if len(self._task_plans) > 256:
+                self._task_plans.clear()
+            spans, r = [], 0
+            for t in tasks:
+                k = t.k if hasattr(t, "k") else len(t.cost)
+                spans.append((t, r, k))
+                r += k
+            plan = self._task_plans[key] = (_runs(tasks), r, spans)
+        return plan
 
     def _posture(self, configuration: mink.Configuration, posture: mink.PostureTask) -> None:
         r"""Adds the posture task: :math:`H \mathrel{+}= \mathrm{diag}(w^2)`,
@@ -414,7 +435,7 @@ def _batched(task: mink.Task) -> type | None:
     """The kind of rows ``task`` is written with in a run of its kind, or None (alone)."""
     kind = type(task)
     if kind is mink.FrameTask:
-        return kind if _native is not None and task.transform_target_to_world is not None else None
+        return kind if _native is not None else None
     return kind if kind is SitePositionTask else None
 
 
@@ -431,18 +452,6 @@ def _runs(tasks: Sequence[mink.Task]) -> list[tuple[type | None, list[mink.Task]
             runs.append((kind, [t]))
         last = kind
     return runs
-
-
-def _lm_damping(tasks: Sequence[mink.Task], eps: np.ndarray) -> float:
-    r""":math:`\sum_k \lambda_k \|\epsilon_k\|^2` over the tasks with LM damping, in task order
-    (each task's rows follow the previous one's in ``eps``)."""
-    mu, r = 0.0, 0
-    for t in tasks:
-        k = t.k if hasattr(t, "k") else len(t.cost)
-        if t.lm_damping:
-            mu += t.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
-        r += k
-    return mu
 
 
 def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:

@@ -35,18 +35,23 @@ class PointJacobians:
 
     def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
-        self._buf = np.zeros((capacity, 3, model.nv))
+        self._grow(capacity)
+
+    def _grow(self, capacity: int) -> None:
+        """A buffer for ``capacity`` points."""
+        self._buf = np.zeros((capacity, 3, self.model.nv))
+        self._rows = list(self._buf)  # one (3, nv) view per point, made once
 
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
         a view of the buffer, valid until the next call."""
         k = len(bodies)
         if k > len(self._buf):
-            self._buf = np.zeros((max(k, 2 * len(self._buf)), 3, self.model.nv))
-        buf, model = self._buf, self.model
-        for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
-            mujoco.mj_jac(model, data, buf[i], None, p, b)
-        return buf[:k]
+            self._grow(max(k, 2 * len(self._buf)))
+        model, jac = self.model, mujoco.mj_jac
+        for row, b, p in zip(self._rows, bodies.tolist(), points):
+            jac(model, data, row, None, p, b)
+        return self._buf[:k]
 
 
 class FrameStepLimit(mink.Limit):

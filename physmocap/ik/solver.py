@@ -296,6 +296,9 @@ class FrameSolver:
                 self._points_on = on
 
     def _set_holds(self, holds: "ContactHolds") -> None:
+        """This frame's contact holds; their tasks' targets and costs are read from here on
+        (:meth:`QPBuilder.new_frame`), so a change to them needs a new call."""
+        self._builder.new_frame()
         self._extra_tasks = list(holds.tasks)
         self._constraints = list(holds.constraints)
         # the planted contacts' residual rows at once: site, world axis, target (metres)
@@ -627,7 +630,6 @@ class FrameSolver:
         """
         self._set_targets(positions, orientations, valid)
         self._set_holds(holds or ContactHolds())
-        self._builder.new_frame()  # the holds' targets and costs are this frame's
         # converging from the rest pose is no motion: the limbs may pass each other on the way
         # (from the next frame on, a pair left overlapping is pushed apart)
         self._first = bool(first)

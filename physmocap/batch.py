@@ -419,8 +419,15 @@ def options_key(options: dict[str, Any]) -> str:
 
 
 def job_options(job: Job, options: dict[str, Any]) -> dict[str, Any]:
-    """The batch's ``options`` with the job's own on top: what the file is retargeted with."""
-    return {**options, **job.options}
+    """The batch's ``options`` with the job's own on top: what the file is retargeted with.
+    The batch's marker options (``--marker-set``, ``--joint-centres``, the marker solve's:
+    :data:`~physmocap.cli.retarget.MARKER_OPTIONS_UNSET`) apply to its marker files only, so
+    a folder can mix them with skeleton files; a file's own are checked as given."""
+    from .cli.retarget import MARKER_OPTIONS_UNSET
+    from .sources.markers import is_marker_file
+
+    shared = options if is_marker_file(job.input) else {**options, **MARKER_OPTIONS_UNSET}
+    return {**shared, **job.options}
 
 
 #: What a job's caller is told as its file is retargeted: ``(frames done, frames in all)``.

@@ -3,8 +3,10 @@
 
 Every case is a mutated copy of a real file (the bundled BVH walk; a tracker CSV, JSONL and NPZ
 and an MCAP made from it; a trajectory NPZ from `retarget --qpos`; the robot's mapping file; and
-the shared C3D/TRC recordings where ../shared is present), run in a child process under a
-CPU-time and memory limit: motion files through `physmocap inspect` and `physmocap convert`, the
+the shared TRC recording and the shared C3D's first 60 frames as a `foxglove.PointCloud` marker
+MCAP where ../shared is present), run in a child process under a CPU-time and memory limit:
+motion files through `physmocap inspect` and `physmocap convert` (the point clouds also through
+`physmocap solve`), the
 trajectory through `physmocap report`, the mapping through `physmocap character info robot --map`.  A case passes when it ends in success (exit 0) or in exactly one `physmocap: error:`
 line with exit 2; anything else (a traceback, another exit status, a signal, a timeout) is a
 failure, saved under --keep for replay.
@@ -86,6 +88,12 @@ def seeds(work: Path) -> list[Path]:
     for name in ("vicon_upperbody.trc",):
         if (DATA / name).exists():
             out.append(DATA / name)
+    if (DATA / "cmu_01_01_markers.c3d").exists():  # markers as Foxglove point clouds, labels in metadata
+        from physmocap.export.mcap import write_markers_pointcloud_mcap
+        from physmocap.sources.markers import read_markers
+
+        rec = read_markers(DATA / "cmu_01_01_markers.c3d").frames(0, 60)
+        out.append(write_markers_pointcloud_mcap(rec, work / "markers_cloud.mcap", compression="none"))
     return out
 
 
@@ -95,6 +103,8 @@ def commands(path: Path) -> list[list[str]]:
         return [["character", "info", "robot", "--map", "{}"], ["inspect", "example", "--map", "{}"]]
     if "traj" in path.stem:
         return [["report", "{}", "--no-source"]]
+    if path.stem == "markers_cloud":
+        return [["inspect", "{}"], ["convert", "{}", "OUT.bvh"], ["solve", "{}", "-o", "OUT.bvh"]]
     return [["inspect", "{}"], ["convert", "{}", "OUT.bvh"]]
 
 

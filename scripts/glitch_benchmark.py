@@ -330,6 +330,69 @@ def positional_benchmark(args: argparse.Namespace) -> None:
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")
 
 
+#: Rotational repairs compared per type (the second table): the hard-limited IK re-solve
+#: (:mod:`physmocap.clean.resolve`) left out ("never"), used where the interpolated pose leaves
+#: a range of motion (the default, "limits"), used wherever it can be ("always"), and per
+#: glitch the better of "never" and "always" against the clean clip ("oracle": what a perfect
+#: choice between interpolation and IK would give).
+METHODS = ("never", "limits", "always", "oracle")
+
+
+def _method_errors(glitched, fixed, report, P0: np.ndarray, frames: list[int], own: np.ndarray) -> dict[str, np.ndarray]:
+    """Method -> ``[sum of squared joint-position errors (m^2) over ``frames``, their count,
+    repaired glitches better than the glitch, repaired glitches]``; a glitch is better where
+    its span's joint-position RMS error (all joints) after the repair is below the one
+    before.  ``fixed``: the default ("limits") repair of ``glitched``; ``own (F,)``: the
+    frames the untouched clip's own repairs change (no truth there: their glitches are not
+    counted)."""
+    import dataclasses
+
+    from physmocap.clean.correct import REPAIRED, correct_glitches
+
+    names = {n: j for j, n in enumerate(glitched.skeleton.names)}
+    found = list(report.glitches)
+    R = {m: np.asarray(correct_glitches(glitched, found, resolve=m)[0].rotations) for m in ("never", "always")}
+    R["limits"] = np.asarray(fixed.rotations)
+    spans = [(names[g.joint], g.start, g.end) for g in found
+             if g.corrected and REPAIRED.get(g.kind) == "rotation" and not own[g.start : g.end + 1].any()]
+
+    def positions(rot: np.ndarray, s: int = 0, e: int = -1) -> np.ndarray:
+        return dataclasses.replace(glitched, rotations=rot).slice_frames(s, e + 1 if e >= 0 else None).world_positions()
+
+    def span_rms(rot: np.ndarray, s: int, e: int) -> float:
+        return float(np.sqrt(np.mean(np.sum((positions(rot, s, e) - P0[s : e + 1]) ** 2, axis=-1))))
+
+    oracle = R["never"].copy()
+    for j, s, e in spans:  # greedy: each glitch's IK kept where it lowers its span's error
+        trial = oracle.copy()
+        trial[s : e + 1, j] = R["always"][s : e + 1, j]
+        if span_rms(trial, s, e) < span_rms(oracle, s, e):
+            oracle = trial
+    R["oracle"] = oracle
+    Rg = np.asarray(glitched.rotations)
+    P = {m: positions(R[m]) for m in METHODS}
+    out = {}
+    for m in METHODS:
+        sq = np.sum((P[m][frames] - P0[frames]) ** 2, axis=-1)
+        better = sum(span_rms(R[m], s, e) < span_rms(Rg, s, e) for _, s, e in spans)
+        out[m] = np.array([np.nansum(sq), np.isfinite(sq).sum(), better, len(spans)], dtype=float)
+    return out
+
+
+def _print_methods(types, sums: dict[str, dict[str, np.ndarray]]) -> None:
+    """The second rotational table: per type and method (:data:`METHODS`), the joint-position
+    RMS error after the repair (cm) and the share of repaired glitches it leaves better than
+    the glitch."""
+    print()
+    print(f"{'repair':11s} " + " ".join(f"{m + ' cm':>10s} {'better':>7s}" for m in METHODS))
+    for t in types:
+        cells = []
+        for m in METHODS:
+            sq, n, better, spans = sums[t][m]
+            cells.append(f"{100 * np.sqrt(sq / max(1, n)):10.2f} {better / max(1, spans):7.1%}")
+        print(f"{t:11s} " + " ".join(cells))
+
+
 def _beyond_rom(motion) -> set[int]:
     """Frames where some anatomical angle of ``motion`` is beyond its range of motion."""
     from physmocap.clean.detect import anatomical_glitches
@@ -380,6 +443,7 @@ def rotational(args: argparse.Namespace) -> None:
     # sum sq before, sum sq after, n, worst increase (cm), touched frames, of them > 1 cm worse,
     # of them beyond a range of motion the untouched clip is within
     err = {t: [0.0, 0.0, 0, 0.0, 0, 0, 0] for t in args.types}
+    methods = {t: {m: np.zeros(4) for m in METHODS} for t in args.types}
     faint_total = {t: 0 for t in args.types}
     print(f"{'clip':26s} {'frames':>6s} {'untouched flagged %':>19s} {'changed %':>9s}  " + " ".join(f"{t[:9] + ' P/R':>13s}" for t in args.types) + "  (strict P)")
     for ci, clip in enumerate(clips):
@@ -417,6 +481,8 @@ def rotational(args: argparse.Namespace) -> None:
                               f" injected {inj[0] if inj else '-'}-{inj[-1] if inj else '-'} found as {sorted(kinds)}")
             frames = sorted({f for _, f in truth[t]})
             if frames:
+                for m, v in _method_errors(glitched, fixed, report, P0, frames, own_fix).items():
+                    methods[t][m] += v
                 Pg, Pf = glitched.world_positions(), fixed.world_positions()
                 eb = np.sum((Pg[frames] - P0[frames]) ** 2, axis=-1)
                 ea = np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)
@@ -446,6 +512,7 @@ def rotational(args: argparse.Namespace) -> None:
     p, r, f = _prf(*tot)
     pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")
+    _print_methods(args.types, methods)
 
 
 if __name__ == "__main__":

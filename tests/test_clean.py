@@ -489,3 +489,15 @@ def test_a_non_finite_channel_is_refused_naming_joint_and_frame(walk, field):
     arr[17, 0, 1] = np.nan
     with pytest.raises(InputError, match=r"frame 17: joint '.+' has a non-finite"):
         clean(dataclasses.replace(walk, **{field: arr}))
+
+
+def test_a_glitch_near_the_clip_start_is_judged_on_two_pseudo_gaps():
+    """The bridge's choice (cubic or matched) rests on as much of the joint's own motion near
+    the clip's ends as in the middle: where no pseudo-gap fits before the span, two after it."""
+    from physmocap.clean.correct import _pseudo_gaps
+
+    assert _pseudo_gaps(100, 109, 500) == [88, 112]  # one each side
+    assert _pseudo_gaps(10, 19, 500) == [22, 33]  # none before: two after, one frame apart
+    assert _pseudo_gaps(480, 489, 500) == [468, 457]  # none after: two before
+    assert _pseudo_gaps(10, 19, 35) == [22]  # room for one only
+    assert _pseudo_gaps(2, 30, 40) == []

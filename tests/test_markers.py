@@ -196,6 +196,10 @@ def test_cmu_markers_agree_with_the_vendor_skeleton():
     assert len(flex) == 8 and max(flex) < 5.5, text
     overall = [float(x) for x in next(line for line in lines if line.startswith("all")).split()[1:]]
     assert len(overall) == 2 and max(overall) < 8.5, text
+    # definition-free: the joints move with the vendor's segments within 2.5 cm on average
+    k = next(i for i, line in enumerate(lines) if line.startswith("definition-free"))
+    tracking = [float(x) for x in next(line for line in lines[k:] if line.startswith("mean")).split()[1:]]
+    assert len(tracking) == 2 and max(tracking) < 2.5, text
 
 
 def test_c3d_retargets_onto_the_robot(tmp_path):

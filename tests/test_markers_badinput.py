@@ -107,16 +107,79 @@ def test_the_rigid_fit_is_public_and_recovers_a_pose():
     assert np.allclose(Rf[0], R) and np.allclose(tf[0], t)
 
 
-def test_two_markers_read_as_one_role_are_warned():
-    """Two different labels that the aliases both read as one role (LKNE and LFLE, the
-    lateral femoral epicondyle): the first takes it, and one warning names both."""
-    import warnings as _w
+def _knee_twice(F: int = 200, swap: bool = False, spoil: str = "gaps"):
+    """The standing markers with a second lateral knee marker, ``LFLE`` (Qualisys's name), 3 mm
+    from ``LKNE``; ``LKNE`` is spoilt (``"gaps"``: missing in 60 % of frames; ``"jumps"``: 8 cm
+    off in a third of them, a ghost), and ``LFLE`` comes first in the file with ``swap``."""
+    from pathlib import Path
 
-    from physmocap.markers.markerset import detect_marker_set
+    from physmocap.markers.recording import MarkerRecording
 
-    with pytest.warns(PhysmocapWarning, match=r"LFLE \(LKNE: LKNE is used\)"):
-        ms = detect_marker_set(["LKNE", "LFLE", "RKNE"])
-    assert ms.roles["LKNE"] == 0
-    with _w.catch_warnings():
-        _w.simplefilter("error")
-        assert detect_marker_set(["LKNE", "LFLE", "RKNE"], {"LKNE": "LFLE"}).roles["LKNE"] == 1
+    labels, P, _ = _standing_markers(F)
+    k = labels.index("LKNE")
+    P = np.concatenate([P, (P[:, k] + [0.0, 0.003, 0.0])[:, None]], axis=1)
+    labels = labels + ["LFLE"]
+    if spoil == "gaps":
+        P[: int(0.6 * F), k] = np.nan
+    else:
+        P[::3, k] += [0.0, 0.0, 0.08]
+    if swap:
+        order = list(range(len(labels)))
+        order[k], order[-1] = order[-1], order[k]
+        P, labels = P[:, order], [labels[i] for i in order]
+    return MarkerRecording(tuple(labels), P, 100.0, Path("knee.trc"))
+
+
+@pytest.mark.parametrize("spoil", ["gaps", "jumps"])
+@pytest.mark.parametrize("swap", [False, True])
+def test_two_labels_for_one_role_the_consistent_one_plays_it(spoil, swap):
+    """LKNE and LFLE are both the lateral knee: the one seen and rigid with the thigh's other
+    markers in more frames plays the role, whichever comes first; one warning states it."""
+    from physmocap.markers.markerset import recording_marker_set
+
+    rec = _knee_twice(spoil=spoil, swap=swap)
+    first, second = ("LFLE", "LKNE") if swap else ("LKNE", "LFLE")
+    with pytest.warns(PhysmocapWarning, match=rf"knee\.trc: {first} and {second} are all read as LKNE; LFLE is used, "
+                      r"rigid with LKNEM in the most frames: LFLE: 200 of 200 frames consistent") as caught:
+        ms = recording_marker_set(rec)
+    assert len([w for w in caught if "read as LKNE" in str(w.message)]) == 1
+    assert rec.labels[ms.roles["LKNE"]] == "LFLE" and "LKNE" in ms.unused
+    seen = 80 if spoil == "gaps" else 200
+    consistent = 80 if spoil == "gaps" else 133
+    assert f"LKNE: {consistent} of 200 frames consistent ({seen} seen" in ms.choices["LKNE"]
+
+
+def test_a_marker_set_file_decides_between_two_labels(tmp_path):
+    import warnings
+
+    from physmocap.markers.markerset import detect_marker_set, recording_marker_set
+
+    rec = _knee_twice()
+    assert detect_marker_set(rec.labels).candidates == {"LKNE": (rec.labels.index("LKNE"), rec.labels.index("LFLE"))}
+    path = tmp_path / "set.toml"
+    path.write_text('[markers]\nLKNE = "LKNE"\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ms = recording_marker_set(rec, path)
+    assert rec.labels[ms.roles["LKNE"]] == "LKNE" and not ms.choices
+    # a file giving one of them another role leaves no choice: one marker, one role
+    path.write_text('[markers]\nLKNEM = "LFLE"\n')
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ms = recording_marker_set(rec, path)
+    assert rec.labels[ms.roles["LKNE"]] == "LKNE" and rec.labels[ms.roles["LKNEM"]] == "LFLE" and not ms.choices
+
+
+def test_inspect_states_which_of_two_labels_was_used(tmp_path, capsys):
+    from physmocap.cli import main
+
+    rec = _knee_twice(60)
+    path = tmp_path / "knee.trc"
+    _write_trc(path, list(rec.labels), np.nan_to_num(rec.positions) * 1000)
+    with pytest.warns(PhysmocapWarning, match="LFLE is used"):
+        assert main(["inspect", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "chosen:    LKNE and LFLE are all read as LKNE; LFLE is used" in out and "LKNE=LFLE" in out
+    with pytest.warns(PhysmocapWarning, match="LFLE is used"):
+        assert main(["inspect", str(path), "--emit-markerset"]) == 0
+    assert "# LKNE: LKNE and LFLE are all read as LKNE; LFLE is used" in capsys.readouterr().out

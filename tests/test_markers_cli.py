@@ -141,3 +141,10 @@ def test_segments_without_markers_are_warned(tmp_path):
     with pytest.warns(UserWarning, match=r"no_left_leg\.trc: no marker on 5 segment\(s\): left_thigh, left_shank, "
                       r"left_foot, left_hand, right_hand; they keep the actor.s rest pose"):
         assert main(["solve", str(path), "-o", str(tmp_path / "a.bvh"), "--quiet"]) == 0
+
+
+def test_solve_refuses_bad_solve_options_before_reading(tmp_path, capsys):
+    out = tmp_path / "a.bvh"
+    assert main(["solve", str(tmp_path / "absent.c3d"), "-o", str(out), "--max-iterations", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "marker solve option max_iterations must be > 0, got 0" in err[0] and not out.exists()

@@ -3,71 +3,14 @@ and repeated frames or timestamps refused (issue 11, deliverable 5)."""
 
 from __future__ import annotations
 
-import base64
 import json
 import warnings
 
 import numpy as np
 import pytest
 
-from conftest import shared_file
 from physmocap.errors import InputError
-from physmocap.markers.recording import MarkerRecording
-
-#: Foxglove NumericType FLOAT32, FLOAT64, UINT16.
-FLOAT32, FLOAT64, UINT16 = 7, 8, 3
-
-
-def _cmu(frames: int) -> MarkerRecording:
-    from physmocap.sources.c3d import read_c3d_markers
-
-    rec = read_c3d_markers(shared_file("cmu_01_01_markers.c3d"))
-    return MarkerRecording(rec.labels, rec.positions[:frames], rec.fps, rec.source)
-
-
-def _cloud(points: np.ndarray, ids: np.ndarray | None = None, dtype: str = "<f4") -> dict:
-    """A foxglove.PointCloud JSON message body for ``(N, 3)`` points: x, y, z (``dtype``) and
-    a 2-byte padding field, plus a UINT16 ``id`` when ``ids`` are given."""
-    size = np.dtype(dtype).itemsize
-    kind = FLOAT32 if size == 4 else FLOAT64
-    fields = [{"name": a, "offset": k * size, "type": kind} for k, a in enumerate("xyz")]
-    stride = 3 * size + 2
-    cols = [("x", dtype), ("y", dtype), ("z", dtype), ("pad", "<u2")]
-    if ids is not None:
-        fields.append({"name": "id", "offset": stride, "type": UINT16})
-        cols.append(("id", "<u2"))
-        stride += 2
-    arr = np.zeros(len(points), dtype=np.dtype(cols))
-    for k, a in enumerate("xyz"):
-        arr[a] = points[:, k]
-    if ids is not None:
-        arr["id"] = ids
-    assert arr.dtype.itemsize == stride
-    return {"frame_id": "mocap", "point_stride": stride, "fields": fields,
-            "data": base64.b64encode(arr.tobytes()).decode()}
-
-
-def write_cloud_mcap(path, frames: list[dict], fps: float, labels=None, meta_record: bool = False,
-                     stamps: list[int] | None = None) -> None:
-    """Messages ``frames`` (PointCloud bodies) on /markers, stamped ``i / fps``; the labels in
-    the channel metadata, or in a physmocap.markers metadata record."""
-    from mcap.writer import Writer
-
-    with open(path, "wb") as fh:
-        w = Writer(fh)
-        w.start()
-        sch = w.register_schema("foxglove.PointCloud", "jsonschema", b"{}")
-        chan_meta = {"labels": json.dumps(list(labels))} if labels is not None and not meta_record else {}
-        ch = w.register_channel("/markers", "json", sch, metadata=chan_meta)
-        if labels is not None and meta_record:
-            w.add_metadata("physmocap.markers", {"topic": "/markers", "labels": json.dumps(list(labels)),
-                                                 "fps": repr(fps)})
-        for i, body in enumerate(frames):
-            t = stamps[i] if stamps is not None else int(round(i * 1e9 / fps))
-            msg = dict(body, timestamp={"sec": t // 1_000_000_000, "nsec": t % 1_000_000_000})
-            w.add_message(ch, log_time=t, data=json.dumps(msg).encode(), publish_time=t, sequence=i)
-        w.finish()
-
+from point_clouds import cloud as _cloud, cmu_markers as _cmu, write_cloud_mcap, write_recording_cloud
 
 def test_a_point_cloud_marker_mcap_reads_like_the_c3d(tmp_path):
     from physmocap.sources.mcap import has_markers, read_mcap_markers
@@ -86,6 +29,24 @@ def test_a_point_cloud_marker_mcap_reads_like_the_c3d(tmp_path):
     assert back.labels == rec.labels and abs(back.fps - rec.fps) < 1e-4 and back.num_frames == 120  # fps from ns stamps
     assert np.array_equal(np.isnan(back.positions), np.isnan(rec.positions))
     assert np.allclose(back.positions, rec.positions, atol=1e-9, equal_nan=True)
+
+
+def test_physmocap_writes_markers_as_a_point_cloud_read_back_exactly(tmp_path):
+    """``write_markers_pointcloud_mcap``: Foxglove PointCloud messages (float64, NaN where
+    unseen), the labels in metadata; read back exactly, the same bytes every time."""
+    from physmocap.export.mcap import write_markers_pointcloud_mcap
+    from physmocap.markers.recording import MarkerRecording
+    from physmocap.sources.mcap import read_mcap_markers
+
+    rec = _cmu(90)
+    rec = MarkerRecording(rec.labels, rec.positions, rec.fps, rec.source, first_frame=7)
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    write_markers_pointcloud_mcap(rec, a)
+    write_markers_pointcloud_mcap(rec, b)
+    assert a.read_bytes() == b.read_bytes()
+    back = read_mcap_markers(a)
+    assert back.labels == rec.labels and back.fps == rec.fps and back.first_frame == 7
+    assert np.array_equal(back.positions, rec.positions, equal_nan=True) and np.isnan(rec.positions).any()
 
 
 def test_point_cloud_ids_place_points_and_a_rotated_pose_is_applied(tmp_path):
@@ -170,9 +131,8 @@ def test_a_repeated_frame_number_in_labelled_points_is_an_error(tmp_path):
 def test_replay_streams_a_point_cloud_marker_mcap(tmp_path, capsys):
     from physmocap.cli import main
 
-    rec = _cmu(240)
     path = tmp_path / "cloud.mcap"
-    write_cloud_mcap(path, [_cloud(np.nan_to_num(rec.positions[t])) for t in range(rec.num_frames)], rec.fps, rec.labels)
+    write_recording_cloud(path, _cmu(240))
     stats = tmp_path / "stats.json"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -166,7 +166,7 @@ def test_solve_rejects_a_non_marker_file(tmp_path, capsys):
     bvh = tmp_path / "a.bvh"
     bvh.write_text("HIERARCHY\n")
     assert main(["solve", str(bvh), "-o", str(tmp_path / "out.bvh")]) == 2
-    assert "reads marker files (.c3d, .trc)" in capsys.readouterr().err
+    assert "a.bvh: not a marker file (expected .c3d, .trc, .mcap)" in capsys.readouterr().err
 
 
 #: Measured on the first 360 frames (solve_markers, 2 iterations per frame): overall marker

@@ -5,7 +5,9 @@
   :mod:`.positional`: bone stretch, gaps, frozen joints and left/right swaps of
   joint-position sources.
 * :mod:`.options`: the thresholds (:class:`CleanOptions`), physical quantities with units.
-* :mod:`.correct`: interpolation over the repairable ones, nothing else touched.
+* :mod:`.correct`: interpolation over the repairable ones, nothing else touched;
+  :mod:`.resolve`: those whose interpolated pose leaves a range of motion re-solved through the
+  hard-limited IK on an actor-fitted humanoid.
 
 ``clean(motion) -> (Motion, GlitchReport)``.
 """
@@ -99,9 +101,13 @@ def _check_finite(motion: Motion) -> None:
             )
 
 
-def clean(motion: Motion, options: CleanOptions | None = None, mapping=None) -> tuple[Motion, GlitchReport]:
+def clean(
+    motion: Motion, options: CleanOptions | None = None, mapping=None, resolve: str = "limits"
+) -> tuple[Motion, GlitchReport]:
     """Detect the glitches of ``motion`` and repair those that can be (:mod:`.correct`);
-    ``mapping``: a source mapping file or dict naming its joints (``--source-map``).
+    ``mapping``: a source mapping file or dict naming its joints (``--source-map``);
+    ``resolve``: where repairs are re-solved through the hard-limited IK (:mod:`.resolve`:
+    "limits", where the interpolation leaves a range of motion; "never"; "always").
 
     Raises:
         InputError: A rotation, translation or position is not finite (the file's reader
@@ -112,5 +118,5 @@ def clean(motion: Motion, options: CleanOptions | None = None, mapping=None) -> 
 
     _check_finite(motion)
     found = detect_glitches(motion, options, mapping)
-    fixed, done = correct_glitches(motion, found, options)
+    fixed, done = correct_glitches(motion, found, options, resolve=resolve, mapping=mapping)
     return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))

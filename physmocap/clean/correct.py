@@ -12,9 +12,13 @@ of the clip where the whole body moves most like it does around the span
 what it was doing).  At the clip's ends the nearest good rotation is held.  A
 positional glitch (bone stretch, gap, a held position) is bridged by the joint's offset
 from its parent turning steadily from its value before to its value after, riding on the
-parent's own motion (linear interpolation of the position where the parent is not tracked); a left/right swap by trading the two joints' positions back over the span.
+parent's own motion (linear interpolation of the position where the parent is not tracked),
+then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
+from the parent and the child (:func:`_on_bones`); a left/right swap by trading the two
+joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
-may be the real one.
+may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
+through the hard-limited IK on an actor-fitted humanoid (:mod:`.resolve`, "re-solved").
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import dataclasses
 
 import numpy as np
 
+from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints
@@ -142,14 +147,42 @@ class _Matcher:
         return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
 
 
+def _glitched(motion: Motion, glitches: list[Glitch]) -> np.ndarray:
+    """``(F, J)`` bool: the (frame, joint) pairs of ``glitches``."""
+    names = {n: j for j, n in enumerate(motion.skeleton.names)}
+    bad = np.zeros((motion.num_frames, len(names)), dtype=bool)
+    for g in glitches:
+        bad[g.start : g.end + 1, names[g.joint]] = True
+    return bad
+
+
 def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matcher:
     """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out."""
     R = np.asarray(motion.rotations, dtype=float)
-    names = {n: j for j, n in enumerate(motion.skeleton.names)}
-    bad = np.zeros(R.shape[:2], dtype=bool)
-    for g in glitches:
-        bad[g.start : g.end + 1, names[g.joint]] = True
+    bad = _glitched(motion, glitches)
     return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows)
+
+
+def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
+    """First frames of the two pseudo-gaps :func:`_bridge` tests a glitch on frames ``s..e``
+    of an ``F``-frame clip on: ``n = e - s + 1`` frames just before the span and just after it
+    (one good frame left between, and two outside for the bridges' end speeds); where the
+    clip ends on one side, the second is the next ``n`` frames on the other side (one frame
+    between them), so a glitch near the clip's ends is judged on as much of its joint's own
+    motion as one in the middle."""
+    n = e - s + 1
+
+    def fits(a: int) -> bool:
+        return a >= 2 and a + n + 1 < F
+
+    before, after = s - 2 - n, e + 3
+    if fits(before) and fits(after):
+        return [before, after]
+    if fits(before):
+        return [before, before - n - 1] if fits(before - n - 1) else [before]
+    if fits(after):
+        return [after, after + n + 1] if fits(after + n + 1) else [after]
+    return []
 
 
 def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
@@ -165,10 +198,8 @@ def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> 
     F, n = len(R), e - s + 1
     err = np.zeros(2)
     tested = False
-    for a in (s - 2 - n, e + 3):  # the pseudo-gap's first frame, before and after
+    for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
-        if a < 2 or b + 2 >= F:
-            continue
         hidden = np.zeros(F, bool)
         hidden[a : b + 1] = True
         matched = matcher.bridge(j, a, b, hidden)
@@ -247,6 +278,42 @@ def _slerp_vectors(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     return d * length
 
 
+def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
+    """The child of joint ``j`` of ``P (F, J, 3)`` tracked and unglitched (``bad (F, J)``) on
+    frames ``s - 1 .. e + 1`` with the longest bone (median over the clip), or None."""
+    lo, hi = max(0, s - 1), min(len(P), e + 2)
+    kids = [int(c) for c in np.flatnonzero(parents == j) if np.isfinite(P[lo:hi, c]).all() and not bad[lo:hi, c].any()]
+    if not kids:
+        return None
+    with np.errstate(invalid="ignore"):
+        length = [np.nanmedian(np.linalg.norm(P[:, c] - P[:, j], axis=-1)) for c in kids]
+    best = int(np.nanargmax(length)) if np.isfinite(length).any() else None
+    return None if best is None or not length[best] > 0.0 else kids[best]
+
+
+def _on_bones(P: np.ndarray, est: np.ndarray, j: int, parent: int, child: int, s: int, e: int) -> np.ndarray:
+    """``est (n, 3)``, joint ``j``'s estimated positions on frames ``s..e`` of ``P (F, J, 3)``,
+    moved to the nearest point at its two bone lengths (medians over the clip, metres) from
+    its parent and from its child there: the circle where the two spheres meet, the bend
+    taken from the estimate (on the line between them where the spheres do not meet: a limb
+    stretched beyond its length).  A frozen knee during a crouch keeps its place between the
+    hip and the ankle instead of riding down with the hip."""
+    with np.errstate(invalid="ignore"):
+        l1 = float(np.nanmedian(np.linalg.norm(P[:, j] - P[:, parent], axis=-1)))
+        l2 = float(np.nanmedian(np.linalg.norm(P[:, child] - P[:, j], axis=-1)))
+    p, c = P[s : e + 1, parent], P[s : e + 1, child]
+    d = np.linalg.norm(c - p, axis=-1, keepdims=True)
+    u = (c - p) / np.maximum(d, 1e-9)
+    x = np.clip((d**2 + l1**2 - l2**2) / (2 * np.maximum(d, 1e-9)), -l1, l1)
+    centre = p + x * u
+    radius = np.sqrt(np.maximum(l1**2 - x**2, 0.0))
+    off = est - centre
+    off -= np.sum(off * u, axis=-1, keepdims=True) * u
+    size = np.linalg.norm(off, axis=-1, keepdims=True)
+    moved = centre + radius * off / np.maximum(size, 1e-9)
+    return np.where((size > 1e-9) & (d > 1e-9), moved, est)
+
+
 def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) -> tuple[np.ndarray, str]:
     """Joint ``j``'s positions over frames ``s..e`` of ``P (F, J, 3)`` rebuilt from its good
     samples just outside (the nearest one held at the clip's ends), and how.
@@ -270,14 +337,74 @@ def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) 
     return (1 - w) * first + w * last, "linear"
 
 
+#: How :func:`correct_glitches` uses the hard-limited IK re-solve (:mod:`.resolve`).
+RESOLVE_MODES = ("never", "limits", "always")
+
+
+def _resolve_spans(
+    motion: Motion, rot: np.ndarray, done: list[Glitch], mode: str, opt: CleanOptions, mapping=None
+) -> list[Glitch]:
+    """``done`` (the repaired glitch list) with the rotational repairs re-solved through the
+    hard-limited IK (:mod:`.resolve`) where ``mode`` asks: "always" wherever the joint can be
+    re-solved, "limits" only where the interpolated pose leaves a range of motion
+    (:func:`.resolve.beyond_range_mask`: a movement the joint changes beyond its range, the
+    performer margin ``rom_soft_margin`` included) and the IK's pose is beyond it on fewer of
+    the span's frames.  ``rot (F, J, 4)`` is updated in place."""
+    from .detect import canonical_joints
+    from .resolve import actor_ik, beyond_range_mask
+
+    names = {n: j for j, n in enumerate(motion.skeleton.names)}
+    F = len(rot)
+    spans = [
+        (i, names[g.joint], g.start, g.end)
+        for i, g in enumerate(done)
+        if REPAIRED.get(g.kind) == "rotation" and g.corrected and g.start >= 1 and g.end + 1 < F
+    ]
+    if mode == "never" or not spans:
+        return done
+    ji = canonical_joints(motion, mapping)
+    if mode == "limits":
+        beyond = beyond_range_mask(dataclasses.replace(motion, rotations=rot), opt, ji)
+        spans = [x for x in spans if beyond[x[2] : x[3] + 1, x[1]].any()]
+    actor = actor_ik(motion, ji) if spans else None
+    if actor is None:
+        return done
+    interpolated = rot.copy()
+    out = list(done)
+    resolved = []
+    for i, j, s, e in spans:
+        ik = actor.resolve(motion, rot, j, s, e)
+        if ik is not None:
+            rot[s : e + 1, j] = ik
+            out[i] = dataclasses.replace(done[i], corrected="re-solved")
+            resolved.append((i, j, s, e))
+    if mode == "limits" and resolved:  # keep the IK only where it is within the ranges more often
+        after = beyond_range_mask(dataclasses.replace(motion, rotations=rot), opt, ji)
+        for i, j, s, e in resolved:
+            if after[s : e + 1, j].sum() >= beyond[s : e + 1, j].sum():
+                rot[s : e + 1, j] = interpolated[s : e + 1, j]
+                out[i] = done[i]
+    return out
+
+
 def correct_glitches(
-    motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None
+    motion: Motion, glitches: list[Glitch], options: CleanOptions | None = None, resolve: str = "limits", mapping=None
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
-    or "linear" (a position, :func:`_repair_position`), "swapped back",
-    or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``)."""
+    "matched" (:class:`_Matcher`), "re-solved" (the hard-limited IK on an actor-fitted
+    humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
+    or "linear" (a position, :func:`_repair_position`; ", on bones" where it was then put at its
+    bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
+    or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
+
+    ``resolve`` (:data:`RESOLVE_MODES`): "limits" re-solves a rotational repair through the
+    hard-limited IK where the interpolated pose leaves a range of motion, "never" keeps every
+    interpolation, "always" re-solves wherever the joint can be (for measuring it)
+    (:func:`_resolve_spans`); ``mapping`` names the source's joints (as
+    :func:`.detect.detect_glitches` takes it)."""
+    if resolve not in RESOLVE_MODES:
+        raise OptionError(f"resolve must be one of {', '.join(RESOLVE_MODES)}, got {resolve!r}")
     opt = options or CleanOptions()
     names = {n: j for j, n in enumerate(motion.skeleton.names)}
     rot = None if motion.rotations is None else np.array(motion.rotations, copy=True)
@@ -287,6 +414,7 @@ def correct_glitches(
     names_of = motion.skeleton.names
     swapped: set[tuple[int, int, int]] = set()
     matcher: _Matcher | None = None
+    bad = _glitched(motion, glitches) if pos is not None else None
     for g in glitches:
         if g.kind == "lr_swap" and pos is not None:
             # trade the pair back (once per pair and span; both joints carry the glitch)
@@ -313,9 +441,16 @@ def correct_glitches(
             arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
             out.append(dataclasses.replace(g, corrected=curve))
             continue
-        parent = int(motion.skeleton.parents[j])
-        arr[g.start : g.end + 1, j], how = _repair_position(arr, j, parent if parent >= 0 else None, g.start, g.end)
+        parents = np.asarray(motion.skeleton.parents)
+        parent = int(parents[j]) if parents[j] >= 0 else None
+        est, how = _repair_position(arr, j, parent, g.start, g.end)
+        child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
+        if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():
+            est, how = _on_bones(arr, est, j, parent, child, g.start, g.end), f"{how}, on bones"
+        arr[g.start : g.end + 1, j] = est
         out.append(dataclasses.replace(g, corrected=how))
+    if rot is not None:
+        out = _resolve_spans(motion, rot, out, resolve, opt, mapping)
     fixed = dataclasses.replace(motion, rotations=rot) if rot is not None else motion
     if pos is not None:
         fixed = dataclasses.replace(fixed, positions=pos)

@@ -38,14 +38,21 @@ def register(sub: argparse._SubParsersAction) -> None:
         "one): names the joints of a skeleton or tracker no profile knows, for the left/right pairs, the "
         "hierarchy of a joint-position file's bones and the ranges of motion",
     )
-    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc, marker .mcap): marker roles overriding the aliases")
+    p.add_argument(
+        "--resolve",
+        choices=("never", "limits", "always"),
+        default="limits",
+        help="re-solve rotational repairs through the hard-limited IK on an actor-fitted humanoid: where the "
+        "interpolated pose leaves a range of motion (limits, the default), never, or wherever the joint can be "
+        "(always; interpolation is better on average)",
+    )
     add_clean_options(p)
     p.set_defaults(func=run)
 
 
 #: Readers that build a joint-position skeleton from the source mapping as they read.
 POSITIONAL_SUFFIXES = {".csv", ".npz", ".jsonl", ".c3d", ".trc"}
-MARKER_SUFFIXES = {".c3d", ".trc"}
 
 
 def _flag(name: str) -> str:
@@ -102,6 +109,7 @@ def options_from_args(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from ..clean import clean
     from ..sources import load_motion
+    from ..sources.markers import MARKER_FILE_TYPES, is_marker_file
 
     options = options_from_args(args)
     if args.output:
@@ -119,8 +127,8 @@ def run(args: argparse.Namespace) -> int:
     check_not_input([args.output, args.report], [args.input, args.source_map, args.marker_set])
     check_distinct([args.output, args.report])
     suffix = Path(args.input).suffix.lower()
-    if args.marker_set and suffix not in MARKER_SUFFIXES:
-        raise OptionError("--marker-set is for marker files (.c3d, .trc)", path=args.input)
+    if args.marker_set and not is_marker_file(args.input):
+        raise OptionError(f"--marker-set is for marker files ({MARKER_FILE_TYPES})", path=args.input)
     read_opts = {}
     if args.source_map and suffix in POSITIONAL_SUFFIXES:
         read_opts["mapping"] = args.source_map  # the bones follow the mapped joints
@@ -129,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     motion = load_motion(args.input, min_frames=1, **read_opts)
     if args.output and not motion.is_rotational:
         raise OptionError("a joint-position source has no rotations to write as BVH; use --report", path=args.input)
-    fixed, report = clean(motion, options, mapping=args.source_map)
+    fixed, report = clean(motion, options, mapping=args.source_map, resolve=args.resolve)
     sys.stdout.write(report.table())
     with OutputSet():  # the BVH, the plots and the JSON renamed into place together, or none
         _write(motion, fixed, report, args)

@@ -29,7 +29,7 @@ def register(subparsers) -> None:  # noqa: ANN001
     )
     p.add_argument("input", metavar="IN", help="input motion file, or 'example' for the bundled walk")
     p.add_argument("output", metavar="OUT", help="output file, by suffix: .bvh (rotational sources) or .mcap "
-                   "(Foxglove FrameTransforms; any source; marker files (.c3d, .trc) as labelled points)")
+                   "(Foxglove FrameTransforms; any source; marker files (.c3d, .trc, marker .mcap) as labelled points)")
     p.add_argument("--rotation-order", metavar="ORDER",
                    help="Euler order for every joint, e.g. ZXY, ZYX, XYZ (default: keep the input's)")
     p.add_argument("--units", metavar="UNIT",
@@ -73,9 +73,9 @@ def _check_output(output: str, options: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..export import write_motion
     from ..fileio import check_not_input
-    from ..sources import load_motion
-
     from ..options import check_frame_range
+    from ..sources import load_motion
+    from ..sources.markers import is_marker_file
 
     check_not_input([args.output], [args.input])
     check_frame_range(args.start, args.end)
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError(f"--fps must be a positive frame rate, got {args.fps:g}")
 
     _check_output(args.output, out_opts)
-    if _is_markers(args.input) and args.output.lower().endswith(".mcap"):
+    if is_marker_file(args.input) and args.output.lower().endswith(".mcap"):
         return _convert_markers(args, out_opts)
     motion = load_motion(args.input, **in_opts)
     F = motion.num_frames
@@ -126,17 +126,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _is_markers(path: str) -> bool:
-    from pathlib import Path
-
-    return Path(path).suffix.lower() in (".c3d", ".trc")
-
-
 def _convert_markers(args: argparse.Namespace, out_opts: dict) -> int:
-    """A marker file (.c3d, .trc) to an MCAP marker recording (labelled points, metres, the
-    file's axes: :func:`physmocap.export.mcap.write_markers_mcap`), cut to [--start, --end)."""
+    """A marker file (.c3d, .trc, marker .mcap) to an MCAP marker recording (labelled points,
+    metres, the file's axes: :func:`physmocap.export.mcap.write_markers_mcap`), cut to
+    [--start, --end)."""
     from ..export.mcap import write_markers_mcap
-    from .solve import read_markers
+    from ..sources.markers import read_markers
 
     if out_opts or args.fps is not None or args.in_up is not None:
         raise OptionError("a marker recording is written to MCAP as it is (metres, the file's axes): "

@@ -194,22 +194,16 @@ def _text(rep: dict[str, Any]) -> str:
     return "\n".join(out) + "\n"
 
 
-MARKER_SUFFIXES = (".c3d", ".trc")
-
-
 def _inspect_markers(args: argparse.Namespace) -> int:
     """Marker files: labels, rate, units, gaps per marker, roles found, markers left unused."""
     from pathlib import Path
 
     from ..markers.joints import up_axis
     from ..markers.markerset import marker_set_toml, recording_marker_set
+    from ..sources.markers import read_markers
 
     path = Path(args.input)
-    if path.suffix.lower() == ".c3d":
-        from ..sources.c3d import read_c3d_markers as read
-    else:
-        from ..sources.trc import read_trc_markers as read
-    rec = read(path, args.units)
+    rec = read_markers(path, args.units)
     ms = recording_marker_set(rec, args.marker_set)
     if args.emit_markerset:
         sys.stdout.write(marker_set_toml(rec.labels, ms))
@@ -230,6 +224,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
         "marker_height_m": height,
         "up_axis": up,
         "roles": {role: rec.labels[i] for role, i in sorted(ms.roles.items())},
+        "role_choices": dict(sorted(ms.choices.items())),
         "unused": list(ms.unused),
         "gaps": {lab: {"frames": n, "share": n / rec.num_frames} for lab, n in gaps.items()},
     }
@@ -241,6 +236,7 @@ def _inspect_markers(args: argparse.Namespace) -> int:
         f"frames:    {rec.num_frames} at {rec.fps:.6g} fps; {len(rec.labels)} markers; up axis {up} (from the markers)",
         f"units:     {rep['units']}; the markers span {_fmt(height, '.3g')} m vertically (median over frames)",
         f"roles:     {len(ms.roles)} found: " + ", ".join(f"{r}={rec.labels[i]}" for r, i in sorted(ms.roles.items())),
+        *(f"chosen:    {why}" for _, why in sorted(ms.choices.items())),
         f"unused:    {', '.join(ms.unused) if ms.unused else '(none)'}",
         "gaps:      " + (", ".join(f"{lab} {n} frames" for lab, n in sorted(gaps.items())) if gaps else "(none)"),
     ]
@@ -249,15 +245,14 @@ def _inspect_markers(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from ..sources import load_motion
+    from ..sources.markers import MARKER_FILE_TYPES, is_marker_file
     from ..sources.profiles import map_skeleton
 
-    if Path(args.input).suffix.lower() in MARKER_SUFFIXES:
+    if is_marker_file(args.input):
         return _inspect_markers(args)
-    if args.emit_markerset:
-        raise OptionError("--emit-markerset is for marker files (.c3d, .trc)")
+    if args.emit_markerset or args.marker_set:
+        raise OptionError(f"--emit-markerset and --marker-set are for marker files ({MARKER_FILE_TYPES})")
 
     opts: dict[str, Any] = {}
     if args.units is not None:

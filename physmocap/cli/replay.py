@@ -40,18 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _is_marker_recording(path: str) -> bool:
-    """A .c3d / .trc file, or an MCAP file holding a marker channel."""
-    from .retarget import is_marker_file
-
-    return is_marker_file(path)
-
-
 def run(args: argparse.Namespace) -> int:
     from ..ik.retarget import retarget
     from ..ik.stream import StreamingRetargeter
     from ..models import load_character
     from ..sources import load_motion
+    from ..sources.markers import is_marker_file
     from ..trajectory import Trajectory
 
     out = Path(args.output) if args.output else None
@@ -64,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.stats:
         check_writable(args.stats)
     check_distinct([out, args.stats])
-    if _is_marker_recording(args.input):
+    if is_marker_file(args.input):
         from ..markers.replay import replay_markers
 
         return replay_markers(args, out)

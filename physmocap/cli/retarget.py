@@ -35,17 +35,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_retarget_options(p: argparse.ArgumentParser) -> None:
-    """The options that say how to retarget (shared by ``retarget`` and ``preview``)."""
+    """The options that say how to retarget (shared by ``retarget``, ``preview``, ``view`` and
+    ``batch``), with the marker solve's (:func:`~physmocap.cli.solve.add_marker_solve_options`)."""
+    from .solve import add_marker_solve_options
+
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
-    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc): marker roles overriding the aliases")
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc, marker .mcap): marker roles overriding the aliases")
     p.add_argument("--joint-centres", action="store_true",
                    help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
                    "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
                    "and no joint ranges before the character's")
+    add_marker_solve_options(p, prefix="marker-")
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -96,6 +100,7 @@ def config_from_args(args: argparse.Namespace):
     from ..ik.config import RetargetConfig
     from ..motion import MAX_FPS
     from ..options import check_frame_range
+    from .solve import marker_solve_options
 
     check_frame_range(args.start, args.end)
     fps = getattr(args, "fps", None)
@@ -114,6 +119,7 @@ def config_from_args(args: argparse.Namespace):
         options["self_collision"] = False
     if args.no_plant:
         options["plant"] = False
+    marker_solve_options(args)  # refused now, before anything is read
     return RetargetConfig().with_options(**options)
 
 
@@ -183,16 +189,44 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             announce(f"wrote {out}")
 
 
-def is_marker_file(path: str) -> bool:
-    """A .c3d or .trc file, or an .mcap file holding a marker channel (labelled points)."""
-    suffix = Path(path).suffix.lower()
-    if suffix in (".c3d", ".trc"):
-        return True
-    if suffix == ".mcap" and Path(path).is_file():
-        from ..sources.mcap import has_markers
+#: The options (argparse destinations) that concern marker inputs alone, unset: ``--marker-set``,
+#: ``--joint-centres`` and the marker solve's (:func:`~physmocap.cli.solve.add_marker_solve_options`).
+#: ``batch`` applies its own to its marker files only (:func:`physmocap.batch.job_options`).
+MARKER_OPTIONS_UNSET: dict = {"marker_set": None, "joint_centres": False, "marker_max_iterations": None,
+                              "marker_no_floor": False}
 
-        return has_markers(path)
-    return False
+
+def marker_read_options(args: argparse.Namespace) -> dict:
+    """What ``load_motion`` is told about a marker input by :data:`MARKER_OPTIONS_UNSET`'s
+    options: ``marker_set``, ``solve`` False (``--joint-centres``) and ``solve_options`` (one
+    validated :class:`~physmocap.markers.solve.MarkerSolveOptions`, as ``physmocap solve``
+    builds it).
+
+    Raises:
+        OptionError: These options on an input that is not a marker file, or the solve's
+            with ``--joint-centres`` (which skips the solve).
+    """
+    from ..sources.markers import MARKER_FILE_TYPES, is_marker_file
+    from .solve import marker_solve_options
+
+    marker_set = getattr(args, "marker_set", None)
+    joint_centres = getattr(args, "joint_centres", False)
+    solve_options = marker_solve_options(args)
+    given = [flag for flag, value in (("--marker-set", marker_set), ("--joint-centres", joint_centres),
+                                      ("--marker-max-iterations / --marker-no-floor", solve_options)) if value]
+    if not given:
+        return {}
+    if not is_marker_file(args.input):
+        raise OptionError(f"{', '.join(given)}: for marker files only ({MARKER_FILE_TYPES})", path=args.input)
+    if joint_centres and solve_options:
+        raise OptionError("--marker-max-iterations and --marker-no-floor shape the actor's solve, which "
+                          "--joint-centres skips", path=args.input)
+    out: dict = {"marker_set": marker_set} if marker_set else {}
+    if joint_centres:
+        out["solve"] = False
+    elif solve_options:
+        out["solve_options"] = solve_options
+    return out
 
 
 def retarget_from_args(args: argparse.Namespace):
@@ -206,15 +240,8 @@ def retarget_from_args(args: argparse.Namespace):
     from ..sources import load_motion
 
     config = config_from_args(args)
-    read_opts = {}
-    if args.in_units:
-        read_opts["units"] = args.in_units
-    if getattr(args, "marker_set", None):
-        read_opts["marker_set"] = args.marker_set
-    if getattr(args, "joint_centres", False):
-        if not is_marker_file(args.input):
-            raise OptionError("--joint-centres is for marker files (.c3d, .trc, marker .mcap)", path=args.input)
-        read_opts["solve"] = False
+    read_opts = {"units": args.in_units} if args.in_units else {}
+    read_opts.update(marker_read_options(args))
     motion = load_motion(args.input, min_frames=1, **read_opts)
     character = load_character(args.character, args.map)
     return retarget(

@@ -1,26 +1,30 @@
-"""``physmocap solve``: a marker recording (C3D, TRC) to the actor's own skeleton as BVH."""
+"""``physmocap solve``: a marker recording (C3D, TRC, marker MCAP) to the actor's own skeleton as BVH."""
 
 from __future__ import annotations
 
 import argparse
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..errors import InputError, OptionError
+from ..errors import OptionError
 from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
+
+if TYPE_CHECKING:  # numpy and mujoco stay unimported until a command runs
+    from ..markers.solve import MarkerSolveOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "solve",
-        help="solve optical markers (.c3d, .trc) into the actor's skeleton (BVH out)",
+        help="solve optical markers (.c3d, .trc, marker .mcap) into the actor's skeleton (BVH out)",
         description=(
             "Calibrate the actor from the markers (functional joint centres, fixed segment lengths), "
             "then solve every frame by marker-driven IK under the joint ranges and the floor, and write "
             "the actor's skeleton (canonical joint names) as BVH."
         ),
     )
-    p.add_argument("input", metavar="INPUT", help="marker file (.c3d or .trc)")
+    p.add_argument("input", metavar="INPUT", help="marker file (.c3d, .trc, or .mcap with labelled markers)")
     p.add_argument("-o", "--output", required=True,
                    help="output .bvh (the actor); with --character, the character's motion: .bvh, .npz, .csv or .mcap")
     p.add_argument("--character", metavar="PATH",
@@ -34,32 +38,47 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--marker-set", metavar="SET.toml", help="marker roles overriding the built-in aliases")
     p.add_argument("--start", type=int, help="first frame (inclusive)")
     p.add_argument("--end", type=int, help="last frame (exclusive)")
-    p.add_argument("--max-iterations", type=int, default=2, help="IK iterations per frame (default 2)")
-    p.add_argument("--no-floor", action="store_true", help="do not keep the feet above the floor")
+    add_marker_solve_options(p)
     p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
     p.add_argument("--units", default="m", help="BVH output length unit (default m)")
     p.add_argument("--quiet", action="store_true", help="no residual table or 'wrote' lines")
     p.set_defaults(func=run)
 
 
-def read_markers(path: str, units: str | float | None = None):
-    """The :class:`~physmocap.markers.recording.MarkerRecording` of a .c3d or .trc file
-    (``units`` overriding the file's length unit)."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".c3d":
-        from ..sources.c3d import read_c3d_markers
+def add_marker_solve_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """The flags of :class:`~physmocap.markers.solve.MarkerSolveOptions` a user sets, read back
+    by :func:`marker_solve_options`: ``--{prefix}max-iterations N`` and ``--{prefix}no-floor``.
+    ``solve`` takes them bare; ``retarget`` (and ``preview``, ``view``, ``batch``), whose
+    ``--max-iterations`` and ``--no-floor`` are the character's, with ``prefix="marker-"``."""
+    what = "marker files: the actor's " if prefix else ""
+    p.add_argument(f"--{prefix}max-iterations", dest="marker_max_iterations", type=int, metavar="N",
+                   help=f"{what}marker-driven IK iterations per frame (default 2)")
+    p.add_argument(f"--{prefix}no-floor", dest="marker_no_floor", action="store_true",
+                   help=f"{what}marker solve without the floor constraint (feet may go below it)"
+                   + ("" if prefix else "; with --character, the character's too"))
 
-        return read_c3d_markers(path, units)
-    if suffix == ".trc":
-        from ..sources.trc import read_trc_markers
 
-        return read_trc_markers(path, units)
-    raise InputError(f"physmocap solve reads marker files (.c3d, .trc), not {suffix or 'files without a suffix'!r}", path=path)
+def marker_solve_options(args: argparse.Namespace) -> "MarkerSolveOptions | None":
+    """The :class:`~physmocap.markers.solve.MarkerSolveOptions` of the flags of
+    :func:`add_marker_solve_options`, validated; None when none is set (the defaults).
+
+    Raises:
+        OptionError: A value the options refuse (an iteration count below 1...).
+    """
+    from ..markers.solve import MarkerSolveOptions
+
+    changes: dict = {}
+    if getattr(args, "marker_max_iterations", None) is not None:
+        changes["max_iterations"] = args.marker_max_iterations
+    if getattr(args, "marker_no_floor", False):
+        changes["floor"] = False
+    return MarkerSolveOptions(**changes) if changes else None
 
 
 def run(args: argparse.Namespace) -> int:
     from ..markers.solve import MarkerSolveOptions, print_report, solve_markers, write_actor_bvh
     from ..options import check_frame_range
+    from ..sources.markers import read_markers
     from .retarget import WRITERS
 
     out = Path(args.output)
@@ -80,15 +99,13 @@ def run(args: argparse.Namespace) -> int:
     check_not_input(outputs, [args.input, args.marker_set, args.map])
     check_distinct(outputs)
     check_frame_range(args.start, args.end)
-    if args.max_iterations < 1:
-        raise OptionError("--max-iterations must be at least 1")
+    opts = marker_solve_options(args) or MarkerSolveOptions()
     rec = read_markers(args.input, args.in_units).frames(args.start, args.end)
     character = None
     if args.character is not None:
         from ..models import load_character
 
         character = load_character(args.character, args.map)  # a bad character fails before the solve
-    opts = MarkerSolveOptions(max_iterations=args.max_iterations, floor=not args.no_floor)
     sol = solve_markers(rec, args.marker_set, opts)
     rep = sol.report()
     traj = None
@@ -97,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         from ..markers.solve import actor_motion
 
         traj = retarget(actor_motion(sol), character, progress=False if args.quiet else None,
-                        floor=not args.no_floor)
+                        floor=opts.floor)
     with OutputSet():
         if actor_out is not None:
             write_actor_bvh(sol, actor_out, up=args.up.upper(), units=args.units)

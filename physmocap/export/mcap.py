@@ -55,6 +55,8 @@ __all__ = [
     "LABELLED_POINTS_SCHEMA",
     "MARKERS_METADATA",
     "write_markers_mcap",
+    "write_markers_pointcloud_mcap",
+    "POINT_CLOUD_SCHEMA",
     "POSES_IN_FRAME_SCHEMA",
     "JOINT_POSITIONS_SCHEMA",
     "SKELETON_METADATA",
@@ -202,6 +204,34 @@ LABELLED_POINTS_SCHEMA: dict = {
 }
 #: Metadata record naming a marker recording's labels, rate and source.
 MARKERS_METADATA = "physmocap.markers"
+
+#: ``foxglove.PointCloud`` (the fields physmocap writes, as in foxglove/schemas): packed
+#: little-endian points, base64 ``data`` in JSON encoding.
+POINT_CLOUD_SCHEMA: dict = {
+    "title": "foxglove.PointCloud",
+    "description": "A collection of N-dimensional points, which may contain additional fields with information like "
+                   "normals, intensity, etc.",
+    "type": "object",
+    "properties": {
+        "timestamp": _time_schema("Timestamp of point cloud"),
+        "frame_id": {"type": "string", "description": "Frame of reference"},
+        "pose": POSES_IN_FRAME_SCHEMA["properties"]["poses"]["items"],
+        "point_stride": {"type": "integer", "minimum": 0, "description": "Number of bytes between points in the data"},
+        "fields": {
+            "type": "array",
+            "items": {
+                "title": "foxglove.PackedElementField",
+                "type": "object",
+                "properties": {"name": {"type": "string"}, "offset": {"type": "integer", "minimum": 0},
+                               "type": {"type": "integer", "description": "NumericType: 8 is FLOAT64"}},
+            },
+            "description": "Fields in data",
+        },
+        "data": {"type": "string", "contentEncoding": "base64", "description": "Point data, interpreted using fields"},
+    },
+}
+#: Foxglove ``NumericType`` of the coordinates written: FLOAT64.
+_FLOAT64 = 8
 
 
 def _schema_bytes(schema: dict) -> bytes:
@@ -713,31 +743,61 @@ def write_markers_mcap(rec: Any, path: str | os.PathLike, *, topic: str = "/mark
     metadata record (labels in order, fps, first frame, source).  Timestamps and bytes are a
     function of the input (:func:`frame_time_ns`); :func:`physmocap.sources.mcap.read_mcap_markers`
     reads it back exactly."""
+    ok = np.all(np.isfinite(rec.positions), axis=2)
+
+    def message(i: int) -> dict:
+        return {"frame": i, "frame_id": WORLD_FRAME, "points": {
+            lab: {"x": q[0], "y": q[1], "z": q[2]} for lab, q, v in zip(rec.labels, rec.positions[i].tolist(), ok[i]) if v}}
+
+    return _write_marker_frames(rec, Path(path), topic, start_time_ns, compression, LABELLED_POINTS_SCHEMA, message)
+
+
+def write_markers_pointcloud_mcap(rec: Any, path: str | os.PathLike, *, topic: str = "/markers",
+                                  start_time_ns: int = 0, compression: str = "zstd") -> Path:
+    """Write a marker recording as Foxglove ``foxglove.PointCloud`` messages (which Foxglove's
+    3D panel draws), atomically: one cloud per frame on ``topic``, point ``k`` marker ``k``
+    (x, y, z float64, metres, the recording's axes; NaN where unseen), and the labels, fps and
+    first frame in a ``physmocap.markers`` metadata record, since a point cloud does not name
+    its points.  Bytes are a function of the input; :func:`physmocap.sources.mcap.read_mcap_markers`
+    reads it back exactly."""
+    import base64
+
+    fields = [{"name": axis, "offset": 8 * k, "type": _FLOAT64} for k, axis in enumerate("xyz")]
+    pose = {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}}
+    points = np.ascontiguousarray(rec.positions, dtype="<f8")
+
+    def message(i: int) -> dict:
+        return {"frame_id": WORLD_FRAME, "pose": pose, "point_stride": 24, "fields": fields,
+                "data": base64.b64encode(points[i].tobytes()).decode("ascii")}
+
+    return _write_marker_frames(rec, Path(path), topic, start_time_ns, compression, POINT_CLOUD_SCHEMA, message)
+
+
+def _write_marker_frames(rec: Any, p: Path, topic: str, start_time_ns: int, compression: str, schema: dict,
+                         message: Any) -> Path:
+    """The MCAP of :func:`write_markers_mcap` and :func:`write_markers_pointcloud_mcap`: the
+    ``physmocap.markers`` metadata record, then ``message(i)`` (a dict) stamped with frame
+    ``i``'s time on ``topic`` under ``schema``, for every frame."""
     from mcap.writer import CompressionType, Writer
 
     from ..resources import portable_path
 
-    p = Path(path)
     fps = float(rec.fps)
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}.get(compression)
     if comp is None:
         raise OutputError(f"compression must be zstd, lz4 or none, got {compression!r}", path=p)
-    P = rec.positions
-    ok = np.all(np.isfinite(P), axis=2)
     with atomic_open(p, "wb") as fh:
         writer = Writer(fh, compression=comp, enable_data_crcs=True)
         writer.start(profile="", library=LIBRARY)
-        schema = writer.register_schema("physmocap.LabelledPoints", "jsonschema", _schema_bytes(LABELLED_POINTS_SCHEMA))
-        ch = writer.register_channel(topic, "json", schema)
+        schema_id = writer.register_schema(schema["title"], "jsonschema", _schema_bytes(schema))
+        ch = writer.register_channel(topic, "json", schema_id)
         writer.add_metadata(MARKERS_METADATA, {
             "labels": json.dumps(list(rec.labels)), "fps": repr(fps), "first_frame": str(int(rec.first_frame)),
             "topic": topic, "units": "m", "axes": "as recorded", "source": portable_path(str(rec.source), p.parent),
         })
         for i in range(rec.num_frames):
             t_ns = frame_time_ns(i, fps, start_time_ns)
-            row = P[i].tolist()
-            msg = {"timestamp": _stamp(t_ns), "frame": i, "frame_id": WORLD_FRAME,
-                   "points": {lab: {"x": q[0], "y": q[1], "z": q[2]} for lab, q, v in zip(rec.labels, row, ok[i]) if v}}
-            writer.add_message(ch, log_time=t_ns, data=_json(msg), publish_time=t_ns, sequence=i)
+            body = {"timestamp": _stamp(t_ns), **message(i)}
+            writer.add_message(ch, log_time=t_ns, data=_json(body), publish_time=t_ns, sequence=i)
         writer.finish()
     return p

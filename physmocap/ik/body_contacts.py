@@ -157,8 +157,7 @@ def detect_body_contacts(
         height = floor.heights(p)
         speed = np.linalg.norm(central_velocity(p, fps)[:, :2], axis=1)
         det = ContactDetector(["heel"], fps, opt.detector_options(part, leg))
-        for t in range(p.shape[0]):
-            det.step(height[t : t + 1], speed[t : t + 1])
+        det.run(height[:, None], speed[:, None])
         det.finish()
         lab = np.zeros(p.shape[0], dtype=bool)
         for _, since, state in det.transitions:

@@ -396,9 +396,11 @@ class ContactDetector:
 
     def reset(self) -> None:
         n = len(self.h_enter)
-        self.state = np.zeros(n, dtype=bool)
-        self.count = np.zeros(n, dtype=int)
-        self.since = np.zeros(n, dtype=int)
+        # per point, as Python scalars (a few points: cheaper than arrays frame by frame)
+        self._thresholds = list(zip(*(a.tolist() for a in (self.h_enter, self.h_exit, self.v_enter, self.v_exit, self.lift))))
+        self.state = [False] * n
+        self.count = [0] * n
+        self.since = [0] * n
         self.frame = 0
         self.transitions: list[tuple[int, int, bool]] = []
 
@@ -406,33 +408,54 @@ class ContactDetector:
         """One frame: heights above each point's stance level (m), horizontal
         speeds (m/s) and vertical velocities (m/s, up positive; None: not
         used) in; the labels ``(P,)`` out."""
-        h = np.asarray(heights, dtype=float)
-        v = np.asarray(speeds, dtype=float)
-        c = np.zeros_like(h) if climb is None else np.asarray(climb, dtype=float)
-        known = np.isfinite(h) & np.isfinite(v) & np.isfinite(c)
-        with np.errstate(invalid="ignore"):
-            enter = known & (h < self.h_enter) & (v < self.v_enter) & (c < self.lift)
-            leave = known & ((h > self.h_exit) | (v > self.v_exit) | (c > self.lift))
-        want = np.where(self.state, leave, enter)
-        start = want & (self.count == 0)
-        self.since[start] = self.frame
-        self.count = np.where(want, self.count + 1, np.where(known, 0, self.count))
-        need = np.where(self.state, self.n_off, self.n_on)
-        flip = self.count >= need
-        for i in np.flatnonzero(flip):
-            self.transitions.append((int(i), int(self.since[i]), not bool(self.state[i])))
-        self.state = np.where(flip, ~self.state, self.state)
-        self.count[flip] = 0
-        self.frame += 1
-        return self.state.copy()
+        h = np.asarray(heights, dtype=float).reshape(-1).tolist()
+        v = np.asarray(speeds, dtype=float).reshape(-1).tolist()
+        c = [0.0] * len(h) if climb is None else np.asarray(climb, dtype=float).reshape(-1).tolist()
+        self._advance(h, v, c)
+        return np.array(self.state, dtype=bool)
+
+    def run(self, heights: np.ndarray, speeds: np.ndarray, climb: np.ndarray | None = None) -> None:
+        """:meth:`step` over a whole clip: ``(F, P)`` heights, speeds and vertical velocities
+        (None: not used), frame by frame; the labels are in :attr:`transitions`."""
+        H = np.asarray(heights, dtype=float).tolist()
+        V = np.asarray(speeds, dtype=float).tolist()
+        C = np.zeros(np.shape(heights)).tolist() if climb is None else np.asarray(climb, dtype=float).tolist()
+        for h, v, c in zip(H, V, C):
+            self._advance(h, v, c)
+
+    def _advance(self, h: list[float], v: list[float], c: list[float]) -> None:
+        """One frame, point by point.  A point *wants* to change when its sample is known
+        (finite) and, in contact, ``h > h_exit`` or ``v > v_exit`` or ``c > lift``; out of
+        contact, ``h < h_enter`` and ``v < v_enter`` and ``c < lift``.  A change is committed
+        once wanted on ``n_on`` (entering) or ``n_off`` (leaving) frames in a row, dated to
+        the first of them; an unknown sample holds the count."""
+        state, count, since, frame = self.state, self.count, self.since, self.frame
+        for i, (hi, vi, ci, (h_enter, h_exit, v_enter, v_exit, lift)) in enumerate(zip(h, v, c, self._thresholds)):
+            known = math.isfinite(hi) and math.isfinite(vi) and math.isfinite(ci)
+            if state[i]:
+                want = known and (hi > h_exit or vi > v_exit or ci > lift)
+            else:
+                want = known and hi < h_enter and vi < v_enter and ci < lift
+            if want:
+                if count[i] == 0:
+                    since[i] = frame
+                count[i] += 1
+            elif known:
+                count[i] = 0
+            if count[i] >= (self.n_off if state[i] else self.n_on):
+                self.transitions.append((i, since[i], not state[i]))
+                state[i] = not state[i]
+                count[i] = 0
+        self.frame = frame + 1
 
     def finish(self) -> None:
         """End of the clip: commit every change whose condition has held to the
         last frame but not yet for its minimum duration (batch use only)."""
-        for i in np.flatnonzero(self.count > 0):
-            self.transitions.append((int(i), int(self.since[i]), not bool(self.state[i])))
-            self.state[i] = not self.state[i]
-            self.count[i] = 0
+        for i, n in enumerate(self.count):
+            if n > 0:
+                self.transitions.append((i, self.since[i], not self.state[i]))
+                self.state[i] = not self.state[i]
+                self.count[i] = 0
 
 
 class ContactStream:
@@ -608,8 +631,7 @@ def detect_point_contacts(
     spd = np.array([speeds[n] for n in names]).reshape(len(names), F)
     climb = np.array([vel[n][:, 2] for n in names]).reshape(len(names), F)
     det = ContactDetector([_kind(n) for n in names], fps, opt)
-    for t in range(F):
-        det.step(rel[:, t], spd[:, t], climb[:, t])
+    det.run(rel.T, spd.T, climb.T)
     det.finish()
     lab = np.zeros((len(names), F), dtype=bool)
     for i, since, state in det.transitions:  # back-date every change to its onset

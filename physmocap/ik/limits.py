@@ -35,18 +35,23 @@ class PointJacobians:
 
     def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
-        self._buf = np.zeros((capacity, 3, model.nv))
+        self._grow(capacity)
+
+    def _grow(self, capacity: int) -> None:
+        """A buffer for ``capacity`` points."""
+        self._buf = np.zeros((capacity, 3, self.model.nv))
+        self._rows = list(self._buf)  # one (3, nv) view per point, made once
 
     def __call__(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray) -> np.ndarray:
         """``(k, 3, nv)`` Jacobians of points ``(k, 3)`` (metres, world) on ``bodies`` ``(k,)``;
         a view of the buffer, valid until the next call."""
         k = len(bodies)
         if k > len(self._buf):
-            self._buf = np.zeros((max(k, 2 * len(self._buf)), 3, self.model.nv))
-        buf, model = self._buf, self.model
-        for i, (b, p) in enumerate(zip(bodies.tolist(), points)):
-            mujoco.mj_jac(model, data, buf[i], None, p, b)
-        return buf[:k]
+            self._grow(max(k, 2 * len(self._buf)))
+        model, jac = self.model, mujoco.mj_jac
+        for row, b, p in zip(self._rows, bodies.tolist(), points):
+            jac(model, data, row, None, p, b)
+        return self._buf[:k]
 
 
 class FrameStepLimit(mink.Limit):
@@ -141,11 +146,14 @@ class FrameStepLimit(mink.Limit):
 class GeomCandidates:
     """Stacked lowest-point candidates of a set of geoms, for vectorised queries."""
 
-    def __init__(self, model: mujoco.MjModel, geoms: Sequence[int]) -> None:
+    def __init__(self, model: mujoco.MjModel, geoms: Sequence[int], known: Mapping[int, np.ndarray] | None = None) -> None:
+        """``known``: geom id -> its :func:`geom_candidates`, where already computed (a mesh's
+        convex hull is the costly part of building this)."""
         rows, owner = [], []
         self.geoms = np.array(list(geoms), dtype=int)
-        for k, gid in enumerate(self.geoms):
-            cand = geom_candidates(model, int(gid))
+        known = known or {}
+        for k, gid in enumerate(self.geoms.tolist()):
+            cand = known[gid] if gid in known else geom_candidates(model, gid)
             if len(cand) == 0:  # planes and the like have no lowest point
                 cand = np.array([[0.0, 0.0, 0.0, -np.inf]])
             rows.append(cand)
@@ -160,7 +168,7 @@ class GeomCandidates:
         if len(self.owner):
             np.maximum.at(self.radius, self.owner, np.where(np.isfinite(reach), reach, 0.0))
         self._rows_key: bytes | None = None
-        self._rows = np.zeros(0, dtype=int)
+        self._rows: tuple = ()
         self._all = np.arange(len(self.gid))
 
     def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -188,28 +196,24 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def _near_rows(self, data: mujoco.MjData, below: float) -> np.ndarray | None:
-        """Candidate rows of the geoms whose bounding sphere reaches below ``below`` (None:
-        every geom does); the index array is kept while the same geoms stay near, which
-        they do over many iterations (a walking robot: its feet and shins)."""
+    def _near_rows(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(rows, their geom ids, their local points (k, 3), their radii)``: the candidates of
+        the geoms whose bounding sphere reaches below ``below``; kept while the same geoms
+        stay near, which they do over many iterations (a walking robot: its feet and shins)."""
         near = data.geom_xpos[self.geoms, 2] - self.radius < below
-        if near.all():
-            return None
         key = near.tobytes()
         if self._rows_key != key:
             self._rows_key = key
-            self._rows = np.flatnonzero(near[self.owner])
+            rows = self._all if near.all() else np.flatnonzero(near[self.owner])
+            self._rows = (rows, self.gid[rows], self.local[rows, :3], self.local[rows, 3])
         return self._rows
 
     def near_z(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray]:
         """``(rows (k,), z (k,))``: the candidates of the geoms whose bounding sphere reaches
         below ``below`` (ascending rows) and their lowest surface heights (metres)."""
-        rows = self._near_rows(data, below)
-        if rows is None:
-            rows = self._all
-        gid = self.gid[rows]
-        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], self.local[rows, :3])
-        z -= self.local[rows, 3]
+        rows, gid, local, radius = self._near_rows(data, below)
+        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], local)
+        z -= radius
         return rows, z
 
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
@@ -266,13 +270,15 @@ class FloorLimit(mink.Limit):
         margin: float = 2e-4,
         activation: float = 0.15,
     ) -> None:
+        known: dict[int, np.ndarray] = {}
         if geoms is None:
             # visual-only meshes are skipped (a robot model draws every link twice)
-            geoms = [
-                g
-                for g in range(model.ngeom)
-                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g) and len(geom_candidates(model, g))
-            ]
+            for g in range(model.ngeom):
+                if model.geom_bodyid[g] != 0 and not is_visual_only(model, g):
+                    cand = geom_candidates(model, g)
+                    if len(cand):
+                        known[g] = cand
+            geoms = list(known)
         self.model = model
         self.geoms = np.array(list(geoms), dtype=int)
         self.sites = np.array(list(sites), dtype=int)
@@ -282,7 +288,7 @@ class FloorLimit(mink.Limit):
         self.enabled = True
         self._jacp = np.zeros((3, model.nv))
         self._pj = PointJacobians(model)
-        self._cand = GeomCandidates(model, self.geoms)
+        self._cand = GeomCandidates(model, self.geoms, known)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
         self._cache: tuple[bytes, tuple] | None = None
@@ -370,7 +376,7 @@ class FloorLimit(mink.Limit):
         h = np.empty(rows)
         b = self._bodies[active]
         ng = len(self._cand.gid)
-        split = int(np.searchsorted(active, ng))
+        split = int(active.searchsorted(ng))
         anchor = np.empty((n_act, 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
         anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
@@ -499,14 +505,19 @@ class SelfCollisionLimit(mink.Limit):
         self._b1 = model.geom_bodyid[self.pairs[:, 0]]
         self._b2 = model.geom_bodyid[self.pairs[:, 1]]
         self._pj = PointJacobians(model)
+        self._i1, self._i2 = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
+        bound = self._rsum + self.activation
+        self._bound2 = bound * bound  # squared reach of each pair's bounding spheres (m^2)
+        self._fromto = np.zeros((len(self.pairs), 6))
+        self._fromto_rows = list(self._fromto)  # one row view per pair, for mj_geomDistance
+        self._far = np.full(len(self.pairs), self.activation)  # every pair at the activation distance
 
     def near_pairs(self, data: mujoco.MjData) -> np.ndarray:
         """Indices of the pairs whose bounding spheres are within ``activation``."""
         if not len(self.pairs):
             return np.zeros(0, dtype=int)
-        diff = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
-        bound = self._rsum + self.activation
-        return np.flatnonzero(np.einsum("ij,ij->i", diff, diff) <= bound * bound)
+        diff = data.geom_xpos[self._i1] - data.geom_xpos[self._i2]
+        return (np.einsum("ij,ij->i", diff, diff) <= self._bound2).nonzero()[0]
 
     def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(pair indices (k,), signed distances (k,), fromto (k, 6))`` of the pairs closer
@@ -515,19 +526,16 @@ class SelfCollisionLimit(mink.Limit):
         if self._cache is not None and self._cache[0] == key:
             return self._cache[1]
         near = self.near_pairs(data)
-        d = np.empty(len(near))
-        fromto = np.empty((len(near), 6))
-        model, act, g1s, g2s = self.model, self.activation, self._g1, self._g2
-        for i, k in enumerate(near.tolist()):
-            d[i] = mujoco.mj_geomDistance(model, data, g1s[k], g2s[k], act, fromto[i])
+        model, act, g1s, g2s, rows, distance = self.model, self.activation, self._g1, self._g2, self._fromto_rows, mujoco.mj_geomDistance
+        d = np.array([distance(model, data, g1s[k], g2s[k], act, rows[i]) for i, k in enumerate(near.tolist())], dtype=float)
         keep = d < act
-        out = (near[keep], d[keep], fromto[keep])
+        out = (near[keep], d[keep], self._fromto[: len(near)][keep])
         self._cache = (key, out)
         return out
 
     def distances(self, data: mujoco.MjData) -> np.ndarray:
         """Signed distances of every pair (capped at ``activation``), metres."""
-        out = np.full(len(self.pairs), self.activation)
+        out = self._far.copy()
         k, d, _ = self._close(data)
         out[k] = d
         return out
@@ -540,7 +548,7 @@ class SelfCollisionLimit(mink.Limit):
             return mink.Constraint()
         pa, pb = fromto[:, :3], fromto[:, 3:]
         n = pb - pa
-        norm = np.linalg.norm(n, axis=1)
+        norm = np.sqrt(np.add.reduce(n * n, axis=1))  # what np.linalg.norm(n, axis=1) computes
         ok = norm >= 1e-9
         if not ok.all():
             k, d, pa, pb, n, norm = k[ok], d[ok], pa[ok], pb[ok], n[ok], norm[ok]
@@ -549,7 +557,7 @@ class SelfCollisionLimit(mink.Limit):
         n /= norm[:, None]
         n[d < 0] *= -1.0  # overlapping: fromto runs from b's deepest point into a's surface
         m = len(k)
-        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.vstack([pa, pb]))
+        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.concatenate([pa, pb]))
         G = -np.einsum("ki,kij->kj", n, J[m:] - J[:m])
         # the distance may shrink to the margin; a pair inside it must move apart, by at
         # most ``recovery`` per iteration (so that the QP stays feasible)

@@ -69,6 +69,9 @@ __all__ = ["QP", "QPBuilder", "WarmSolver", "solve", "INFINITY"]
 #: What daqp reads as an absent bound.
 INFINITY = 1e30
 
+#: daqp's constraint sense array type (a C ``int``).
+_SENSE = np.dtype(c_int)
+
 _JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
 _XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
 _XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
@@ -125,16 +128,14 @@ class QPBuilder:
         self.ub = np.zeros(nv)
         self._W = np.zeros((64, nv))  # stacked weighted Jacobians, grown on demand
         self._eps = np.zeros(64)
-        self._jacF = np.zeros((0, 6, nv))  # frame tasks' Jacobians, grown on demand
-        self._M = np.zeros((0, 6, 6))
-        self._E = np.zeros((0, 6))
-        self._C = np.zeros((0, 6))
-        self._g = np.zeros((0, 1))
-        self._jac3 = np.zeros((3, nv))
+        self._frame_plans: dict[tuple, tuple] = {}  # frame tasks' ids -> their frames and Jacobian rows
+        self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
+        self._task_plans: dict[tuple, tuple] = {}  # task ids -> runs, rows, spans
+        self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites, targets (this frame)
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
-        self._diag = np.arange(nv) * (nv + 1)
-        self._ids: dict[int, tuple] = {}  # id(task) -> (task, frame type, frame id)
+        self._Hdiag = np.einsum("ii->i", self.H)  # a writable view of H's diagonal
+        self._postures: dict[int, tuple] = {}  # id(posture task) -> (task, its costs' bytes, weights)
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
 
@@ -149,44 +150,50 @@ class QPBuilder:
         r"""Rows of consecutive ``FrameTask`` s, 6 each: :math:`W_k = -\mathrm{diag}(w_k)
         J_{\log}(T_{tb}) \mathrm{Ad}_{T_{fw}} J_k`, :math:`\epsilon_k = -\alpha_k\, w_k \odot
         \log(T_{bt})` (metres, radians), :math:`J_k` the frame's ``(6, nv)`` Jacobian in world
-        axes (``mj_jacSite``/``mj_jacBody``); the products in one batched ``matmul``."""
+        axes (``mj_jacSite``/``mj_jacBody``).  The SE(3) terms are mink's compiled operations,
+        task by task; the products are batched ``matmul`` s (a stack of matrices gives each
+        product the same bits as one ``matmul`` per task)."""
         n = len(tasks)
-        if n > len(self._jacF):
-            self._jacF = np.zeros((n, 6, self.nv))
-            self._M = np.zeros((n, 6, 6))
-            self._E = np.zeros((n, 6))
-            self._C = np.zeros((n, 6))
-            self._g = np.zeros((n, 1))
-        J, M, E, C, g = self._jacF, self._M, self._E, self._C, self._g
         model = self.model
-        arrays: dict[str, tuple] = {}  # kind -> (jacobian function, xmat, xpos) of this data
-        for i, task in enumerate(tasks):
-            kind, fid = self._frame_id(task)
-            fn_xmat_xpos = arrays.get(kind)
-            if fn_xmat_xpos is None:
-                fn_xmat_xpos = arrays[kind] = (_JAC[kind], getattr(data, _XMAT[kind]), getattr(data, _XPOS[kind]))
-            jac, xmats, xposs = fn_xmat_xpos
-            xmat = xmats[fid]
-            frame = _native.xmat_xpos_to_wxyz_xyz(xmat, xposs[fid])
+        jlog, inverse_multiply, adjoint = _native.se3_jlog, _native.se3_inverse_multiply, _native.se3_rotation_adjoint_from_xmat
+        to_se3, rminus = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus
+        logs, adjoints, errors = [], [], []
+        frames, jacobians = self._frames(tasks, data)
+        for task, (jac, fid, xmat, xpos, Jp, Jr) in zip(tasks, frames):
+            frame = to_se3(xmat, xpos)
+            if task.transform_target_to_world is None:
+                raise mink.TargetNotSet(type(task).__name__)
             target = task.transform_target_to_world.wxyz_xyz
-            Ji = J[i]
-            jac(model, data, Ji[:3], Ji[3:], fid)
-            np.matmul(_native.se3_jlog(_native.se3_inverse_multiply(target, frame)),
-                      _native.se3_rotation_adjoint_from_xmat(xmat), out=M[i])
-            E[i] = _native.se3_rminus(target, frame)
-            C[i] = task.cost
-            g[i] = task.gain
-        M[:n] *= -C[:n, :, None]
-        np.matmul(M[:n], J[:n], out=W.reshape(n, 6, self.nv))
-        np.multiply(C[:n], -g[:n] * E[:n], out=eps.reshape(n, 6))
+            jac(model, data, Jp, Jr, fid)
+            logs.append(jlog(inverse_multiply(target, frame)))
+            adjoints.append(adjoint(xmat))
+            errors.append(rminus(target, frame))
+        M = np.matmul(np.array(logs), np.array(adjoints))
+        C = np.array([t.cost for t in tasks])
+        g = np.array([[t.gain] for t in tasks])
+        M *= -C[:, :, None]
+        np.matmul(M, jacobians, out=W.reshape(n, 6, self.nv))
+        np.multiply(C, -g * np.array(errors), out=eps.reshape(n, 6))
 
-    def _frame_id(self, task: mink.FrameTask) -> tuple[str, int]:
-        """``(frame type, id)`` of a ``FrameTask``'s frame, resolved once per task."""
-        ids = self._ids.get(id(task))
-        if ids is None or ids[0] is not task:
-            kind = task.frame_type
-            ids = self._ids[id(task)] = (task, kind, _resolve(self.model, task.frame_name, kind))
-        return ids[1], ids[2]
+    def _frames(self, tasks: Sequence[mink.FrameTask], data: mujoco.MjData) -> tuple[list[tuple], np.ndarray]:
+        """Per task ``(Jacobian function, frame id, xmat row, xpos row, translation and rotation
+        rows of its Jacobian)``, and the ``(n, 6, nv)`` Jacobians buffer those rows belong to,
+        resolved once per run of tasks (the rows are views into ``data``: they follow its
+        kinematics)."""
+        key = tuple(map(id, tasks))  # the plan keeps the tasks alive: their ids stay theirs
+        plan = self._frame_plans.get(key)
+        if plan is None or plan[1] is not data:
+            if len(self._frame_plans) > 64:
+                self._frame_plans.clear()
+            J = np.zeros((len(tasks), 6, self.nv))
+            frames = []
+            for i, task in enumerate(tasks):
+                kind = task.frame_type
+                fid = _resolve(self.model, task.frame_name, kind)
+                xmat, xpos = getattr(data, _XMAT[kind])[fid], getattr(data, _XPOS[kind])[fid]
+                frames.append((_JAC[kind], fid, xmat, xpos, J[i, :3], J[i, 3:]))
+            plan = self._frame_plans[key] = (tuple(tasks), data, frames, J)
+        return plan[2], plan[3]
 
     def _sites_rows(self, task: SitesPositionTask, data: mujoco.MjData, W: np.ndarray, eps: np.ndarray, r: int) -> None:
         r"""``SitesPositionTask`` rows: :math:`W = \mathrm{diag}(w) J`, :math:`J` the sites' stacked
@@ -203,6 +210,36 @@ class QPBuilder:
         W *= task.cost[:, None]
         np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
 
+    def new_frame(self) -> None:
+        """Forget the ``SitePositionTask`` s' targets, gains and costs read so far (see
+        :meth:`site_terms`): call it whenever they may have changed (a new frame's holds)."""
+        self._site_plans.clear()
+
+    def site_terms(self, tasks: Sequence[SitePositionTask], data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""``(J, e, w)`` of consecutive ``SitePositionTask`` s, one row per regulated axis in task
+        order: :math:`J` the site's world-position Jacobian row (``mj_jacSite``, ``(k, nv)``),
+        :math:`e = -\alpha (x_s - x^*)` (metres, ``(k,)``) and the cost :math:`w` (per metre),
+        what ``compute_jacobian``, ``-gain * compute_error`` and ``cost`` give task by task.
+        The tasks' targets, gains and costs are read at the first call after :meth:`new_frame`."""
+        key = tuple(map(id, tasks))
+        plan = self._site_plans.get(key)
+        if plan is None:
+            owner = np.repeat(np.arange(len(tasks)), [t.k for t in tasks])
+            axes = np.concatenate([np.array(t.axes, dtype=int) for t in tasks])
+            sites = np.array([t.site_id for t in tasks])
+            target = np.array([t.target for t in tasks])[owner, axes]
+            gain = np.array([-t.gain for t in tasks])[owner]
+            cost = np.concatenate([t.cost for t in tasks])
+            # the tasks are kept so that their ids stay theirs until new_frame
+            plan = self._site_plans[key] = (tuple(tasks), owner, axes, sites[owner], sites.tolist(), target, gain, cost)
+        _, owner, axes, row_sites, sites, target, gain, cost = plan
+        jac, model = self._jacS, self.model
+        if len(sites) > len(jac):
+            jac = self._jacS = np.zeros((max(len(sites), 2 * len(jac)), 3, self.nv))
+        for j, sid in enumerate(sites):
+            mujoco.mj_jacSite(model, data, jac[j], None, sid)
+        return jac[owner, axes], gain * (data.site_xpos[row_sites, axes] - target), cost
+
     def objective(
         self,
         configuration: mink.Configuration,
@@ -212,76 +249,86 @@ class QPBuilder:
     ) -> tuple[np.ndarray, np.ndarray]:
         r"""``(H, c)`` of ``tasks`` plus the diagonal posture terms (see the module docstring).
 
-        ``H`` and ``c`` are the builder's buffers, overwritten by the next call.
+        ``H`` and ``c`` are the builder's buffers, overwritten by the next call.  Consecutive
+        tasks of one kind (``FrameTask``, ``SitePositionTask``) are written together.
         """
-        data, model = configuration.data, self.model
-        m = 0
-        for t in tasks:
-            m += t.k if hasattr(t, "k") else len(t.cost)
+        data = configuration.data
+        runs, m, spans = self._task_plan(tasks)
         self._rows(m)
         W, eps = self._W, self._eps
         r = 0
-        mu = 0.0
-        i, ntask = 0, len(tasks)
-        while i < ntask:
-            task = tasks[i]
-            kind = type(task)
-            if kind is mink.FrameTask and _native is not None and task.transform_target_to_world is not None:
-                j = i + 1  # the run of frame tasks from i, done at once
-                while (
-                    j < ntask
-                    and type(tasks[j]) is mink.FrameTask
-                    and tasks[j].transform_target_to_world is not None
-                ):
-                    j += 1
-                k = 6 * (j - i)
-                self._frame_rows(tasks[i:j], data, W[r : r + k], eps[r : r + k])
-                for t in tasks[i:j]:
-                    if t.lm_damping:
-                        mu += t.lm_damping * float(eps[r : r + 6] @ eps[r : r + 6])
-                    r += 6
-                i = j
-                continue
-            elif kind is SitesPositionTask:
-                k = task.k
-                self._sites_rows(task, data, W[r : r + k], eps[r : r + k], r)
+        for kind, run in runs:
+            if kind is mink.FrameTask:
+                k = 6 * len(run)
+                self._frame_rows(run, data, W[r : r + k], eps[r : r + k])
             elif kind is SitePositionTask:
-                k = task.k
-                mujoco.mj_jacSite(model, data, self._jac3, None, task.site_id)
-                np.multiply(task.cost[:, None], self._jac3[task.axes, :], out=W[r : r + k])
-                np.multiply(task.cost, -task.gain * task.compute_error(configuration), out=eps[r : r + k])
+                Jk, ek, cost = self.site_terms(run, data)
+                k = len(ek)
+                np.multiply(cost[:, None], Jk, out=W[r : r + k])
+                np.multiply(cost, ek, out=eps[r : r + k])
+            elif type(run[0]) is SitesPositionTask:
+                k = run[0].k
+                self._sites_rows(run[0], data, W[r : r + k], eps[r : r + k], r)
             else:  # any other mink task: its own weighted residual
-                Wk, ek = _weighted_residual(task, configuration)
+                Wk, ek = _weighted_residual(run[0], configuration)
                 k = len(ek)
                 W[r : r + k] = Wk
                 eps[r : r + k] = ek
-            if task.lm_damping:
-                mu += task.lm_damping * float(eps[r : r + k] @ eps[r : r + k])
             r += k
-            i += 1
+        mu = 0.0  # sum of lambda_k |eps_k|^2 over the tasks with LM damping, in task order
+        for t, r0, k in spans:
+            if t.lm_damping:
+                mu += t.lm_damping * float(eps[r0 : r0 + k] @ eps[r0 : r0 + k])
         H, c = self.H, self.c
         Wm = W[:r]
         np.matmul(Wm.T, Wm, out=H)
         np.matmul(eps[:r], Wm, out=c)
         np.negative(c, out=c)
-        H.flat[self._diag] += damping + mu
+        self._Hdiag += damping + mu
         for p in posture:
             self._posture(configuration, p)
         return H, c
+
+    def _task_plan(self, tasks: Sequence[mink.Task]) -> tuple[list, int, list[tuple[mink.Task, int, int]]]:
+        """``(runs, rows, spans)`` of a sequence of tasks: its :func:`_runs`, its number of rows
+        and each task's ``(task, first row, rows)``, kept per sequence (with the tasks, so
+        that their ids stay theirs)."""
+        key = tuple(map(id, tasks))
+        plan = self._task_plans.get(key)
+        if plan is None:
+            if len(self._task_plans) > 256:
+                self._task_plans.clear()
+            spans, r = [], 0
+            for t in tasks:
+                k = t.k if hasattr(t, "k") else len(t.cost)
+                spans.append((t, r, k))
+                r += k
+            plan = self._task_plans[key] = (_runs(tasks), r, spans)
+        return plan
 
     def _posture(self, configuration: mink.Configuration, posture: mink.PostureTask) -> None:
         r"""Adds the posture task: :math:`H \mathrel{+}= \mathrm{diag}(w^2)`,
         :math:`c \mathrel{+}= \alpha w^2 \odot (q \ominus q^*)`, free-joint columns excluded."""
         e = self._dq
-        mujoco.mj_differentiatePos(self.model, e, 1.0, posture.target_q, configuration.q)
-        w = posture.cost.copy()
-        if posture._v_ids is not None:
-            w[posture._v_ids] = 0.0
-            e[posture._v_ids] = 0.0
-        w2 = w * w
+        mujoco.mj_differentiatePos(self.model, e, 1.0, posture.target_q, configuration.data.qpos)
+        w, w2, free = self._posture_weights(posture)
+        if free is not None:
+            e[free] = 0.0
         eps = w * (-posture.gain * e)
-        self.H.flat[self._diag] += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
+        self._Hdiag += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
         self.c -= eps * w
+
+    def _posture_weights(self, posture: mink.PostureTask) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(w, w^2, free-joint dofs or None)`` of a posture task, its costs with the free
+        joint's zeroed; recomputed when the costs change."""
+        cached = self._postures.get(id(posture))
+        key = posture.cost.tobytes()
+        if cached is None or cached[0] is not posture or cached[1] != key:
+            w = posture.cost.copy()
+            if posture._v_ids is not None:
+                w[posture._v_ids] = 0.0
+            cached = self._postures[id(posture)] = (posture, key, (w, w * w, posture._v_ids))
+        return cached[2]
 
     # -- constraints --------------------------------------------------------------
     def bounds(
@@ -361,15 +408,50 @@ class QPBuilder:
             if not con.inactive:
                 Gs.append(con.G)
                 hs.append(con.h)
-        G = np.vstack(Gs) if Gs else np.zeros((0, self.nv))
+        G = np.concatenate(Gs) if Gs else np.zeros((0, self.nv))
         h = np.concatenate(hs) if hs else np.zeros(0)
-        As, bs = [], []
-        for task in constraints:
-            As.append(task.compute_jacobian(configuration))
-            bs.append(-task.gain * task.compute_error(configuration))
-        A = np.vstack(As) if As else np.zeros((0, self.nv))
-        b = np.concatenate(bs) if bs else np.zeros(0)
+        A, b = self.equalities(configuration, constraints)
         return QP(H, c, lb, ub, G, h, A, b)
+
+    def equalities(self, configuration: mink.Configuration, constraints: Sequence[mink.Task]) -> tuple[np.ndarray, np.ndarray]:
+        r"""``(A, b)``: the rows :math:`J_c \Delta q = -\alpha_c e_c` of the equality tasks, in order
+        (runs of ``SitePositionTask`` s by :meth:`site_terms`)."""
+        if not constraints:
+            return np.zeros((0, self.nv)), np.zeros(0)
+        As, bs = [], []
+        for kind, run in _runs(constraints):
+            if kind is SitePositionTask:
+                Jk, ek, _ = self.site_terms(run, configuration.data)
+            else:
+                Jk, ek = run[0].compute_jacobian(configuration), -run[0].gain * run[0].compute_error(configuration)
+            As.append(Jk)
+            bs.append(ek)
+        if len(As) == 1:
+            return As[0], bs[0]
+        return np.concatenate(As), np.concatenate(bs)
+
+
+def _batched(task: mink.Task) -> type | None:
+    """The kind of rows ``task`` is written with in a run of its kind, or None (alone)."""
+    kind = type(task)
+    if kind is mink.FrameTask:
+        return kind if _native is not None else None
+    return kind if kind is SitePositionTask else None
+
+
+def _runs(tasks: Sequence[mink.Task]) -> list[tuple[type | None, list[mink.Task]]]:
+    """``tasks`` split into maximal runs of one batched kind (:func:`_batched`); any other
+    task is a run of its own, of kind None."""
+    runs: list[tuple[type | None, list]] = []
+    last = None
+    for t in tasks:
+        kind = _batched(t)
+        if kind is not None and kind is last:
+            runs[-1][1].append(t)
+        else:
+            runs.append((kind, [t]))
+        last = kind
+    return runs
 
 
 def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:
@@ -386,15 +468,14 @@ def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:
 def _stack(qp: QP) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """daqp's ``(A, bupper, blower, sense)``: simple bounds first, then :math:`G`, then :math:`A` (sense 5)."""
     nv, m, p = qp.c.size, qp.h.size, qp.b.size
-    if m or p:
-        Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
-        bupper = np.concatenate([qp.ub, qp.h, qp.b])
-        blower = np.concatenate([qp.lb, np.full(m, -INFINITY), qp.b])
-    else:
-        Atot = np.zeros((0, nv))
-        bupper, blower = qp.ub, qp.lb
-    sense = np.zeros(nv + m + p, dtype=c_int)
+    sense = np.zeros(nv + m + p, dtype=_SENSE)
+    if not (m or p):
+        return np.zeros((0, nv)), qp.ub, qp.lb, sense
     sense[nv + m :] = 5
+    Atot = np.ascontiguousarray(np.concatenate([qp.G, qp.A]) if (m and p) else (qp.G if m else qp.A))
+    bupper = np.concatenate([qp.ub, qp.h, qp.b])
+    blower = np.concatenate([qp.lb, qp.h, qp.b])
+    blower[nv : nv + m] = -INFINITY
     return Atot, bupper, blower, sense
 
 
@@ -412,7 +493,7 @@ def solve(qp: QP, dual_start: np.ndarray | None = None) -> np.ndarray:
 def _solve(qp: QP, dual_start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     Atot, bupper, blower, sense = _stack(qp)
     x, _, exitflag, info = daqp.solve(qp.H, qp.c, Atot, bupper, blower, sense, dual_start=dual_start)
-    if exitflag <= 0 or x is None or not np.all(np.isfinite(x)):
+    if exitflag <= 0 or x is None or not np.isfinite(x).all():
         raise mink.NoSolutionFound("daqp")
     return np.asarray(x), info["lam"]
 

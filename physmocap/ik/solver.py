@@ -291,17 +291,20 @@ class FrameSolver:
         if self.points is not None:
             self.points.set_targets(positions[self._point_idx])
             on = np.asarray(valid, dtype=bool)[self._point_idx]
-            if np.any(on != self._points_on):
+            if (on != self._points_on).any():
                 self.points.set_costs(np.where(on, self._point_costs, 0.0))
                 self._points_on = on
 
     def _set_holds(self, holds: "ContactHolds") -> None:
+        """This frame's contact holds; their tasks' targets and costs are read from here on
+        (:meth:`QPBuilder.new_frame`), so a change to them needs a new call."""
+        self._builder.new_frame()
         self._extra_tasks = list(holds.tasks)
         self._constraints = list(holds.constraints)
         # the planted contacts' residual rows at once: site, world axis, target (metres)
         self._hold_rows = None
         if self._constraints and all(type(t) is SitePositionTask for t in self._constraints):
-            sites = np.concatenate([np.full(t.k, t.site_id) for t in self._constraints])
+            sites = np.repeat([t.site_id for t in self._constraints], [t.k for t in self._constraints])
             axes = np.concatenate([np.array(t.axes, dtype=int) for t in self._constraints])
             target = np.concatenate([t.target[list(t.axes)] for t in self._constraints])
             self._hold_rows = (sites, axes, target)
@@ -437,7 +440,7 @@ class FrameSolver:
                 except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
                     break
                 self._integrate(v, 1.0)
-                if np.max(np.abs(v)) < opt.tolerance:
+                if np.abs(v).max() < opt.tolerance:
                     break
         finally:
             self.posture.set_cost(opt.posture_cost)
@@ -470,13 +473,14 @@ class FrameSolver:
             if self._floor_ok():
                 return
 
-    def _residuals(self) -> tuple[float, float]:
+    def _residuals(self, contacts: float | None = None) -> tuple[float, float]:
         """``(contacts, floor)``: how far the planted contacts are off their anchors
-        and the lowest point below the floor (metres), cached per configuration."""
+        and the lowest point below the floor (metres), cached per configuration
+        (``contacts``: the first, when just computed by :meth:`_contact_residual`)."""
         key = self.configuration.data.qpos.tobytes()
         if self._res_cache is not None and self._res_cache[0] == key:
             return self._res_cache[1]
-        rc = self._contact_residual()
+        rc = self._contact_residual() if contacts is None else contacts
         rf = 0.0
         if self.options.floor:
             rf = max(0.0, self.options.floor_height - self.floor_limit.lowest(self.configuration.data))
@@ -487,7 +491,7 @@ class FrameSolver:
         """How far (metres, largest coordinate) the planted contacts are off their anchors."""
         rc = 0.0
         if self._hold_rows is not None:
-            rc = max(rc, float(np.max(np.abs(self._contact_errors()))))
+            rc = max(rc, float(np.abs(self._contact_errors()).max()))
         else:
             for task in self._constraints:
                 rc = max(rc, float(np.max(np.abs(task.compute_error(self.configuration)))))
@@ -511,7 +515,7 @@ class FrameSolver:
         if not self._constraints and not self.options.floor:
             self._integrate(v, 1.0)
             return
-        q0 = self.configuration.q.copy()
+        q0 = self.configuration.data.qpos.copy()
         r0 = self._residual if self._residual is not None else self._hard_residual()
         bound = max(r0, tol)
         qpos = self.configuration.data.qpos
@@ -567,9 +571,10 @@ class FrameSolver:
         """True (and the residual kept) if the current trial's hard-constraint residual is
         within ``bound``: the contacts' residual first, so that when it alone is too large
         the trial is refused without the floor's (the same decision as on their maximum)."""
-        if self._contact_residual() > bound:
+        rc = self._contact_residual()
+        if rc > bound:
             return False
-        r1 = self._hard_residual()
+        r1 = max(self._residuals(rc))
         if r1 > bound:
             return False
         self._residual = r1
@@ -660,12 +665,12 @@ class FrameSolver:
                 worst = 5
                 break
             self._line_search(v)
-            if np.max(np.abs(v)) < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
+            if np.abs(v).max() < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
                 break
         if opt.floor and worst < 3 and not self._floor_ok():
             self._project_floor(base)
-        q = self.configuration.q.copy()
-        if worst == 5 or not np.all(np.isfinite(q)):
+        q = self.configuration.data.qpos.copy()
+        if worst == 5 or not np.isfinite(q).all():
             worst = 5
             q = (self.q_prev if self.q_prev is not None else np.array(self.character.rest_qpos)).copy()
         # remove solver round-off outside the joint ranges (the QP keeps within ~1e-9)

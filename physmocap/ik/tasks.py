@@ -52,8 +52,10 @@ class SitePositionTask(mink.Task):
         self.set_cost(cost)
 
     def set_cost(self, cost) -> None:
-        c = np.broadcast_to(np.asarray(cost, dtype=float), (self.k,))
-        if np.any(c < 0):
+        """Cost per metre: a scalar or one per regulated axis (>= 0)."""
+        c = np.empty(self.k)
+        c[:] = cost  # broadcast and converted to float, as np.broadcast_to(np.asarray(cost, float)) would
+        if (c < 0).any():
             raise ValueError("costs must be >= 0")
         self.cost[:] = c
 

@@ -26,8 +26,8 @@ that soft-tissue motion cannot turn it noticeably about its long axis (:data:`MA
 two skin markers and a joint centre nearly in a row, as on the CMU set's thigh, shank and
 upper arm, do not).  A hinge's centre along its axis is never taken from the motion (:data:`HINGE_JOINTS`), and a
 ball joint (hip, shoulder) or the wrist is fitted only when its motion spans two planes
-(:data:`TWO_PLANE_JOINTS`, Piazza et al. 2004, Camomilla et al. 2006): a jumping or walking
-clip flexes the hip in one plane, which places its centre worse than the regression.
+(:data:`TWO_PLANE_JOINTS`: functional methods need multi-plane calibration movements, sources
+there): a jumping or walking clip flexes the hip in one plane, and the regression is kept.
 Frames whose fit residual exceeds three times the median are dropped and the fit repeated
 once (marker glitches).  Where a joint is not exercised enough, its segments lack markers,
 or the fit's residual is implausible, the regression centre is kept; every joint records its
@@ -66,12 +66,12 @@ __all__ = [
 # engineering reason for the value (changing one changes the README's marker figures).
 #: Minimum angular spread (degrees, 98th percentile of the pairwise angles between the child's
 #: directions) of a joint's motion for a functional fit.  Range of motion is among what the
-#: functional-method studies examine (Hicks & Richards 2005, Gait Posture 22:138: flexion-
-#: extension and abduction-adduction ranges; Piazza et al. 2004, J. Biomech. 37:349: reduced
-#: hip motion, the 20-30 degrees quoted for :data:`TWO_PLANE_JOINTS`); 25 is the middle of that
-#: range.  The exact value is an engineering choice: no paper gives one
-#: cut-off for all joints, and this spread is measured on the child's direction, not as a
-#: goniometric angle.
+#: functional-method studies examine (Hicks & Richards 2005, Gait Posture 22:138, varied the
+#: flexion-extension and abduction-adduction ranges of the fitted motion; Piazza et al. 2004
+#: assessed the functional hip centre under reduced range of hip motion, the subject of its
+#: title as Hicks & Richards cite it; its figures are not checked here).  The value is an
+#: engineering choice: no source found gives one cut-off for all joints, and this spread is
+#: measured on the child's direction, not as a goniometric angle.
 MIN_SPREAD_DEG = 25.0
 #: Fewest distinct poses (cells of the :data:`BIN` grid, about 3 degrees) a functional fit
 #: uses.  An engineering choice, not from a paper: 30 poses give SCoRE 90 equations for its 6
@@ -112,12 +112,19 @@ MAX_FRAMES = 800
 MIN_CONSTELLATION_FRAMES = 10
 #: Joints whose centre a single plane of motion cannot place (ball joints, and the wrist's two
 #: axes): fitted only when the motion also spans :data:`MIN_SECOND_PLANE_DEG` across its main
-#: plane.  Piazza et al. (2004, J. Biomech. 37:349) found functional hip centres degrade
-#: sharply when the range of motion drops below about 20-30 degrees, and Camomilla et al.
-#: (2006, J. Biomech. 39:1096) that planar (flexion-only) motion places the hip worst; with
-#: mostly one-plane motion (walking, jumping) the regression is the better estimate.
+#: plane.  Sources: SCoRE needs complex multi-plane movements for an accurate hip centre, and
+#: subjects with a limited hip range get a poor one (Ravera & Peterson, "A regularized
+#: functional method to determine the hip joint center of rotation in subjects with limited
+#: range of motion", J. Biomech.); functional methods are sensitive to the complexity of the
+#: calibration movement (Meng, Childs & Buis 2019, "Evaluation of functional methods of joint
+#: centre determination for quasi-planar movement"), and later studies (Siston & Delp 2006,
+#: Kainz et al. 2015, as Ravera & Peterson cite them) found the multi-plane "star-arc"
+#: movement that Camomilla et al. (2006, J. Biomech.) proposed the best calibration movement.
+#: That the regression beats a one-plane functional fit is this module's reading of those
+#: findings, not a figure from them.
 TWO_PLANE_JOINTS = ("hip", "shoulder", "wrist")
-#: Smallest extent (degrees) across the main plane of motion for :data:`TWO_PLANE_JOINTS`.
+#: Smallest extent (degrees) across the main plane of motion for :data:`TWO_PLANE_JOINTS`.  An
+#: engineering choice, not from a paper: no source found gives a second-plane threshold.
 MIN_SECOND_PLANE_DEG = 20.0
 #: Soft-tissue motion (metres, RMS) of a skin marker relative to its bone: 5 mm is at the low
 #: end of what Leardini et al. (2005, Gait Posture 21:212) review (up to 2-3 cm on the thigh).

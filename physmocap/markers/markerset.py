@@ -15,13 +15,14 @@ cluster markers) are listed as unused.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
-from ..errors import InputError, MappingError, warn
+from ..errors import InputError, MappingError
 from ..fileio import read_toml
 from .recording import plain_label
 
-__all__ = ["ROLES", "ALIASES", "MarkerSet", "detect_marker_set", "load_marker_set", "recording_marker_set"]
+__all__ = ["ROLES", "ALIASES", "MarkerSet", "detect_marker_set", "load_marker_set", "recording_marker_set",
+           "unused_labels"]
 
 _SIDED = ("SHO", "ELB", "ELBM", "WRA", "WRB", "FIN", "THI", "KNE", "KNEM", "TIB", "ANK", "ANKM", "HEE", "TOE")
 #: Every role, in a stable order.
@@ -89,63 +90,89 @@ class MarkerSet:
         roles: Role -> index of the marker playing it.
         unused: Labels that play no role (props, clusters, extra markers).
         origin: ``"aliases"`` or the TOML file used.
+        candidates: Role -> indices of every marker whose label the aliases read as that role,
+            for the roles that two or more different labels claim (``LKNE`` and ``LFLE``) and
+            no marker set file assigns; until :func:`.candidates.choose_candidates` picks one
+            from the data, the first in the file holds the role.
+        choices: Role -> why its marker was chosen among its candidates (one sentence).
     """
 
     roles: dict[str, int]
     unused: tuple[str, ...]
     origin: str = "aliases"
+    candidates: dict[str, tuple[int, ...]] = field(default_factory=dict)
+    choices: dict[str, str] = field(default_factory=dict)
 
     def has(self, *roles: str) -> bool:
         return all(r in self.roles for r in roles)
 
 
+def unused_labels(labels: tuple[str, ...] | list[str], roles: dict[str, int]) -> tuple[str, ...]:
+    """The labels of the markers that play none of ``roles`` (role -> marker index), in file order."""
+    used = set(roles.values())
+    return tuple(lab for i, lab in enumerate(labels) if i not in used)
+
+
 def detect_marker_set(labels: tuple[str, ...] | list[str], overrides: dict[str, str] | None = None) -> MarkerSet:
-    """Roles of ``labels`` by the built-in aliases, then ``overrides`` (role -> label)."""
-    roles: dict[str, int] = {}
-    clashes: list[tuple[str, str]] = []  # (role, label left without it)
+    """Roles of ``labels`` by the built-in aliases, then ``overrides`` (role -> label).
+
+    Labels alone cannot say which of two different labels read as one role is the better
+    marker: such a role keeps them all in :attr:`MarkerSet.candidates` (the first holds it
+    meanwhile) for :func:`.candidates.choose_candidates` to decide from the recording, unless
+    ``overrides`` assigns the role.  A marker the file gives another role is no candidate."""
+    claims: dict[str, list[int]] = {}
     for i, lab in enumerate(labels):
         role = ALIASES.get(plain_label(lab))
-        if role is not None and role not in roles:
-            roles[role] = i
-        elif role is not None and plain_label(lab) != plain_label(labels[roles[role]]):
-            clashes.append((role, lab))
-    clashes = [(role, lab) for role, lab in clashes if role not in (overrides or {})]
-    if clashes:
-        warn(
-            "markers read as a role another marker already has: "
-            + ", ".join(f"{lab} ({role}: {labels[roles[role]]} is used)" for role, lab in clashes)
-            + "; give the role its marker in a marker set file (--marker-set) to choose"
-        )
-    origin = "aliases"
-    if overrides:
-        plain = {plain_label(lab): i for i, lab in enumerate(labels)}
-        for role, lab in overrides.items():
-            if role not in ROLES:
-                raise MappingError(f"unknown marker role {role!r}; roles are {' '.join(ROLES)}")
-            i = plain.get(plain_label(lab))
-            if i is None:
-                raise MappingError(f"marker {lab!r} (for {role}) is not in the recording; its labels are {', '.join(labels)}")
-            roles[role] = i
-        origin = "aliases + file"
-    used = set(roles.values())
-    return MarkerSet(roles=roles, unused=tuple(lab for i, lab in enumerate(labels) if i not in used), origin=origin)
+        if role is not None and all(plain_label(labels[k]) != plain_label(lab) for k in claims.get(role, [])):
+            claims.setdefault(role, []).append(i)
+    given = _file_roles(labels, overrides or {})
+    roles, candidates = dict(given), {}
+    for role, idx in claims.items():
+        free = tuple(i for i in idx if i not in given.values())
+        if role in given or not free:
+            continue
+        roles[role] = free[0]
+        if len(free) > 1:
+            candidates[role] = free
+    origin = "aliases + file" if overrides else "aliases"
+    return MarkerSet(roles=roles, unused=unused_labels(labels, roles), origin=origin, candidates=candidates)
+
+
+def _file_roles(labels: tuple[str, ...] | list[str], overrides: dict[str, str]) -> dict[str, int]:
+    """Role -> marker index of a marker set file's ``overrides`` (role -> label).
+
+    Raises:
+        MappingError: An unknown role, or a label not in the recording.
+    """
+    plain = {plain_label(lab): i for i, lab in enumerate(labels)}
+    out = {}
+    for role, lab in overrides.items():
+        if role not in ROLES:
+            raise MappingError(f"unknown marker role {role!r}; roles are {' '.join(ROLES)}")
+        i = plain.get(plain_label(lab))
+        if i is None:
+            raise MappingError(f"marker {lab!r} (for {role}) is not in the recording; its labels are {', '.join(labels)}")
+        out[role] = i
+    return out
 
 
 def recording_marker_set(rec, marker_set: "str | os.PathLike | MarkerSet | None" = None) -> MarkerSet:
     """The roles of a recording's markers: the aliases, the user's TOML file ``marker_set``
-    (or a ready :class:`MarkerSet`), then single-limb markers placed on their side by where
-    they are (:func:`.sides.with_sides`)."""
+    (or a ready :class:`MarkerSet`), a choice from the data where two labels claim one role
+    and the file does not say (:func:`.candidates.choose_candidates`), then single-limb
+    markers placed on their side by where they are (:func:`.sides.with_sides`)."""
+    from .candidates import choose_candidates
     from .sides import with_sides
 
     if isinstance(marker_set, MarkerSet):
         return marker_set
     if marker_set is None:
-        return with_sides(rec, detect_marker_set(rec.labels))
+        return with_sides(rec, choose_candidates(rec, detect_marker_set(rec.labels)))
     try:
         ms = detect_marker_set(rec.labels, load_marker_set(marker_set))
     except MappingError as exc:  # a role or label of the user's file: name the file, and the recording
         raise MappingError(f"{exc.message} (recording {rec.source})", path=marker_set) from None
-    return with_sides(rec, ms)
+    return with_sides(rec, choose_candidates(rec, ms))
 
 
 def load_marker_set(path: str | os.PathLike) -> dict[str, str]:
@@ -161,6 +188,8 @@ def marker_set_toml(labels: tuple[str, ...] | list[str], ms: MarkerSet) -> str:
     """A marker set file to edit: every role with the label playing it (or commented out)."""
     lines = ["# physmocap marker set: ROLE = \"label as in the file\"; delete or fix the guesses", "[markers]"]
     for role in ROLES:
+        if role in ms.choices:
+            lines.append(f"# {role}: {ms.choices[role]}")
         if role in ms.roles:
             lines.append(f'{role} = "{labels[ms.roles[role]]}"')
         else:

@@ -3,8 +3,9 @@ actor skeleton (the default), or the canonical joint centres (``solve=False``)."
 
 from __future__ import annotations
 
+import dataclasses
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -13,6 +14,9 @@ from .functional import functional_joint_centres, warn_fallbacks
 from .joints import up_axis, warn_unused
 from .markerset import MarkerSet, recording_marker_set
 from .recording import MarkerRecording
+
+if TYPE_CHECKING:
+    from .solve import MarkerSolveOptions
 
 __all__ = ["marker_motion", "solved_motion", "check_legs", "LEG_SEGMENTS"]
 
@@ -34,7 +38,7 @@ def _to_z_up(up: np.ndarray) -> np.ndarray:
 
 
 def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = None, solve: bool = True,
-                  **options: Any) -> Motion:
+                  solve_options: "MarkerSolveOptions | None" = None, **options: Any) -> Motion:
     """What ``load_motion`` returns for a marker recording.
 
     By default the actor skeleton solved by marker-driven IK (:func:`solved_motion`:
@@ -51,13 +55,23 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
         rec: The :class:`MarkerRecording`.
         marker_set: A TOML file of ``[markers] ROLE = "label"`` overriding the aliases.
         solve: The solved actor skeleton (default) rather than the joint centres.
+        solve_options: How the actor is solved (:class:`~.solve.MarkerSolveOptions`; default
+            its defaults); with ``solve=True`` only.
         **options: Options of ``positional_motion`` (``max_gap``, ``smooth``, ``floor``...);
             with ``solve=False`` only.
+
+    Raises:
+        OptionError: Options of the other route (``solve_options`` with ``solve=False``,
+            ``**options`` with ``solve=True``).
     """
+    from ..errors import OptionError
     from ..sources.positions import positional_motion
 
     if solve:
-        return solved_motion(rec, marker_set, **options)
+        return solved_motion(rec, marker_set, solve_options, **options)
+    if solve_options is not None:
+        raise OptionError("marker solve options apply to the solved actor, not to the joint centres "
+                          "(solve=False, --joint-centres)", path=rec.source)
     ms = recording_marker_set(rec, marker_set)
     warn_unused(rec, ms)
     centres = functional_joint_centres(rec, ms)
@@ -91,13 +105,14 @@ def check_legs(rec: MarkerRecording, ms: MarkerSet) -> None:
 
 
 def solved_motion(rec: MarkerRecording, marker_set: str | os.PathLike | MarkerSet | None = None,
-                  **options: Any) -> Motion:
-    """The actor skeleton solved from the markers (:func:`.solve.solve_markers`) as a
-    rotational :class:`~physmocap.motion.Motion` (metres, Z-up, canonical joint names), with
-    the joint-centre methods, ignored markers and the residual RMS in ``meta``.  A recording
-    with no marker on a leg segment is refused before the solve (:func:`check_legs`)."""
+                  solve_options: "MarkerSolveOptions | None" = None, **options: Any) -> Motion:
+    """The actor skeleton solved from the markers (:func:`.solve.solve_markers` with
+    ``solve_options``) as a rotational :class:`~physmocap.motion.Motion` (metres, Z-up,
+    canonical joint names), with the joint-centre methods, ignored markers and the residual
+    RMS in ``meta``.  A recording with no marker on a leg segment is refused before the solve
+    (:func:`check_legs`); ``options`` (the joint-centre route's) are refused."""
     from ..errors import OptionError
-    from .solve import actor_motion, solve_markers
+    from .solve import MarkerSolveOptions, actor_motion, solve_markers
 
     if options:
         raise OptionError(f"option(s) {', '.join(sorted(options))} do not apply to a solved marker recording "
@@ -108,10 +123,11 @@ def solved_motion(rec: MarkerRecording, marker_set: str | os.PathLike | MarkerSe
 
         joint_centres(rec, ms)  # raises: the labels match no known marker set
     check_legs(rec, ms)
-    sol = solve_markers(rec, ms)
+    sol = solve_markers(rec, ms, solve_options)
     motion = actor_motion(sol)
     rep = sol.report()
     motion.meta["joint_centre_methods"] = dict(sol.calibration.method)
     motion.meta["ignored_markers"] = list(sol.ignored)
     motion.meta["marker_residual_rms_mm"] = rep["overall"]["rms_mm"]
+    motion.meta["marker_solve_options"] = dataclasses.asdict(solve_options or MarkerSolveOptions())
     return motion

@@ -18,20 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError, warn
-from .recording import MarkerRecording
 
-__all__ = ["replay_markers", "read_marker_recording"]
-
-
-def read_marker_recording(path: str) -> MarkerRecording:
-    """A marker recording from a .c3d, .trc or marker .mcap file."""
-    if Path(path).suffix.lower() == ".mcap":
-        from ..sources.mcap import read_mcap_markers
-
-        return read_mcap_markers(path)
-    from ..cli.solve import read_markers
-
-    return read_markers(path)
+__all__ = ["replay_markers"]
 
 
 def _percentiles(x: np.ndarray) -> dict[str, float]:
@@ -45,15 +33,16 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
     from ..ik.stream import StreamingRetargeter
     from ..models import load_character
     from ..motion import Skeleton
+    from ..sources.markers import read_markers
     from ..trajectory import Trajectory
     from .stream import MarkerStream, calibration_slice
 
     if args.compare or args.source_map or args.floor is not None:
         raise OptionError("--compare, --source-map and --floor are for skeleton recordings, not markers")
-    rec = read_marker_recording(args.input)
+    rec = read_markers(args.input)
     character = load_character(args.character, args.map) if args.character else None
     if args.calibrate:
-        cal = read_marker_recording(args.calibrate)
+        cal = read_markers(args.calibrate)
     else:
         cal = calibration_slice(rec, args.calibration_seconds)
         if args.calibration_seconds * rec.fps > rec.num_frames:

@@ -11,9 +11,11 @@ least :data:`MIN_LATERAL` (metres).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from .markerset import MarkerSet
+from .markerset import MarkerSet, unused_labels
 from .recording import MarkerRecording, plain_label
 
 __all__ = ["SIDELESS_ROLES", "lateral_offsets", "side_of", "with_sides"]
@@ -79,6 +81,4 @@ def with_sides(rec: MarkerRecording, ms: MarkerSet) -> MarkerSet:
         role = f"{'L' if side == 'left' else 'R'}{SIDELESS_ROLES[plain_label(rec.labels[i])]}" if side else None
         if role is not None and role not in roles:
             roles[role] = i
-    used = set(roles.values())
-    unused = tuple(lab for i, lab in enumerate(rec.labels) if i not in used)
-    return MarkerSet(roles=roles, unused=unused, origin=ms.origin + " + sides from positions")
+    return replace(ms, roles=roles, unused=unused_labels(rec.labels, roles), origin=ms.origin + " + sides from positions")

@@ -35,6 +35,7 @@ import mujoco
 import numpy as np
 
 from ..errors import InputError, warn
+from ..options import check_fields
 from .functional import Calibration, attach_by_rigidity, functional_joint_centres, warn_fallbacks
 from .joints import up_axis
 from .markerset import MarkerSet, recording_marker_set
@@ -42,7 +43,7 @@ from .motion import _to_z_up
 from .recording import MarkerRecording
 
 __all__ = ["MarkerSolveOptions", "MarkerSolution", "ActorModel", "calibrate_actor", "calibrate_segments", "fit_actor",
-           "solve_markers", "frame_ranges"]
+           "solve_markers", "frame_ranges", "load_spec_character", "pose_on_centres"]
 
 #: Model body of each marker segment (default humanoid body names).
 SEGMENT_BODY = {
@@ -60,17 +61,22 @@ CALIBRATION_TARGETS = (
 )
 
 
-@dataclass
+@dataclass(frozen=True)
 class MarkerSolveOptions:
-    """How markers are solved.
+    """How markers are solved: the one options object of ``physmocap solve``, of ``retarget``
+    on marker files (``--marker-max-iterations``, ``--marker-no-floor``) and of
+    ``load_motion(take.c3d, solve_options=...)``; its values are checked when it is made.
 
     Attributes:
-        max_iterations: QP iterations per frame (warm-started from the previous frame).
-        calibration_frames: Frames used to place the marker sites (spread over the clip).
+        max_iterations: QP iterations per frame (warm-started from the previous frame), >= 1.
+        calibration_frames: Frames used to place the marker sites (spread over the clip), >= 1.
         velocity_limits: Bound frame-to-frame joint steps by human joint speeds.
         floor: Keep the feet above the floor (found from the feet's lowest points).
-        min_weight_scatter: Scatter (metres) below which a marker's weight stops growing.
-        rigidity: Largest scatter (metres) of a marker on a segment for it to be attached.
+        min_weight_scatter: Scatter (metres) below which a marker's weight stops growing, > 0.
+        rigidity: Largest scatter (metres) of a marker on a segment for it to be attached, > 0.
+
+    Raises:
+        OptionError: A value out of its range, or of the wrong type.
     """
 
     max_iterations: int = 2
@@ -79,6 +85,10 @@ class MarkerSolveOptions:
     floor: bool = True
     min_weight_scatter: float = 0.005
     rigidity: float = 0.025
+
+    def __post_init__(self) -> None:
+        check_fields(self, "marker solve", counts=("max_iterations", "calibration_frames"),
+                     positive=("max_iterations", "calibration_frames", "min_weight_scatter", "rigidity"))
 
 
 @dataclass
@@ -157,7 +167,7 @@ def _actor_lengths(cal: Calibration, base) -> dict[tuple[str, str], float]:
     return out
 
 
-def _load_spec_character(spec: mujoco.MjSpec, folder: Path, name: str):
+def load_spec_character(spec: mujoco.MjSpec, folder: Path, name: str):
     """Compile ``spec`` into a :class:`~physmocap.models.Character` (through a file, which
     the loader and its mapping need)."""
     from ..models.character import load_character
@@ -405,7 +415,7 @@ def fit_actor(rec: MarkerRecording, ms: MarkerSet, cal: Calibration, seg_of: dic
               opt: MarkerSolveOptions) -> ActorModel:
     """Steps 2-3: the default humanoid scaled to the calibrated lengths, posed by IK on the
     joint centres over calibration frames spread through the clip (:func:`_calibration_frames`,
-    :func:`_pose_on_centres`), then one site per marker at its mean position on its body,
+    :func:`pose_on_centres`), then one site per marker at its mean position on its body,
     refined on the markers (:func:`_place_marker_sites`)."""
     from ..models.character import load_character
     from ..models.scaling import scaled_humanoid_spec
@@ -413,10 +423,10 @@ def fit_actor(rec: MarkerRecording, ms: MarkerSet, cal: Calibration, seg_of: dic
     frame = _solver_frame(rec, ms, cal, seg_of, opt.floor)
     spec = scaled_humanoid_spec(_actor_lengths(cal, load_character()))
     with tempfile.TemporaryDirectory(prefix="physmocap-actor-") as tmp:
-        actor = _load_spec_character(spec, Path(tmp), "actor")
+        actor = load_spec_character(spec, Path(tmp), "actor")
         centres, names, calib = _calibration_frames(rec, actor, frame.centres, opt.calibration_frames)
         C = np.stack([centres[n] for n in names], 1)
-        Q = _pose_on_centres(actor, centres, names, C, calib, rec.fps)
+        Q = pose_on_centres(actor, centres, names, C, calib, rec.fps)
         char, site_names, attached, ignored, weights, Q = _place_marker_sites(
             spec, Path(tmp), rec, actor, frame, seg_of, names, C, calib, Q, opt)
     return ActorModel(
@@ -451,12 +461,13 @@ def _calibration_frames(rec: MarkerRecording, actor, centres: dict[str, np.ndarr
     return centres, names, calib
 
 
-def _pose_on_centres(actor, centres: dict[str, np.ndarray], names: list[str], C: np.ndarray, calib: np.ndarray,
-                     fps: float) -> list[np.ndarray]:
+def pose_on_centres(actor, centres: dict[str, np.ndarray], names: list[str], C: np.ndarray, calib: np.ndarray,
+                    fps: float) -> list[np.ndarray]:
     """The actor's ``qpos`` on each calibration frame by IK on the joint centres ``C``
-    ``(F, J, 3)`` (hand ends and toes at weight 0.3), each frame started from the previous
-    pose with the root placed by the hips and the neck (the frames are far apart: the actor
-    may have turned)."""
+    ``(F, J, 3)`` (metres, Z-up; hand ends and toes at weight 0.3), each frame started from the
+    previous pose with the root placed by the hips and the neck (the frames are far apart: the
+    actor may have turned), the joint ranges hard.  Also the cleaner's re-solve of a glitched
+    span (:mod:`physmocap.clean.resolve`)."""
     from ..ik.solver import FrameSolver, SolverOptions
 
     seen = np.all(np.isfinite(C), 2)
@@ -578,7 +589,7 @@ def _with_marker_sites(spec: mujoco.MjSpec, folder: Path, labels, attached, seg_
         names[i] = name
         s2.body(SEGMENT_BODY[seg_of[i]]).add_site(name=name, pos=[float(x) for x in local[i]], size=[0.008, 0, 0],
                                                   group=5, rgba=[1.0, 0.5, 0.0, 1.0])
-    char = _load_spec_character(s2, folder, "actor_markers")
+    char = load_spec_character(s2, folder, "actor_markers")
     return char, names
 
 

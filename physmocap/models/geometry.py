@@ -14,6 +14,8 @@ the lowest and highest world heights are ``p_z -/+ e`` with
 
 from __future__ import annotations
 
+import hashlib
+
 import mujoco
 import numpy as np
 
@@ -87,17 +89,31 @@ def highest_z(model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int] | Non
 
 def hull_vertices(model: mujoco.MjModel, mesh: int) -> np.ndarray:
     """The vertices of a mesh's convex hull (its lowest point is always one of them):
-    a robot's foot mesh of 10,000 vertices has a few hundred."""
+    a robot's foot mesh of 10,000 vertices has a few hundred.  A new array; hulls are
+    kept per vertex set for the process (a robot's meshes, a batch's next clip)."""
     start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
     v = np.asarray(model.mesh_vert[start : start + n], dtype=float)
     if n < 16:
         return v
-    try:
-        from scipy.spatial import ConvexHull
+    key = hashlib.blake2b(v.tobytes(), digest_size=20).digest()
+    hull = _HULLS.get(key)
+    if hull is None:
+        try:
+            from scipy.spatial import ConvexHull
 
-        return v[np.sort(ConvexHull(v).vertices)]
-    except Exception:  # noqa: BLE001 - flat or degenerate meshes: keep every vertex
-        return v
+            hull = v[np.sort(ConvexHull(v).vertices)]
+        except Exception:  # noqa: BLE001 - flat or degenerate meshes: keep every vertex
+            hull = v
+        if len(_HULLS) >= _MAX_HULLS:
+            _HULLS.pop(next(iter(_HULLS)))
+        _HULLS[key] = hull
+    return hull.copy()
+
+
+#: Convex hulls already computed: digest of a mesh's vertices -> its hull vertices (the oldest
+#: dropped beyond :data:`_MAX_HULLS`).
+_HULLS: dict[bytes, np.ndarray] = {}
+_MAX_HULLS = 256
 
 
 def geom_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:

@@ -26,8 +26,8 @@ READERS: dict[str, tuple[str, str]] = {
     ".npz": ("physmocap.sources.positions", "read_positions"),
     ".jsonl": ("physmocap.sources.positions", "read_positions"),
     ".mcap": ("physmocap.sources.mcap", "read_mcap"),
-    ".c3d": ("physmocap.sources.c3d", "read_c3d"),
-    ".trc": ("physmocap.sources.trc", "read_trc"),
+    ".c3d": ("physmocap.sources.markers", "read_marker_motion"),
+    ".trc": ("physmocap.sources.markers", "read_marker_motion"),
 }
 
 
@@ -52,6 +52,22 @@ def load_motion(path: str | os.PathLike, *, min_frames: int = 0, **options) -> M
     if motion.num_frames < min_frames:
         raise InputError(f"the clip has {motion.num_frames} frames; this command needs at least {min_frames}", path=p)
     return motion
+
+
+def pick_reader(path: str | os.PathLike, readers: dict, what: str):
+    """``(Path, readers[suffix])`` for a file that exists and whose suffix ``readers`` holds.
+
+    Raises:
+        InputError: Naming the file: not one of ``what`` (the suffixes known are listed), or
+            not found.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in readers:
+        raise InputError(f"not {what} (expected {', '.join(readers)}): {suffix or 'no suffix'!r}", path=p)
+    if not p.is_file():
+        raise InputError("file not found", path=p)
+    return p, readers[suffix]
 
 
 #: Plausible ranges of what a capture holds: frame rate (Hz), distances (metres).

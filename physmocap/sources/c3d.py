@@ -11,15 +11,13 @@ from __future__ import annotations
 import os
 import struct
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..errors import InputError, warn
 from ..markers.recording import UNITS, MarkerRecording, unique_labels, unit_scale
-from ..motion import Motion
 
-__all__ = ["read_c3d_markers", "read_c3d"]
+__all__ = ["read_c3d_markers"]
 
 
 def read_c3d_markers(path: str | os.PathLike, units: str | float | None = None) -> MarkerRecording:
@@ -122,12 +120,3 @@ def _declared_frames(p: Path, markers: int) -> int | None:
         if count == markers and 0 < first <= last:
             return last - first + 1
     return None
-
-
-def read_c3d(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = True, **options: Any) -> Motion:
-    """A C3D file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
-    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
-    from ..markers.motion import marker_motion
-
-    return marker_motion(read_c3d_markers(path, units), marker_set, solve=solve, **options)

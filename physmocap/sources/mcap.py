@@ -744,7 +744,7 @@ def read_mcap(
     p = Path(path)
     raw = _load(p)
     tracks = [m for name, m in raw.metadata if name == SKELETON_METADATA]
-    if not tracks and topic is None and _marker_channel(raw) is not None:
+    if topic is None and _is_marker_recording(raw):
         from ..markers.motion import marker_motion
 
         return marker_motion(_markers(p, raw, units), **options)
@@ -833,10 +833,18 @@ def _marker_channel(raw: _Raw) -> _Channel | None:
     return clouds[0] if clouds and not _skeleton_channels(raw) else None
 
 
+def _is_marker_recording(raw: _Raw) -> bool:
+    """Whether :func:`read_mcap` reads ``raw`` as markers: no physmocap skeleton track and a
+    marker channel (:func:`_marker_channel`)."""
+    has_track = any(name == SKELETON_METADATA for name, _ in raw.metadata)
+    return not has_track and _marker_channel(raw) is not None
+
+
 def has_markers(path: str | os.PathLike) -> bool:
-    """Whether an MCAP file holds a marker channel (``physmocap.LabelledPoints``, or a
-    labelled ``foxglove.PointCloud``: :func:`_marker_channel`)."""
-    return _marker_channel(_load(Path(path))) is not None
+    """Whether an MCAP file is a marker recording (``physmocap.LabelledPoints``, or a
+    ``foxglove.PointCloud`` that is taken for markers: :func:`_marker_channel`), read as
+    markers by :func:`read_mcap`, not a skeleton recording."""
+    return _is_marker_recording(_load(Path(path)))
 
 
 def read_mcap_markers(path: str | os.PathLike, units: str | float | None = None):

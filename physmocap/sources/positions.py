@@ -56,7 +56,7 @@ import numpy as np
 from ..canonical import CANONICAL_NAMES, canonical_parent
 from ..errors import InputError, MappingError, OptionError, warn
 from ..fileio import parse_json
-from . import FPS_RANGE, MAX_DISTANCE, check_distances, check_grid
+from . import FPS_RANGE, MAX_DISTANCE, check_distances, check_grid, pick_reader
 from ..motion import Motion, Skeleton
 from .gaps import fill_gaps, invalid_samples
 from .sensor import Ground, default_foot_height, estimate_ground, guess_units, level_rotation, to_world, unit_scale
@@ -903,12 +903,7 @@ def read_positions(path: str | os.PathLike, **options: Any) -> Motion:
     tracker's camera-frame output: ``units="auto"``, ``frame="camera"``,
     ``mirrored=True``, levelled, floor at z = 0.
     """
-    p = Path(path)
-    suffix = p.suffix.lower()
-    if suffix not in _READERS:
-        raise InputError(f"not a joint-position file (expected {', '.join(_READERS)})", path=p)
-    if not p.exists():
-        raise InputError("file not found", path=p)
+    p, read = pick_reader(path, _READERS, "a joint-position file")
     allowed = {
         "fps", "units", "frame", "up", "mirrored", "level", "floor", "floor_plane", "foot_height",
         "profile", "mapping", "min_confidence", "max_gap", "smooth", "synthesize", "joint_names",
@@ -916,7 +911,7 @@ def read_positions(path: str | os.PathLike, **options: Any) -> Motion:
     unknown = sorted(set(options) - allowed)
     if unknown:
         raise OptionError(f"unknown option(s) {unknown} for joint-position files; known: {sorted(allowed)}", path=p)
-    raw = _READERS[suffix](p)
+    raw = read(p)
     check_grid(p, raw.positions.shape[0], raw.positions.shape[1], raw.positions.shape[0] * raw.positions.shape[1])
     opts: dict[str, Any] = {}
     for key, value in raw.options.items():

@@ -14,15 +14,13 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..errors import InputError, warn
 from ..markers.recording import UNITS, MarkerRecording, unique_labels, unit_scale
-from ..motion import Motion
 
-__all__ = ["read_trc_markers", "read_trc"]
+__all__ = ["read_trc_markers"]
 
 #: Largest file read whole (bytes): a TRC of a long take stays well below.
 MAX_BYTES = 2_000_000_000
@@ -125,12 +123,3 @@ def read_trc_markers(path: str | os.PathLike, units: str | float | None = None) 
     if not np.isfinite(pos).any():
         raise InputError("every marker sample is missing", path=p)
     return MarkerRecording(labels=tuple(labels), positions=pos, fps=rate, source=p)
-
-
-def read_trc(path: str | os.PathLike, marker_set: str | os.PathLike | None = None, units: str | float | None = None,
-             solve: bool = True, **options: Any) -> Motion:
-    """A TRC file as the solved actor skeleton, or with ``solve=False`` the actor's canonical
-    joint centres (:func:`physmocap.markers.motion.marker_motion`); ``units`` overrides the file's."""
-    from ..markers.motion import marker_motion
-
-    return marker_motion(read_trc_markers(path, units), marker_set, solve=solve, **options)

@@ -14,19 +14,16 @@ target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
   agree, :func:`_consistent_anchors`),
   and vertically the height :math:`h_p` at which the character's joint carrying the point
   stands when the point rests on the floor (from its rest pose);
-* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` horizontally and
-  :math:`h_p - \min(z_p(t), m_k)` vertically inside it, with :math:`m_k` the median
-  height of the point's target over the interval: the joint stands at its stance
-  height while the actor's rests and rises with the actor's own rise above it (a heel
-  lifting before its label ends lifts the character's with it, instead of being held
-  down and catching up in one frame at toe-off); the offset is held at its end values
-  outside the interval;
+* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it (vertically
+  :math:`h_p - z_p(t)`) and is held at its end values outside it;
 * its weight :math:`w_k(t)` is 1 inside the interval and falls to 0 along a
   smoothstep over ``ease_time`` seconds before :math:`a_k` and after
   :math:`b_k` (ease-in, ease-out); horizontally, where another point of the foot is down
   across an end, that ramp lies inside the interval instead (the planted point is not
-  disturbed); vertically it always lies outside (inside, it lifted the heel by the
-  actor's stance height difference from the character's while the actor's heel was down);
+  disturbed); vertically it always lies outside: a heel eased up within its interval
+  was planned up to 2 cm above the floor (the actor's stance height less the
+  character's) while its label still held it down, and caught up with the plan in one
+  frame at toe-off;
 * the foot's offset is :math:`o(t) = \sum_k w_k o_k / \max(1, \sum_k w_k)`.
 
 Offsets are three-dimensional: horizontally the plant location, vertically
@@ -116,10 +113,9 @@ def foot_offsets(
         ease_time: Seconds over which each contact's offset eases in and out.
         heights: The same names -> height (metres) of the joint above the floor
             when its contact point rests on the floor (the character's rest pose):
-            in contact that joint is held at that height while the actor's joint is at
-            or below its median height over the contact, and rises by the actor's
-            excess above that median (each joint on its own, so a foot with heel and
-            toe down lies flat), neither hovering nor pulled into the floor.
+            in contact that joint is held at that height (each joint on its own,
+            so a foot with heel and toe down lies flat), neither hovering nor
+            pulled into the floor.
     """
     F = next(iter(points.values())).shape[0]
     ease = int(round(max(ease_time, 0.0) * fps))
@@ -136,9 +132,7 @@ def foot_offsets(
             anchor = anchors[(name, a)]
             o = np.empty((F, 3))
             o[a : b + 1, :2] = anchor - x[a : b + 1, :2]
-            # vertically the point rests at its stance height while the actor's rests, and
-            # rises with the actor's own rise above the interval's median height
-            o[a : b + 1, 2] = heights[name] - np.minimum(x[a : b + 1, 2], np.median(x[a : b + 1, 2]))
+            o[a : b + 1, 2] = heights[name] - x[a : b + 1, 2]
             o[:a] = o[a]
             o[b + 1 :] = o[b]
             # another point of the foot already down at the start (still down at the end):

@@ -240,6 +240,29 @@ def test_foot_plan_is_continuous_and_plants():
     assert np.allclose(plan.xy[t < 0.1], 0.0) and np.allclose(plan.xy[t > 1.6], plan.xy[-1])
 
 
+def test_a_heel_rests_at_its_stance_height_until_its_label_ends():
+    """Before: a heel whose toes stayed down after its label ended was eased up within its
+    label, towards the actor's ankle height (2 cm above the character's stance height on the
+    CMU walk) while the label still held the heel on the floor: at toe-off the ankle caught
+    up with its plan in one frame.  Now the height eases out after the label only."""
+    from physmocap.ik.footplan import foot_offsets
+
+    F, fps = 120, 60.0
+    t = np.arange(F) / fps
+    heel = np.stack([0 * t, 0 * t, 0.09 + 0 * t], 1)  # the actor's ankle stands 2 cm higher
+    heel[t > 1.0, 2] += 0.5 * (t[t > 1.0] - 1.0)  # and rises after its label
+    toe = heel + [0.15, 0.0, -0.05]
+    toe[:, 2] = 0.04
+    lab_h = (t > 0.3) & (t <= 1.0)
+    lab_t = (t > 0.3) & (t < 1.4)
+    plan = foot_offsets({"heel": heel, "toe": toe}, {"heel": lab_h, "toe": lab_t}, fps, 0.1, {"heel": 0.07, "toe": 0.02})
+    planned = heel[:, 2] + plan.z["heel"]
+    assert np.allclose(planned[lab_h], 0.07)
+    after = t > 1.0
+    assert np.all(np.diff(planned[after]) > 0)  # it rises with the actor's after the label
+    assert np.allclose(planned[t > 1.3], heel[t > 1.3, 2])  # and has handed back to it in 0.1 s
+
+
 def test_velocity_saturation_names_the_worst_joint():
     """Any-joint frames and the worst single joint's share, on a hand-made trajectory."""
     from physmocap.metrics.fidelity import fidelity, saturation_matrix

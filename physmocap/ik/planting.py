@@ -109,10 +109,10 @@ class PlantOptions:
             measured on the shared clips (whose flat feet drift by a median 1.4-6.5
             degrees over a stance; a spin turns one by 30 degrees and more): against 5
             degrees it follows the dance better (worst segment 8.3 -> 7.5 degrees, the
-            robot's facing on the jumps' turn p95 8.4 -> 5.9) with the feet's slip the
-            same (heels swivel more about the ball: the geom slip figure rises); against 0
-            it keeps the walks' heels from swivelling with every degree of drift (PyMO
-            geom slip 2.0 against 3.2 cm/s).
+            robot's facing on the jumps' turn p95 8.3 -> 5.8) with the feet's slip about
+            the same (heels swivel more about the ball: the PyMO walk's geom slip 1.3 ->
+            2.1 cm/s); against 0 it keeps the walks' heels from swivelling with every
+            degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).
     """
 
     plant: bool = True

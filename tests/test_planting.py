@@ -79,7 +79,8 @@ def test_planted_feet_do_not_skate_sink_or_hover(clip, character):
     assert slip.mean() < 1.0 and np.percentile(slip, 95) < 3.0, (slip.mean(), np.percentile(slip, 95))
     # every site on its own, pivots about another site included: the PyMO actor's flat feet
     # turn by up to 9 degrees over a stance and the heel sites swivel with them beyond
-    # PlantOptions.pivot_threshold (2.1 cm/s humanoid, 2.8 robot; the actor's own feet 40)
+    # PlantOptions.pivot_threshold (2.1 cm/s humanoid, 2.8 robot; the actor's toe joints 40 in
+    # their stance band)
     skating = _flat_stance_skating(traj)
     assert skating["stance_samples"] > 0
     assert skating["mean_cm_s"] < 4.0, skating

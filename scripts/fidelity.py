@@ -43,7 +43,7 @@ def main() -> int:
     clips = args.clips or sorted(p.name for p in DATA.glob("*.bvh"))
     print(
         f"{'clip':26s} {'char':8s} {'seg med':>7s} {'worst':>14s} {'>45%':>5s} {'face med':>8s} {'p95':>5s}"
-        f" {'path cm':>7s} {'max':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'1jt%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'scuf%':>5s}"
+        f" {'path cm':>7s} {'max':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'1jt%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'gslip':>5s} {'scuf%':>5s}"
     )
     for clip in clips:
         path = DATA / clip
@@ -66,7 +66,7 @@ def main() -> int:
                 f"{clip:26s} {name:8s} {worst[1].median_deg:7.1f} {worst[0]:>14s} {100 * fid.share_any_over_45:5.1f}"
                 f" {fid.facing_median_deg:8.1f} {fid.facing_p95_deg:5.1f} {fid.path_mean_cm:7.1f} {fid.path_max_cm:5.1f}"
                 f" {fid.pelvis_vz_p99:5.2f} {fid.actor_vz_p99_scaled:6.2f} {100 * fid.saturated_share:5.1f}"
-                f" {100 * fid.saturated_joint_share:5.1f} {acc:6.1f} {ratio:5.2f} {fid.floor.slip_mean_cm_s:5.2f} {100 * fid.floor.scuff_share:5.1f}",
+                f" {100 * fid.saturated_joint_share:5.1f} {acc:6.1f} {ratio:5.2f} {fid.floor.slip_mean_cm_s:5.2f} {fid.floor.geom_slip_mean_cm_s:5.2f} {100 * fid.floor.scuff_share:5.1f}",
                 flush=True,
             )
     return 0

@@ -13,6 +13,7 @@ import physmocap.export.bvh as bvh_mod
 import physmocap.ik.targets as targets_mod
 import physmocap.metrics.fidelity as fidelity_mod
 from physmocap.errors import OptionError, OutputError
+from physmocap.models.geometry import foot_bodies
 from physmocap.export.character_bvh import character_motion, write_character_bvh
 from physmocap.ik.config import RetargetConfig
 from physmocap.ik.footlevel import level_feet
@@ -115,6 +116,7 @@ def test_fidelity_from_blocks_and_the_joints_it_reads_is_exact(traj, monkeypatch
     everything = fidelity_mod.fidelity(
         actor, fidelity_mod.character_joint_positions(traj), traj.fps, traj.targets.scale,
         model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
+        feet=foot_bodies(ch.model, ch.contacts),
     )
     monkeypatch.setattr(fidelity_mod, "BLOCK_FRAMES", 7)
     assert _fidelity_fields_equal(fidelity_mod.trajectory_fidelity(traj), everything)

@@ -49,15 +49,41 @@ def _flat_stance_skating(traj) -> dict:
     return metrics.skating(pos, traj.fps, resting & np.stack(masks, axis=1))
 
 
+def _flat_stance_foot_slip(traj) -> np.ndarray:
+    """cm/s per flat-foot transition: the slip of a foot's resting contact sites taken as a
+    whole (:func:`~physmocap.metrics.fidelity.pivot_slip`): a foot turning about a site it
+    stands on pivots with the actor and does not slip."""
+    from physmocap.metrics.fidelity import RESTING_HEIGHT, pivot_slip
+
+    labels = traj.contacts.labels
+    out = []
+    for side in sorted(traj.character.contacts):
+        sites = list(traj.character.contacts[side])
+        pos = traj.site_positions(sites)
+        flat = labels[f"{side}_heel"] & labels[f"{side}_toe"]
+        down = pos[..., 2] <= RESTING_HEIGHT
+        for t in np.flatnonzero(flat[:-1] & flat[1:]):
+            rest = down[t] & down[t + 1]
+            if rest.any():
+                out.append(pivot_slip(pos[t, rest, :2], pos[t + 1, rest, :2]) * traj.fps * 100.0)
+    return np.asarray(out)
+
+
 @pytest.mark.parametrize("clip,character", CASES)
 def test_planted_feet_do_not_skate_sink_or_hover(clip, character):
     _, traj = retargeted(clip, character)
     contacts = traj.contacts
     assert contacts is not None and any(lab.any() for lab in contacts.labels.values())
+    slip = _flat_stance_foot_slip(traj)
+    assert slip.size > 0
+    assert slip.mean() < 1.0 and np.percentile(slip, 95) < 3.0, (slip.mean(), np.percentile(slip, 95))
+    # every site on its own, pivots about another site included: the PyMO actor's flat feet
+    # turn by up to 9 degrees over a stance and the heel sites swivel with them beyond
+    # PlantOptions.pivot_threshold (2.1 cm/s humanoid, 2.8 robot; the actor's toe joints 40 in
+    # their stance band)
     skating = _flat_stance_skating(traj)
     assert skating["stance_samples"] > 0
-    assert skating["mean_cm_s"] < 1.0, skating
-    assert skating["p95_cm_s"] < 3.0, skating
+    assert skating["mean_cm_s"] < 4.0, skating
     pen = metrics.penetration(traj.model, traj.qpos)
     assert pen["max_mm"] < 2.0, pen
     hover = metrics.character_hovering(traj, contacts)
@@ -224,3 +250,21 @@ def test_flat_feet_figure_takes_a_label_file_without_every_point():
     finally:
         contacts.labels = kept
     assert 0 < partial["contact_samples"] < full["contact_samples"]
+
+
+@pytest.mark.parametrize("clip", ["cmu_12_01_walk.bvh", "pymo_walk.bvh"])
+def test_the_ball_stays_where_it_rests_while_the_foot_rolls_over_its_toes(clip):
+    """Before: while only the toes were down, the humanoid's ball (on the foot body, 2.3 cm
+    below the toe joint) was let go and slid round the toe joint as the heel rose: 7.9 cm/s
+    (CMU walk) and 5.4 cm/s (PyMO walk) mean while within 5 mm of the floor.  Now it is held
+    where it rests, not pulled down, until it lifts (PlanHints.lifting)."""
+    _, traj = retargeted(clip, "humanoid")
+    labels, speeds = traj.contacts.labels, []
+    for side in ("left", "right"):
+        pos = traj.site_positions([traj.character.contacts[side][1]])[:, 0]
+        rolling = labels[f"{side}_toe"] & ~labels[f"{side}_heel"]
+        low = pos[:, 2] < 0.005
+        both = rolling[1:] & rolling[:-1] & low[1:] & low[:-1]
+        speeds.append(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)[both] * traj.fps * 100.0)
+    speeds = np.concatenate(speeds)
+    assert speeds.size > 10 and speeds.mean() < 3.0, (speeds.size, speeds.mean())

@@ -12,13 +12,18 @@ target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
   for the point that touches down first; the other points of the same contact
   get the location the same foot translation gives them (so heel and toe
   agree, :func:`_consistent_anchors`),
-  and vertically the height at which the character's joint carrying the point
+  and vertically the height :math:`h_p` at which the character's joint carrying the point
   stands when the point rests on the floor (from its rest pose);
-* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it and is held
-  at its end values outside it;
+* the interval's offset is :math:`o_k(t) = A_k - x_p(t)` inside it (vertically
+  :math:`h_p - z_p(t)`) and is held at its end values outside it;
 * its weight :math:`w_k(t)` is 1 inside the interval and falls to 0 along a
   smoothstep over ``ease_time`` seconds before :math:`a_k` and after
-  :math:`b_k` (ease-in, ease-out);
+  :math:`b_k` (ease-in, ease-out); horizontally, where another point of the foot is down
+  across an end, that ramp lies inside the interval instead (the planted point is not
+  disturbed); vertically it always lies outside: a heel eased up within its interval
+  was planned up to 2 cm above the floor (the actor's stance height less the
+  character's) while its label still held it down, and caught up with the plan in one
+  frame at toe-off;
 * the foot's offset is :math:`o(t) = \sum_k w_k o_k / \max(1, \sum_k w_k)`.
 
 Offsets are three-dimensional: horizontally the plant location, vertically
@@ -138,8 +143,10 @@ def foot_offsets(
             w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
             num += w[:, None] * o[:, :2]
             den += w
-            z_num += w * o[:, 2]
-            z_den += w
+            # heights always ease outside the interval (module docstring)
+            wz = ease_weights(F, a, b, ease)
+            z_num += wz * o[:, 2]
+            z_den += wz
         z[name] = z_num / np.maximum(z_den, 1.0)
     return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
 

@@ -46,7 +46,7 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
-from ..models.geometry import character_geoms, geom_candidates
+from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, ToeContact, knee_between
 from .tasks import SitePositionTask
@@ -101,6 +101,18 @@ class PlantOptions:
             its front edge, a tenth of ``cost_z``: without it the foot could tip
             onto its side edge instead of pitching (measured on the bundled robot:
             25 degrees of roll, its ankle roll limit, and 11 cm/s of slip).
+        pivot_threshold: Offline only: radians a foot held at two points may be turned
+            by the plan before its holds turn with it (beyond this they follow the
+            plan's heading, :meth:`FootPlanter.turn`, so an actor pivoting on a planted
+            foot is followed; below it the turn is taken as the capture's drift and the
+            foot stays put, and what is left snaps back when the foot lets go).  2 degrees,
+            measured on the shared clips (whose flat feet drift by a median 1.4-6.5
+            degrees over a stance; a spin turns one by 30 degrees and more): against 5
+            degrees it follows the dance better (worst segment 8.3 -> 7.5 degrees, the
+            robot's facing on the jumps' turn p95 8.3 -> 5.8) with the feet's slip about
+            the same (heels swivel more about the ball: the PyMO walk's geom slip 1.3 ->
+            2.1 cm/s); against 0 it keeps the walks' heels from swivelling with every
+            degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).
     """
 
     plant: bool = True
@@ -117,6 +129,7 @@ class PlantOptions:
     root_follow_time: float = 0.15
     ease_time: float = 0.1
     pivot_cost: float = 40.0
+    pivot_threshold: float = 0.035
 
     def __post_init__(self) -> None:
         check_fields(self, "planting")
@@ -137,10 +150,14 @@ class PlanHints:
             with the actor's, :mod:`.footplan`): held horizontally while labelled,
             whatever its height, and not pulled down.
         holdable: The site may be held (the others are only pulled down).
+        lifting: The site is held horizontally while it stays down but not pulled
+            down: the ball of a foot rolling over its toes, which rests where it is
+            while the heel rises and lifts as the toes bend (None: no such site).
     """
 
     rolling: np.ndarray
     holdable: np.ndarray
+    lifting: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -177,6 +194,9 @@ class FootPlanter:
         self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
         self.anchor = np.zeros((n, 3))
+        #: sites whose hold is soft on this frame: a foot turning about another held site
+        #: (:meth:`turn`; a hard hold turned with the plan could be out of the leg's reach)
+        self.turning = np.zeros(n, dtype=bool)
 
     def _anchor_for(self, k: int, xy: np.ndarray) -> np.ndarray:
         r"""Where site ``k``, now at ``xy``, is held from this frame on.
@@ -202,6 +222,29 @@ class FootPlanter:
         u = xy - self.anchor[j, :2]
         n = float(np.linalg.norm(u))
         return xy if n < 1e-9 else self.anchor[j, :2] + d[j] * u / n
+
+    def turn(self, foot: int, angle: float) -> None:
+        r"""Turn the holds of ``foot`` by ``angle`` radians about the vertical axis.
+
+        Two held points of one foot fix its heading, so a foot the plan turns
+        while it is planted (an actor pivoting on a flat foot) would stay where it
+        landed and swing round in one frame when a point is let go.  Its holds are
+        turned with the plan instead, about the foot's last held point (the most
+        distal: a foot pivots on its toes), :math:`a_k \leftarrow p + R_z(\alpha)(a_k - p)`.
+        Nothing happens with fewer than two points held (one point does not fix the heading).
+        The turned points other than the pivot are held softly on this frame (``cost_xy``):
+        a hard hold turned where the leg cannot follow at once (a hip rotation at its
+        limit) would make the constraints infeasible.
+        """
+        held = np.flatnonzero(self.locked & (self.feet == foot))
+        if held.size < 2 or angle == 0.0:
+            return
+        self.turning[held[:-1]] = True
+        pivot = self.anchor[held[-1], :2].copy()
+        c, s = np.cos(angle), np.sin(angle)
+        d = self.anchor[held, :2] - pivot
+        self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
+        self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
 
     def reset(self) -> None:
         self.locked[:] = False
@@ -273,11 +316,17 @@ class FootPlanter:
                     self.anchor[k, 2] = self.floor
                     self.locked[k] = True
                 self.xy[k].set_target(self.anchor[k])
-                hard.append(self.xy[k])
+                if self.turning[k]:
+                    self.xy[k].set_cost(opt.cost_xy)
+                    soft.append(self.xy[k])
+                else:
+                    self.xy[k].set_cost(opt.cost_xy)
+                    hard.append(self.xy[k])
             else:
                 self.locked[k] = False
             self.free[k] = not flags[k] and not engaged[k]
-            if flags[k] and not rolling:
+            lifting = hints is not None and hints.lifting is not None and bool(hints.lifting[k])
+            if flags[k] and not rolling and not lifting:
                 # pulled onto the floor, the pull ramping in over onset_time
                 self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
                 ramp = _smooth((self.age[k] + 1) / self.onset_frames)
@@ -288,6 +337,7 @@ class FootPlanter:
                 task.set_target(np.array([0.0, 0.0, z_goal]))
                 soft.append(task)
             self.labelled[k] = flags[k]
+        self.turning[:] = False
         return soft, hard, engaged
 
 
@@ -435,7 +485,8 @@ class Planting:
             model, self.sites, fps, lock_opt, floor=floor, rest_distances=self._rest_distances(character), feet=feet
         )
         #: per site, its role while only the toes are down (offline; :meth:`_toe_roles`)
-        self._foot_bodies = {side: self._subtree_bodies(model, character, side) for side in ("left", "right")}
+        feet_bodies = foot_bodies(model, character.contacts)
+        self._foot_bodies = {side: feet_bodies.get(side, []) for side in ("left", "right")}
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
         self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
@@ -464,6 +515,12 @@ class Planting:
         self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
         #: horizontal offset of the whole body from the actor's (scaled) path, metres
         self.root_offset = np.zeros(2)
+        #: per side, the planned foot heading on the previous frame (radians; offline)
+        self._heading: dict[str, float] = {}
+        #: per side, the planned turn since the foot was last held at two points, and the
+        #: part of it the holds have followed (radians; :meth:`_turn_with_plan`)
+        self._planned_turn = np.zeros(2)
+        self._held_turn = np.zeros(2)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
         foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
@@ -496,19 +553,6 @@ class Planting:
         d[body[:, None] != body[None]] = np.nan
         np.fill_diagonal(d, np.nan)
         return d
-
-    @staticmethod
-    def _subtree_bodies(model: mujoco.MjModel, character, side: str) -> list[int]:
-        """The bodies of a foot's contact sites and every body below them (toes)."""
-        roots = {int(model.site(s).bodyid[0]) for s in character.contacts.get(side, ())}
-        out = []
-        for b in range(1, model.nbody):
-            a = b
-            while a > 0 and a not in roots:
-                a = int(model.body_parentid[a])
-            if a > 0:
-                out.append(b)
-        return out
 
     @staticmethod
     def _toe_roles(model: mujoco.MjModel, character, side: str) -> dict[str, str]:
@@ -590,6 +634,30 @@ class Planting:
             return {}
         return {t.site_id: c for t, free in zip(self.locks.tasks, self.locks.free) if free}
 
+    def _turn_with_plan(self, positions: np.ndarray) -> None:
+        """Turn each foot's holds (:meth:`FootPlanter.turn`) by its planned heading's change
+        since the previous frame: the heading of the foot's targets, ankle to toe, horizontal."""
+        for s, side in enumerate(("left", "right")):
+            if side not in self.feet:
+                continue
+            ia, it = self.feet[side][:2]
+            if ia == it:
+                continue
+            v = positions[it, :2] - positions[ia, :2]
+            heading = float(np.arctan2(v[1], v[0]))
+            step = 0.0
+            if side in self._heading:
+                step = (heading - self._heading[side] + np.pi) % (2.0 * np.pi) - np.pi
+            self._heading[side] = heading
+            if np.count_nonzero(self.locks.locked & (self.locks.feet == s)) < 2:
+                self._planned_turn[s] = self._held_turn[s] = 0.0
+                continue
+            self._planned_turn[s] += step
+            free = self.options.pivot_threshold
+            turn = np.sign(self._planned_turn[s]) * max(0.0, abs(self._planned_turn[s]) - free)
+            self.locks.turn(s, float(turn - self._held_turn[s]))
+            self._held_turn[s] = turn
+
     @staticmethod
     def _xy(data: mujoco.MjData, ref: tuple[str, int]) -> np.ndarray:
         kind, i = ref
@@ -610,14 +678,17 @@ class Planting:
         toes_only = np.zeros(len(self.sites), dtype=bool) if self.anchored else toe & ~heel
         hints = None
         if not self.anchored:
-            flags &= ~(toes_only & self._release)  # heel up, toes down: the foot rolls over its toes
+            # heel up, toes down: the foot rolls over its toes; its ball is held where it rests
+            # (not pulled down) until it lifts, so it rolls about its contact instead of sliding
+            # round the toe joint above it
             # The toes of a flat foot (heel and toes labelled) are pulled down, never held: its
             # heel and ball already fix it, a tip held where it first touched would lock the
             # toes in their landing bend, and a third held point over a straight leg made the
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
             waiting = toe & heel & self._toe_segment
-            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting)
+            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release)
+            self._turn_with_plan(positions)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

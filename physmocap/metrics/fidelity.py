@@ -34,6 +34,7 @@ character in the actor's world orientation, so directions compare directly.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -329,15 +330,25 @@ SCUFF_SPEED = 0.30
 
 @dataclass(frozen=True)
 class GeomFloorContact:
-    """Skating and scuffing measured on the character's collision geoms.
+    """Slip and scuffing measured on the character's collision geoms.
 
     Attributes:
-        slip_mean_cm_s, slip_p95_cm_s: Horizontal speed of the centre of geoms
-            resting on the floor (lowest point within :data:`RESTING_HEIGHT` on
-            both frames of a transition), cm/s.
-        resting_samples: Geom-transitions counted there.
+        slip_mean_cm_s, slip_p95_cm_s: Horizontal slip of the feet resting on the
+            floor, cm/s: per foot (its bodies, toes included; every other body on
+            its own) and transition with a resting geom, the speed of the least
+            moving point of its resting contact patch (:func:`pivot_slip`): a foot
+            turning about a point it stands on pivots and does not slip; a foot
+            whose every resting point moves does.
+        resting_samples: Foot-transitions counted there.
+        geom_slip_mean_cm_s, geom_slip_p95_cm_s: Horizontal speed of the material
+            lowest point of every resting geom (lowest point within
+            :data:`RESTING_HEIGHT` on both frames of a transition), cm/s: pivots
+            count here (a heel swivelling about the ball slides).
+        geom_resting_samples: Geom-transitions counted there.
         scuff_share: Share of near-floor geom-transitions (lowest point within
-            :data:`NEAR_FLOOR_HEIGHT` on both frames) moving faster than :data:`SCUFF_SPEED`.
+            :data:`NEAR_FLOOR_HEIGHT` on both frames) on which a geom of a foot that
+            does not rest on the floor moves faster than :data:`SCUFF_SPEED`: a swing
+            foot skimming the floor (a planted foot's moves are its slip).
         near_samples: Near-floor geom-transitions.
     """
 
@@ -346,12 +357,18 @@ class GeomFloorContact:
     resting_samples: int
     scuff_share: float
     near_samples: int
+    geom_slip_mean_cm_s: float = 0.0
+    geom_slip_p95_cm_s: float = 0.0
+    geom_resting_samples: int = 0
 
     def as_dict(self) -> dict:
         return {
             "slip_mean_cm_s": self.slip_mean_cm_s,
             "slip_p95_cm_s": self.slip_p95_cm_s,
             "resting_samples": self.resting_samples,
+            "geom_slip_mean_cm_s": self.geom_slip_mean_cm_s,
+            "geom_slip_p95_cm_s": self.geom_slip_p95_cm_s,
+            "geom_resting_samples": self.geom_resting_samples,
             "scuff_share": self.scuff_share,
             "near_samples": self.near_samples,
         }
@@ -360,19 +377,19 @@ class GeomFloorContact:
 _BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 
 
-def _lowest_material_point(model: mujoco.MjModel, data: mujoco.MjData, g: int, tie: float = 1e-3) -> np.ndarray:
-    """The geom's lowest point in its own frame (metres): for a face or edge lying
-    flat, the centroid of its points within ``tie`` of the lowest."""
+def _contact_patch(model: mujoco.MjModel, data: mujoco.MjData, g: int, tie: float = 1e-3) -> np.ndarray:
+    """``(k, 3)`` the geom's lowest material points in its own frame (metres): the
+    points of a face or edge lying flat within ``tie`` of the lowest (a box's bottom
+    corners, a capsule's two end caps), one point otherwise."""
     R = data.geom_xmat[g].reshape(3, 3)
     size = model.geom_size[g]
     gtype = int(model.geom_type[g])
     G = mujoco.mjtGeom
     down = R.T @ np.array([0.0, 0.0, -1.0])  # world down in geom coordinates
     if gtype == G.mjGEOM_SPHERE:
-        return size[0] * down
+        return (size[0] * down)[None]
     if gtype == G.mjGEOM_CAPSULE:
-        ends = np.array([[0.0, 0.0, size[1]], [0.0, 0.0, -size[1]]])
-        pts = ends
+        pts = np.array([[0.0, 0.0, size[1]], [0.0, 0.0, -size[1]]])
     elif gtype == G.mjGEOM_BOX:
         pts = _BOX_CORNERS * size
     elif gtype == G.mjGEOM_MESH:
@@ -380,20 +397,102 @@ def _lowest_material_point(model: mujoco.MjModel, data: mujoco.MjData, g: int, t
         start, n = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
         pts = np.asarray(model.mesh_vert[start : start + n], dtype=float)
     else:  # cylinders, ellipsoids: the point under the centre
-        return np.zeros(3)
+        return np.zeros((1, 3))
     z = pts @ R[2]
-    low = pts[z <= z.min() + tie].mean(axis=0)
+    low = pts[z <= z.min() + tie]
     return low + (size[0] * down if gtype == G.mjGEOM_CAPSULE else 0.0)
 
 
-def geom_floor_contact(model: mujoco.MjModel, qpos: np.ndarray, fps: float, floor: float = 0.0) -> GeomFloorContact:
+def _lowest_material_point(model: mujoco.MjModel, data: mujoco.MjData, g: int, tie: float = 1e-3) -> np.ndarray:
+    """The geom's lowest point in its own frame (metres): for a face or edge lying
+    flat, the centroid of its :func:`_contact_patch`."""
+    return _contact_patch(model, data, g, tie).mean(axis=0)
+
+
+def _distance_to_hull(c: np.ndarray, points: np.ndarray) -> float:
+    """Distance (metres) from the 2-D point ``c`` to the convex hull of ``points (k, 2)``
+    (0 inside it)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) >= 3:
+        try:
+            hull = ConvexHull(points)
+        except QhullError:  # collinear points: a segment, below
+            hull = None
+        if hull is not None:
+            if np.all(hull.equations[:, :2] @ c + hull.equations[:, 2] <= 1e-12):
+                return 0.0
+            ring = points[hull.vertices]
+            return min(_distance_to_segment(c, ring[i], ring[(i + 1) % len(ring)]) for i in range(len(ring)))
+    if len(points) == 1:
+        return float(np.linalg.norm(c - points[0]))
+    axis = points[-1] - points[0] if len(points) == 2 else np.linalg.svd(points - points.mean(axis=0))[2][0]
+    t = (points - points[0]) @ axis
+    return _distance_to_segment(c, points[np.argmin(t)], points[np.argmax(t)])
+
+
+def _distance_to_segment(c: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    ab = b - a
+    n = float(ab @ ab)
+    t = 0.0 if n < 1e-18 else min(max(float((c - a) @ ab) / n, 0.0), 1.0)
+    return float(np.linalg.norm(c - (a + t * ab)))
+
+
+def pivot_slip(before: np.ndarray, after: np.ndarray) -> float:
+    r"""Horizontal displacement (metres) of the least moving point of a contact patch.
+
+    ``before``, ``after``: ``(k, 2)`` horizontal positions of the patch's material
+    points on two frames.  Their motion is fitted by a planar rigid motion
+    :math:`x \mapsto R_\theta x + T` (least squares, 2-D Kabsch); its fixed point
+    :math:`c = (I - R_\theta)^{-1} T` is the pivot, and every point :math:`p` moves by
+    :math:`2|\sin(\theta/2)|\,|p - c|`.  The least moving point of the patch (its
+    convex hull) therefore moves :math:`2|\sin(\theta/2)|\,d(c, \mathrm{hull})`: 0 for
+    a foot turning about a point it stands on, the common displacement for a foot
+    sliding without turning.  Where the points do not move rigidly (toes bending), the
+    least displacement of any one of them bounds the figure.
+    """
+    before = np.asarray(before, dtype=float)
+    after = np.asarray(after, dtype=float)
+    least = float(np.linalg.norm(after - before, axis=1).min())
+    if len(before) == 1:
+        return least
+    pc, qc = before.mean(axis=0), after.mean(axis=0)
+    H = (before - pc).T @ (after - qc)
+    theta = float(np.arctan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1]))
+    if abs(np.sin(theta / 2.0)) < 1e-9:
+        return min(least, float(np.linalg.norm(qc - pc)))
+    c_, s_ = np.cos(theta), np.sin(theta)
+    R = np.array([[c_, -s_], [s_, c_]])
+    T = qc - R @ pc
+    pivot = np.linalg.solve(np.eye(2) - R, T)
+    return min(least, 2.0 * abs(np.sin(theta / 2.0)) * _distance_to_hull(pivot, before))
+
+
+def _geom_groups(model: mujoco.MjModel, geoms: list[int], feet: Mapping[str, Sequence[int]]) -> np.ndarray:
+    """``(len(geoms),)`` group of each geom: its foot's index for the bodies of ``feet``,
+    else a group of its own body."""
+    group_of_body = {}
+    for i, bodies in enumerate(feet.values()):
+        for b in bodies:
+            group_of_body[int(b)] = i
+    n = len(feet)
+    return np.array([group_of_body.get(int(model.geom_bodyid[g]), n + int(model.geom_bodyid[g])) for g in geoms])
+
+
+def geom_floor_contact(
+    model: mujoco.MjModel, qpos: np.ndarray, fps: float, floor: float = 0.0, feet: Mapping[str, Sequence[int]] | None = None
+) -> GeomFloorContact:
     """:class:`GeomFloorContact` of a trajectory ``qpos (F, nq)`` on a floor at height ``floor``.
 
-    Slip is the horizontal speed of the *material* point of a resting geom that
-    touches the floor (its lowest point on the first frame of a transition,
-    followed to the next frame): a foot rolling over its toe edge or a capsule
-    rolling does not slip; a foot sliding does.  Scuffing uses the same
-    material point of near-floor geoms.
+    Geom slip is the horizontal speed of the *material* point of a resting geom that
+    touches the floor (its lowest point on the first frame of a transition, followed
+    to the next frame): a foot rolling over its toe edge or a capsule rolling does
+    not slip; a foot sliding does, and so does a heel swivelling about the ball.
+    Foot slip (:func:`pivot_slip`) takes each foot's resting patch as a whole
+    (``feet``: name -> body ids, e.g. :func:`~physmocap.models.geometry.foot_bodies`;
+    other bodies each on their own), so a pivot is not slip.  Scuffing uses the
+    material points of near-floor geoms; a geom of a foot resting on the floor on that
+    transition does not scuff.
     """
     from ..models.geometry import character_geoms, geom_z_extent
 
@@ -401,33 +500,55 @@ def geom_floor_contact(model: mujoco.MjModel, qpos: np.ndarray, fps: float, floo
     F = qpos.shape[0]
     if F < 2 or not geoms:
         return GeomFloorContact(0.0, 0.0, 0, 0.0, 0)
+    groups = _geom_groups(model, geoms, feet or {})
     data = mujoco.MjData(model)
-    low = np.empty((F, len(geoms)))
-    local = np.empty((F, len(geoms), 3))
-    pos = np.empty((F, len(geoms), 3))
-    mat = np.empty((F, len(geoms), 3, 3))
+    geom_slip: list[float] = []
+    foot_slip: list[float] = []
+    scuffs = near_count = 0
+    prev = None  # (low, patches, pos, mat) of the previous frame
     for t in range(F):
         data.qpos[:] = qpos[t]
         mujoco.mj_kinematics(model, data)
-        for k, g in enumerate(geoms):
-            low[t, k] = geom_z_extent(model, data, g)[0] - floor
-            local[t, k] = _lowest_material_point(model, data, g)
-        pos[t] = data.geom_xpos[geoms]
-        mat[t] = data.geom_xmat[geoms].reshape(-1, 3, 3)
-    before = pos[:-1] + np.einsum("fkij,fkj->fki", mat[:-1], local[:-1])
-    after = pos[1:] + np.einsum("fkij,fkj->fki", mat[1:], local[:-1])
-    speed = np.linalg.norm((after - before)[..., :2], axis=-1) * fps
-    resting = (low[1:] < RESTING_HEIGHT) & (low[:-1] < RESTING_HEIGHT)
-    # near the floor on both frames: the whole move skims the floor (a geom lifting off or landing
-    # crosses the band in one transition, further the lower the frame rate, and does not scuff)
-    near = (low[1:] < NEAR_FLOOR_HEIGHT) & (low[:-1] < NEAR_FLOOR_HEIGHT)
-    slip = speed[resting] * 100.0
+        low = np.array([geom_z_extent(model, data, g)[0] - floor for g in geoms])
+        pos = data.geom_xpos[geoms].copy()
+        mat = data.geom_xmat[geoms].reshape(-1, 3, 3).copy()
+        # a patch is needed only where the geom is near the floor (it may rest or scuff next)
+        patches = [_contact_patch(model, data, g) if low[k] < NEAR_FLOOR_HEIGHT else None for k, g in enumerate(geoms)]
+        if prev is not None:
+            p_low, p_patches, p_pos, p_mat = prev
+            resting = (low < RESTING_HEIGHT) & (p_low < RESTING_HEIGHT)
+            # near the floor on both frames: the whole move skims the floor (a geom lifting off or
+            # landing crosses the band in one transition, further the lower the frame rate)
+            near = (low < NEAR_FLOOR_HEIGHT) & (p_low < NEAR_FLOOR_HEIGHT)
+            planted_groups = set(groups[resting].tolist())
+            moved: dict[int, tuple[list[np.ndarray], list[np.ndarray]]] = {}
+            for k in np.flatnonzero(near):
+                local = p_patches[k]
+                before = p_pos[k] + local @ p_mat[k].T
+                after = pos[k] + local @ mat[k].T
+                speed = float(np.linalg.norm((after.mean(axis=0) - before.mean(axis=0))[:2])) * fps
+                near_count += 1
+                if resting[k]:
+                    geom_slip.append(speed)
+                    b, a = moved.setdefault(int(groups[k]), ([], []))
+                    b.append(before[:, :2])
+                    a.append(after[:, :2])
+                elif int(groups[k]) not in planted_groups:
+                    scuffs += speed > SCUFF_SPEED
+            for b, a in moved.values():
+                foot_slip.append(pivot_slip(np.concatenate(b), np.concatenate(a)) * fps)
+        prev = (low, patches, pos, mat)
+    foot = np.asarray(foot_slip) * 100.0
+    geom = np.asarray(geom_slip) * 100.0
     return GeomFloorContact(
-        slip_mean_cm_s=float(slip.mean()) if slip.size else 0.0,
-        slip_p95_cm_s=float(np.percentile(slip, 95)) if slip.size else 0.0,
-        resting_samples=int(slip.size),
-        scuff_share=float(np.mean(speed[near] > SCUFF_SPEED)) if near.any() else 0.0,
-        near_samples=int(near.sum()),
+        slip_mean_cm_s=float(foot.mean()) if foot.size else 0.0,
+        slip_p95_cm_s=float(np.percentile(foot, 95)) if foot.size else 0.0,
+        resting_samples=int(foot.size),
+        scuff_share=float(scuffs / near_count) if near_count else 0.0,
+        near_samples=int(near_count),
+        geom_slip_mean_cm_s=float(geom.mean()) if geom.size else 0.0,
+        geom_slip_p95_cm_s=float(np.percentile(geom, 95)) if geom.size else 0.0,
+        geom_resting_samples=int(geom.size),
     )
 
 
@@ -448,6 +569,7 @@ def fidelity(
     qpos: np.ndarray | None = None,
     velocity_limits: dict[str, float] | None = None,
     floor_contact: bool = True,
+    feet: Mapping[str, Sequence[int]] | None = None,
 ) -> Fidelity:
     """All fidelity figures from the actor's and the character's joint centres.
 
@@ -460,6 +582,8 @@ def fidelity(
             velocity limits, for the saturation count (optional).
         floor_contact: Also measure slip and scuffing on the collision geoms
             (:func:`geom_floor_contact`; the slowest figure).
+        feet: Foot name -> the character's body ids of that foot, for the slip of whole
+            feet (:func:`~physmocap.models.geometry.foot_bodies`; None: each body alone).
     """
     seg = segment_direction_errors(actor, character)
     segments = {}
@@ -495,7 +619,7 @@ def fidelity(
             counts = matrix.sum(axis=0)
             worst_joint = list(velocity_limits)[int(np.argmax(counts))]
             worst_share = float(counts.max() / transitions)
-    floor_figures = geom_floor_contact(model, qpos, fps) if floor_contact and model is not None and qpos is not None else None
+    floor_figures = geom_floor_contact(model, qpos, fps, feet=feet) if floor_contact and model is not None and qpos is not None else None
     return Fidelity(
         segments=segments,
         share_any_over_45=float(frames_over.size / n),
@@ -525,9 +649,11 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     character = character_joint_positions(traj, used)
     scale = float(getattr(traj.targets, "scale", 1.0)) if traj.targets is not None else 1.0
     ch = traj.character
+    from ..models.geometry import foot_bodies
+
     return fidelity(
         actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
-        floor_contact=floor_contact,
+        floor_contact=floor_contact, feet=foot_bodies(ch.model, ch.contacts),
     )
 
 

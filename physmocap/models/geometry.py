@@ -140,3 +140,25 @@ def geom_candidates(model: mujoco.MjModel, gid: int) -> np.ndarray:
         return np.hstack([v, np.zeros((len(v), 1))])
     # planes, heightfields, SDFs: not constrained
     return np.zeros((0, 4))
+
+
+def subtree_bodies(model: mujoco.MjModel, roots: set[int]) -> list[int]:
+    """The bodies at or below any of ``roots`` (body ids), in id order: a foot's bodies
+    are those of its contact sites and every body below them (toes)."""
+    out = []
+    for b in range(1, model.nbody):
+        a = b
+        while a > 0 and a not in roots:
+            a = int(model.body_parentid[a])
+        if a > 0:
+            out.append(b)
+    return out
+
+
+def foot_bodies(model: mujoco.MjModel, contacts: dict[str, tuple[str, ...]]) -> dict[str, list[int]]:
+    """Side -> the bodies of that foot (:func:`subtree_bodies` of its contact sites' bodies)."""
+    return {
+        side: subtree_bodies(model, {int(model.site(s).bodyid[0]) for s in sites})
+        for side, sites in contacts.items()
+        if sites
+    }

@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, help="output: .mp4, .gif or .png (contact sheet)")
     p.add_argument("--size", default="640x480", help="image size per panel, WIDTHxHEIGHT (default 640x480)")
     p.add_argument("--camera", default="side", help="side, front, back, top or AZIMUTH,ELEVATION in degrees "
-                   "(azimuth relative to the character's initial heading)")
+                   "(azimuth relative to the character's initial heading; a negative one as --camera=-60,-15)")
     p.add_argument("--layout", choices=["beside", "overlay"], default="beside", help="skeleton beside or over the character")
     p.add_argument("--frames", help="contact sheet: comma-separated source frame numbers (default: --count evenly spaced)")
     p.add_argument("--count", type=int, default=8, help="contact sheet: number of frames (default 8)")

@@ -143,7 +143,7 @@ class FrameRetargeter:
             return
         tracked = self.character.tracked["pelvis"]
         data = self.solver.configuration.data
-        x = data.site(tracked.name).xpos if tracked.kind == "site" else data.body(tracked.name).xpos
+        x = tracked.position(self.character.model, data)
         a = 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps))
         self._lag = self._lag + a * (np.asarray(x, dtype=float) - positions[i] - self._lag)
 

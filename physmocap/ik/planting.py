@@ -534,7 +534,7 @@ class Planting:
             ref = {}
             for j in (ankle, toe):
                 tf = character.tracked[j]
-                ref[j] = (tf.kind, model.site(tf.name).id if tf.kind == "site" else model.body(tf.name).id)
+                ref[j] = (tf.kind, tf.object_id(model))
             moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
 

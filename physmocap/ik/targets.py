@@ -368,9 +368,7 @@ def _positional_orientations(S: np.ndarray, col: dict, present: set, char_pts: d
 
 
 def _frame_body(character, name: str) -> int:
-    tf = character.tracked[name]
-    m = character.model
-    return int(m.site(tf.name).bodyid[0]) if tf.kind == "site" else int(m.body(tf.name).id)
+    return character.tracked[name].body_id(character.model)
 
 
 def _has_dofs_between(character, child: str, parent: str | None) -> bool:

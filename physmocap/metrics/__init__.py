@@ -220,7 +220,7 @@ def tracking_errors(traj, mask: np.ndarray | None = None) -> dict:
     refs = []
     for name in targets.names:
         tf = ch.tracked[name]
-        refs.append((tf.kind, model.site(tf.name).id if tf.kind == "site" else model.body(tf.name).id))
+        refs.append((tf.kind, tf.object_id(model)))
     for t in range(F):
         data.qpos[:] = traj.qpos[t]
         mujoco.mj_kinematics(model, data)

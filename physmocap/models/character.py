@@ -102,9 +102,7 @@ class Character:
 
     def frame_id(self, canonical: str) -> int:
         """MuJoCo id of the site or body tracked for ``canonical``."""
-        tf = self.tracked[canonical]
-        obj = mujoco.mjtObj.mjOBJ_SITE if tf.kind == "site" else mujoco.mjtObj.mjOBJ_BODY
-        return mujoco.mj_name2id(self.model, obj, tf.name)
+        return self.tracked[canonical].object_id(self.model)
 
     def hinge_names(self) -> list[str]:
         """Names of the hinge and slide joints, in model order."""
@@ -459,7 +457,7 @@ def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: 
     ankles = {}
     for side in ("left", "right"):
         tf = tracked[f"{side}_ankle"]
-        ankles[side] = int(model.site(tf.name).bodyid[0]) if tf.kind == "site" else int(model.body(tf.name).id)
+        ankles[side] = tf.body_id(model)
     found = foot_contact_points(model, qpos, ankles)
     if set(found) != {"left", "right"}:
         return model, tracked
@@ -512,8 +510,5 @@ def _frame_positions(
 ) -> dict[str, np.ndarray]:
     out = {}
     for canon, tf in tracked.items():
-        if tf.kind == "site":
-            out[canon] = data.site_xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, tf.name)].copy()
-        else:
-            out[canon] = data.xpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, tf.name)].copy()
+        out[canon] = tf.position(model, data).copy()
     return out

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
+import numpy as np
 
 from ..canonical import CANONICAL_NAMES
 from ..errors import MappingError
@@ -71,10 +72,27 @@ IMPLICIT_CONTACTS = ("heel", "ball", "toe_tip")
 
 @dataclass(frozen=True)
 class TrackedFrame:
-    """A canonical joint's frame on the character: a site or a body, by name."""
+    """A canonical joint's frame on the character: a site or a body, by name.
+
+    The one place that knows how to find it in a model: :meth:`object_id`,
+    :meth:`body_id`, :meth:`position`.
+    """
 
     kind: str  # "site" or "body"
     name: str
+
+    def object_id(self, model: mujoco.MjModel) -> int:
+        """The site's id (a site) or the body's id (a body) in ``model``."""
+        return int(model.site(self.name).id if self.kind == "site" else model.body(self.name).id)
+
+    def body_id(self, model: mujoco.MjModel) -> int:
+        """The id of the body that carries the frame (a site's body, or the body itself)."""
+        return int(model.site(self.name).bodyid[0] if self.kind == "site" else model.body(self.name).id)
+
+    def position(self, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+        """``(3,)`` its world position in ``data`` after kinematics (metres; a view: copy to keep)."""
+        i = self.object_id(model)
+        return data.site_xpos[i] if self.kind == "site" else data.xpos[i]
 
 
 @dataclass

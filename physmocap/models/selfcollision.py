@@ -50,10 +50,7 @@ def _body_of(character, canonical: str) -> int | None:
     tf = character.tracked.get(canonical)
     if tf is None:
         return None
-    model = character.model
-    if tf.kind == "site":
-        return int(model.site_bodyid[character.frame_id(canonical)])
-    return int(character.frame_id(canonical))
+    return tf.body_id(character.model)
 
 
 def _chain(model: mujoco.MjModel, body: int) -> list[int]:

@@ -192,7 +192,7 @@ class PreviewScene:
         mujoco.mj_kinematics(model, data)
         hips = [getattr(ch, "tracked", {}).get(f"{s}_hip") for s in ("left", "right")]
         if all(h is not None for h in hips):
-            l, r = (data.site_xpos[model.site(h.name).id] if h.kind == "site" else data.xpos[model.body(h.name).id] for h in hips)
+            l, r = (h.position(model, data) for h in hips)
             forward = np.cross(l - r, [0.0, 0.0, 1.0])
         else:
             forward = data.xmat[self.root].reshape(3, 3) @ rest.T @ np.array([1.0, 0.0, 0.0])

@@ -146,4 +146,6 @@ def test_the_stream_follows_the_actor_on_a_second_vendor():
     fid = trajectory_fidelity(traj, floor_contact=False)
     arms = ("left_upper_arm", "right_upper_arm", "left_forearm", "right_forearm")
     assert max(fid.segments[s].median_deg for s in arms) < 8.0, {s: fid.segments[s].median_deg for s in arms}
-    assert fid.worst_segment_median_deg < 15.0
+    # three IK iterations a frame without the smoothness prior left the thighs 11.3 degrees off
+    # (STREAMING_DEFAULTS: eight with the prior, 7.1)
+    assert fid.worst_segment_median_deg < 9.0

@@ -135,6 +135,13 @@ class PlantOptions:
         check_fields(self, "planting")
 
 
+#: Pitch (radians) of a foot's ankle-to-toe targets beyond which its heading is not read
+#: (:meth:`Planting._turn_with_plan`): at 60 degrees the horizontal part is half the bone.  (A
+#: streamed foot, still held as it pitched through its toe-off, read heading steps of 20-90
+#: degrees a frame on the PyMO walk; the stream does not turn its holds yet.)
+HEADING_PITCH = np.radians(60.0)
+
+
 def _smooth(x: float) -> float:
     """Smoothstep on [0, 1]."""
     x = min(max(x, 0.0), 1.0)
@@ -636,17 +643,20 @@ class Planting:
 
     def _turn_with_plan(self, positions: np.ndarray) -> None:
         """Turn each foot's holds (:meth:`FootPlanter.turn`) by its planned heading's change
-        since the previous frame: the heading of the foot's targets, ankle to toe, horizontal."""
+        since the previous frame: the heading of the foot's targets, ankle to toe, horizontal.
+        A foot pitched by more than :data:`HEADING_PITCH` (its toe nearly below or above its
+        ankle) has no reliable heading: it does not turn on that frame."""
         for s, side in enumerate(("left", "right")):
             if side not in self.feet:
                 continue
             ia, it = self.feet[side][:2]
             if ia == it:
                 continue
-            v = positions[it, :2] - positions[ia, :2]
+            v = positions[it] - positions[ia]
             heading = float(np.arctan2(v[1], v[0]))
             step = 0.0
-            if side in self._heading:
+            level = np.hypot(v[0], v[1]) >= np.cos(HEADING_PITCH) * np.linalg.norm(v)
+            if side in self._heading and level:
                 step = (heading - self._heading[side] + np.pi) % (2.0 * np.pi) - np.pi
             self._heading[side] = heading
             if np.count_nonzero(self.locks.locked & (self.locks.feet == s)) < 2:

@@ -350,7 +350,8 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz", options: 
             where = f"lines {seen[str(target)]} and {e.line}" if e.line else "two inputs"
             raise OptionError(f"{where} write the same output {target}", path=source)
         seen[str(target)] = e.line
-        jobs.append(Job(input=str(e.input.resolve()), output=str(target), options=dict(e.options)))
+        # the input as given (absolute, links kept): its path in the summary is the one the user wrote
+        jobs.append(Job(input=os.path.abspath(e.input), output=str(target), options=dict(e.options)))
     return jobs
 
 
@@ -882,6 +883,8 @@ def _write_summary_files(results: list[FileResult], out: Path) -> None:
     for r in results:
         row = {k: v for k, v in asdict(r).items() if k in SUMMARY_FIELDS}
         row["input"], row["output"] = _relative(r.input, out), _relative(r.output, out)
+        if row.get("error"):  # an error names its file as the reader had it: the same relative path
+            row["error"] = row["error"].replace(r.input, row["input"])
         rows.append(row)
     done = [r for r in results if r.status == "done"]
     totals = {

@@ -133,11 +133,14 @@ def main() -> int:
             print(f"skip {c}: {DATA / c} not found", file=sys.stderr)
     ours: dict = {k: [] for k in combos}
     ref: dict = {k: [] for k in combos}
-    for _ in range(args.runs):  # interleaved: every combination once per round
+    for k in range(args.runs):  # interleaved: every combination once per round
         for clip, name in combos:
             if args.compare is not None:
                 ref[(clip, name)].append(_subprocess_run(args.compare, clip, name, args.frames, plant))
             ours[(clip, name)].append(_measure(clip, name, args.frames, plant, options))
+            # progress on stderr: a whole benchmark takes minutes before its table
+            print(f"run {k + 1}/{args.runs}: {clip} onto {_char_label(name)}: "
+                  f"{ours[(clip, name)][-1]['cpu_fps']:.0f} frames/s CPU", file=sys.stderr, flush=True)
 
     def med(runs: list[dict], key: str) -> float:
         return statistics.median(r[key] for r in runs)

@@ -36,6 +36,8 @@ def test_batch_records_failures_and_mirrors_outputs(folder):
     rows = {r["input"]: r for r in summary["files"]}
     assert rows[os.path.join("..", "in", "broken.bvh")]["status"] == "failed"
     assert "broken.bvh" in rows[os.path.join("..", "in", "broken.bvh")]["error"]
+    # the summaries name files relatively, in their errors too (the machine's paths stay out)
+    assert str(folder) not in (out / "summary.json").read_text() + (out / "summary.csv").read_text()
     assert rows[os.path.join("..", "in", "a.bvh")]["frames"] == 39
     assert summary["totals"] == {"files": 3, "done": 2, "failed": 1, "frames": 78}
 

@@ -21,6 +21,7 @@ from ..errors import InputError, MappingError, OptionError, warn
 from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
+from ..spill import release, spill, spilled_empty
 from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
 from .config import RetargetConfig
@@ -196,6 +197,8 @@ def retarget(
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
                                found.body_labels, own_orientations=ours)
+    if ours:
+        spill_targets(targets)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
     del targets
     traj.contacts = found
@@ -248,6 +251,17 @@ def plan_targets(
     del positions
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return levelled
+
+
+def spill_targets(targets: Targets) -> None:
+    """Keep ``targets``' positions and orientations, and the unplanned positions
+    (``info["raw_positions"]``), in temporary files (:mod:`physmocap.spill`; a long clip's
+    1.4 to 2 KB per frame): the tracker, the fidelity figures and the writers read them a
+    block of frames at a time.  Only for targets nothing writes any more."""
+    targets.positions = spill(targets.positions)
+    targets.orientations = spill(targets.orientations)
+    if "raw_positions" in targets.info:
+        targets.info["raw_positions"] = spill(targets.info["raw_positions"])
 
 
 #: The joints of a foot that :func:`~physmocap.ik.footlevel.level_feet` reads and levels.
@@ -311,6 +325,10 @@ def solve_targets(
     return _track(targets, character, options, source, progress, labels, plant)
 
 
+#: Frames :func:`_track` goes through between two releases of its spilled arrays' pages.
+RELEASE_FRAMES = 4096
+
+
 def _track(
     targets: Targets,
     character,
@@ -328,7 +346,7 @@ def _track(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False
     )
     F = targets.num_frames
-    qpos = np.empty((F, character.model.nq))
+    qpos = spilled_empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
     latency = np.zeros(F)
@@ -341,6 +359,9 @@ def _track(
             relaxation[t] = result.relaxation
             latency[t] = result.latency
             bar.update(1)
+            if (t + 1) % RELEASE_FRAMES == 0:  # spilled arrays: the frames done leave the memory
+                for array in (targets.positions, targets.orientations, qpos):
+                    release(array)
     for level in range(1, len(RELAXATION_LEVELS)):
         frames = np.flatnonzero(relaxation == level)
         if frames.size:

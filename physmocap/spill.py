@@ -42,9 +42,14 @@ def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
 
 def spill(array: np.ndarray, min_bytes: int = SPILL_BYTES) -> np.ndarray:
     """A read-only copy of ``array`` in a temporary file (the same values, shape and dtype,
-    C-ordered); ``array`` itself if it is smaller than ``min_bytes`` or cannot be spilled."""
+    C-ordered); ``array`` itself if it is smaller than ``min_bytes`` or cannot be spilled,
+    a read-only view of it if it is spilled already."""
     if array.nbytes < max(min_bytes, 1):
         return array
+    if _mapping(array) is not None and array.flags.c_contiguous:
+        view = array.view()
+        view.flags.writeable = False
+        return view
     data = np.ascontiguousarray(array)
     mapping = _mapped(data.nbytes, data)
     if mapping is None:
@@ -65,17 +70,23 @@ def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int = SPI
     return np.frombuffer(mapping, dtype=dtype).reshape(shape)
 
 
-def release(array: np.ndarray | None) -> None:
-    """Unmap the pages of the temporary file under ``array`` (or any view of a spilled
-    array) from this process: they leave its resident memory, and their data stay in the
-    file.  Nothing for an array in memory."""
+def _mapping(array: np.ndarray | None) -> mmap.mmap | None:
+    """The mapping of a temporary file under ``array`` (a spilled array or a view of one), or None."""
     base = array
     while isinstance(base, np.ndarray):
         base = base.base
     if isinstance(base, memoryview):  # np.frombuffer's view of the mapping
         base = base.obj
-    if isinstance(base, mmap.mmap) and not base.closed:
-        base.madvise(mmap.MADV_DONTNEED)
+    return base if isinstance(base, mmap.mmap) and not base.closed else None
+
+
+def release(array: np.ndarray | None) -> None:
+    """Unmap the pages of the temporary file under ``array`` (or any view of a spilled
+    array) from this process: they leave its resident memory, and their data stay in the
+    file.  Nothing for an array in memory."""
+    mapping = _mapping(array)
+    if mapping is not None:
+        mapping.madvise(mmap.MADV_DONTNEED)
 
 
 #: Rows :func:`blocks` hands out at a time.

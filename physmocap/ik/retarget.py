@@ -283,16 +283,20 @@ def level_targets(targets: Targets, character, labels: dict[str, np.ndarray], *,
     else), then written into a copy of the positions and of the orientations, or into
     ``targets.orientations`` itself with ``own_orientations`` (the caller gives it up)."""
     cols = _foot_columns(targets.names)
+    feet = targets.orientations[:, cols]
+    release(targets.orientations)  # spilled orientations: the pages read leave the memory
     positions, orientations, levels = level_feet(
-        targets.positions[:, cols], targets.orientations[:, cols], targets.has_orientation[cols],
+        targets.positions[:, cols], feet, targets.has_orientation[cols],
         tuple(targets.names[i] for i in cols), labels, character_rest_frames(character), targets.fps,
     )
+    del feet
     levelled = copy.copy(targets)  # not dataclasses.replace: released source positions stay released
     levelled.positions = targets.positions.copy()
     levelled.orientations = targets.orientations if own_orientations else targets.orientations.copy()
     levelled.info = {**targets.info, "foot_levels": levels}
     levelled.positions[:, cols] = positions
     levelled.orientations[:, cols] = orientations
+    release(levelled.orientations)
     return levelled
 
 

@@ -18,7 +18,7 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks"]
+__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_memory"]
 
 #: Arrays of at least this many bytes are spilled (a 10-minute clip's targets are about 40 MB).
 SPILL_BYTES = 32 << 20
@@ -100,3 +100,12 @@ def blocks(array: np.ndarray, rows: int = BLOCK_ROWS) -> Iterator[tuple[int, np.
     for s in range(0, array.shape[0], rows):
         yield s, array[s : s + rows]
         release(array)
+
+
+def in_memory(array: np.ndarray) -> np.ndarray:
+    """A C-ordered copy of ``array`` in memory, read :data:`BLOCK_ROWS` rows at a time (a
+    spilled array's pages let go after each block: only the copy is held)."""
+    out = np.empty(array.shape, dtype=array.dtype)
+    for s, rows in blocks(array):
+        out[s : s + rows.shape[0]] = rows
+    return out

@@ -544,7 +544,7 @@ def build_targets(
     valid = np.all(np.isfinite(S), axis=-1)
     if motion.confidence is not None:
         valid &= motion.confidence[:, idx] > 0.0
-    S = _masked_positions(S, valid)
+    S[~valid] = 0.0  # as _masked_positions, in place: the actor's positions are held once
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
@@ -668,6 +668,7 @@ def build_targets(
                 delta["chest"] = delta[seg]
                 break
 
+    rot_all = actor.rotations = None  # read no more: let go before the positions are built
     # --- positions: root, then rigid children and limb chains in canonical order
     # Root: anchored on the midpoint of the hip joint centres where both are known
     # (vendors put their "pelvis" joint anywhere between the hips and the waist;

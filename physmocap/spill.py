@@ -24,6 +24,12 @@ __all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_mem
 SPILL_BYTES = 32 << 20
 
 
+def _threshold(min_bytes: int | None) -> int:
+    """Bytes from which an array is spilled: ``min_bytes``, or :data:`SPILL_BYTES` (read
+    when called); at least 1 (an empty array stays in memory)."""
+    return max(1, SPILL_BYTES if min_bytes is None else int(min_bytes))
+
+
 def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
     """A shared, writable mapping of a new unlinked temporary file of ``nbytes`` bytes
     (zeros, or the bytes of the C-contiguous ``fill`` written through the file, so no page
@@ -40,11 +46,11 @@ def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
         return None
 
 
-def spill(array: np.ndarray, min_bytes: int = SPILL_BYTES) -> np.ndarray:
+def spill(array: np.ndarray, min_bytes: int | None = None) -> np.ndarray:
     """A read-only copy of ``array`` in a temporary file (the same values, shape and dtype,
-    C-ordered); ``array`` itself if it is smaller than ``min_bytes`` or cannot be spilled,
-    a read-only view of it if it is spilled already."""
-    if array.nbytes < max(min_bytes, 1):
+    C-ordered); ``array`` itself if it is smaller than ``min_bytes`` (default
+    :data:`SPILL_BYTES`) or cannot be spilled, a read-only view of it if it is spilled already."""
+    if array.nbytes < _threshold(min_bytes):
         return array
     if _mapping(array) is not None and array.flags.c_contiguous:
         view = array.view()
@@ -59,12 +65,12 @@ def spill(array: np.ndarray, min_bytes: int = SPILL_BYTES) -> np.ndarray:
     return out
 
 
-def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int = SPILL_BYTES) -> np.ndarray:
+def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int | None = None) -> np.ndarray:
     """A writable C-ordered array of zeros in a temporary file (in memory, ``np.zeros``, if
-    smaller than ``min_bytes`` or where no file can be made)."""
+    smaller than ``min_bytes``, default :data:`SPILL_BYTES`, or where no file can be made)."""
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
-    mapping = _mapped(nbytes) if nbytes >= max(min_bytes, 1) else None
+    mapping = _mapped(nbytes) if nbytes >= _threshold(min_bytes) else None
     if mapping is None:
         return np.zeros(shape, dtype=dtype)
     return np.frombuffer(mapping, dtype=dtype).reshape(shape)
@@ -93,10 +99,11 @@ def release(array: np.ndarray | None) -> None:
 BLOCK_ROWS = 8192
 
 
-def blocks(array: np.ndarray, rows: int = BLOCK_ROWS) -> Iterator[tuple[int, np.ndarray]]:
+def blocks(array: np.ndarray, rows: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
     """``(first row, array[first : first + rows])`` for consecutive blocks of ``array``'s
-    rows, the pages read so far released after each block (:func:`release`): a spilled
-    array is gone through holding one block of it."""
+    rows (default :data:`BLOCK_ROWS`), the pages read so far released after each block
+    (:func:`release`): a spilled array is gone through holding one block of it."""
+    rows = BLOCK_ROWS if rows is None else int(rows)
     for s in range(0, array.shape[0], rows):
         yield s, array[s : s + rows]
         release(array)

@@ -129,14 +129,14 @@ def qvel_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> np.nd
 
 
 def row_blocks(array: np.ndarray) -> ArrayBlocks:
-    """``array`` (float64, C order) as :class:`ArrayBlocks` of :data:`BLOCK_ROWS` rows: a
-    spilled array (:mod:`physmocap.spill`) is written holding one block of it."""
-    return ArrayBlocks(tuple(array.shape), np.dtype(np.float64), lambda: (b for _, b in blocks(array, BLOCK_ROWS)))
+    """``array`` (float64, C order) as :class:`ArrayBlocks` of rows (:func:`~physmocap.spill.blocks`):
+    a spilled array (:mod:`physmocap.spill`) is written holding one block of it."""
+    return ArrayBlocks(tuple(array.shape), np.dtype(np.float64), lambda: (b for _, b in blocks(array)))
 
 
 def _check_finite(traj: Trajectory, path: Path) -> None:
     """Refuse a trajectory with a non-finite number (checked a block of frames at a time)."""
-    for s, rows in blocks(traj.qpos, BLOCK_ROWS):
+    for s, rows in blocks(traj.qpos):
         bad = ~np.all(np.isfinite(rows), axis=1)
         if np.any(bad):
             raise OutputError(

@@ -91,7 +91,7 @@ def release(array: np.ndarray | None) -> None:
     array) from this process: they leave its resident memory, and their data stay in the
     file.  Nothing for an array in memory."""
     mapping = _mapping(array)
-    if mapping is not None:
+    if mapping is not None and hasattr(mmap, "MADV_DONTNEED"):  # not on Windows: the pages stay
         mapping.madvise(mmap.MADV_DONTNEED)
 
 

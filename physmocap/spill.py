@@ -13,6 +13,7 @@ therefore holds one block, not the clip.  Arrays under :data:`SPILL_BYTES` stay 
 from __future__ import annotations
 
 import mmap
+import os
 import tempfile
 from typing import Iterator
 
@@ -33,10 +34,14 @@ def _threshold(min_bytes: int | None) -> int:
 def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
     """A shared, writable mapping of a new unlinked temporary file of ``nbytes`` bytes
     (zeros, or the bytes of the C-contiguous ``fill`` written through the file, so no page
-    of it is mapped in); None where the file cannot be made."""
+    of it is mapped in); None where the file cannot be made.  The zeros' disk blocks are
+    reserved up front where the system can (a full disk then refuses here, instead of
+    failing a write through the mapping later)."""
     try:
         with tempfile.TemporaryFile(prefix="physmocap-") as fh:
-            if fill is None:
+            if fill is None and hasattr(os, "posix_fallocate"):
+                os.posix_fallocate(fh.fileno(), 0, nbytes)
+            elif fill is None:
                 fh.truncate(nbytes)
             else:
                 fill.tofile(fh)

@@ -35,6 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from .rotations import quat_apply, quat_mul
+from .spill import release
 
 __all__ = ["Skeleton", "Motion", "forward_kinematics", "MAX_FPS"]
 
@@ -215,6 +216,7 @@ def forward_kinematics(
         tra = translations[s:e] if moved else None  # type: ignore[index]
         chunk_rot = None if wrot is None else wrot[s:e]
         _fk_chunk(skeleton, np.asarray(rotations[s:e], dtype=float), tra, translated, pos[s:e], chunk_rot)
+        release(rotations)  # a spilled clip (a long BVH's): the frames read leave the memory
     return pos, wrot
 
 

@@ -31,6 +31,7 @@ import numpy as np
 from ..errors import warn
 from ..motion import Motion, Skeleton
 from ..rotations import quat_conj, quat_mul, up_axis_matrix, wxyz_to_xyzw
+from ..spill import release
 from ..trajectory import Trajectory
 
 #: Frames whose world rotations are held at once while the local ones are derived.
@@ -156,6 +157,7 @@ class _LocalRotations:
             mujoco.mj_kinematics(model, data)
             D[t - s, self.cols] = quat_mul(wxyz_to_xyzw(data.xquat[self.bodies]), self.inv_rest)
             root[t - s, 0] = data.xpos[self.root]
+        release(self.traj.qpos)  # a spilled trajectory: the frames read leave the memory
         local = D.copy()
         for j in range(self.skel.num_joints):
             p = int(self.skel.parents[j])

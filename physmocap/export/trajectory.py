@@ -46,6 +46,7 @@ import numpy as np
 
 from ..errors import OutputError
 from ..fileio import atomic_open
+from ..spill import blocks, release
 from ..trajectory import Trajectory
 
 __all__ = ["ArrayBlocks", "write_npz", "write_trajectory_npz", "write_trajectory_csv", "qvel_from_qpos", "qvel_blocks"]
@@ -118,6 +119,7 @@ def qvel_blocks(model: mujoco.MjModel, qpos: np.ndarray, fps: float, rows: int =
         block = np.zeros((min(F, s + rows) - s, model.nv))
         for t in range(max(s, 1), s + block.shape[0]):
             mujoco.mj_differentiatePos(model, block[t - s], 1.0 / fps, qpos[t - 1], qpos[t])
+        release(qpos)
         yield block
 
 
@@ -126,10 +128,16 @@ def qvel_from_qpos(model: mujoco.MjModel, qpos: np.ndarray, fps: float) -> np.nd
     return np.concatenate([np.zeros((0, model.nv)), *qvel_blocks(model, qpos, fps)])
 
 
+def row_blocks(array: np.ndarray) -> ArrayBlocks:
+    """``array`` (float64, C order) as :class:`ArrayBlocks` of rows (:func:`~physmocap.spill.blocks`):
+    a spilled array (:mod:`physmocap.spill`) is written holding one block of it."""
+    return ArrayBlocks(tuple(array.shape), np.dtype(np.float64), lambda: (b for _, b in blocks(array)))
+
+
 def _check_finite(traj: Trajectory, path: Path) -> None:
     """Refuse a trajectory with a non-finite number (checked a block of frames at a time)."""
-    for s in range(0, traj.num_frames, BLOCK_ROWS):
-        bad = ~np.all(np.isfinite(traj.qpos[s : s + BLOCK_ROWS]), axis=1)
+    for s, rows in blocks(traj.qpos):
+        bad = ~np.all(np.isfinite(rows), axis=1)
         if np.any(bad):
             raise OutputError(
                 f"trajectory has non-finite values on frame {s + int(np.argmax(bad))}; nothing written",
@@ -147,7 +155,7 @@ def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, "
     model = traj.model
     ch = traj.character
     return {
-        "qpos": np.ascontiguousarray(traj.qpos, dtype=np.float64),
+        "qpos": row_blocks(traj.qpos),
         "qvel": ArrayBlocks((traj.num_frames, model.nv), np.dtype(np.float64),
                             lambda: qvel_blocks(model, traj.qpos, traj.fps)),
         "fps": np.float64(traj.fps),
@@ -164,14 +172,14 @@ def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, "
     }
 
 
-def target_arrays(targets) -> dict[str, np.ndarray]:
+def target_arrays(targets) -> "dict[str, np.ndarray | ArrayBlocks]":
     """The ``target_*`` arrays of a trajectory NPZ (empty without targets)."""
     if targets is None:
         return {}
     return {
         "target_names": np.array(list(targets.names)),
-        "target_positions": np.ascontiguousarray(targets.positions, dtype=np.float64),
-        "target_orientations": np.ascontiguousarray(targets.orientations, dtype=np.float64),
+        "target_positions": row_blocks(targets.positions),
+        "target_orientations": row_blocks(targets.orientations),
         "target_has_orientation": np.asarray(targets.has_orientation, dtype=bool),
         "target_valid": np.asarray(targets.valid, dtype=bool),
     }

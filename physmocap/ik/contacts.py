@@ -677,20 +677,53 @@ def detect_contacts(
         :class:`Contacts` with labels for :data:`CONTACT_LABELS`, the floor,
         and per-point heights above the floor and horizontal speeds.
     """
+    from .body_contacts import detect_body_contacts
+
     pts = contact_points(joint_indices)
-    world = motion.world_positions()
+    body = {name: j for name, j in joint_indices.items() if name in _body_contact_joints()}
+    world, column = joint_world_positions(motion, [*pts.values(), *body.values()])
     try:
-        contacts = detect_point_contacts({n: world[:, j] for n, j in pts.items()}, motion.fps, options)
+        contacts = detect_point_contacts({n: world[:, column[j]] for n, j in pts.items()}, motion.fps, options)
     except InputError as exc:
         raise InputError(exc.message, path=motion.source) from None
     contacts.joints = pts
     contacts.source = "detected"
     if contacts.floor is not None:
-        from .body_contacts import detect_body_contacts
-
-        canonical = {name: world[:, j] for name, j in joint_indices.items()}
+        canonical = {name: world[:, column[j]] for name, j in body.items()}
         contacts.body_labels = detect_body_contacts(canonical, motion.fps, contacts.floor, body_options)
     return contacts
+
+
+#: Frames of an actor's world positions computed at a time by :func:`joint_world_positions`.
+WORLD_BLOCK_FRAMES = 4096
+
+
+def _body_contact_joints() -> frozenset[str]:
+    """Canonical joints :func:`~physmocap.ik.body_contacts.detect_body_contacts` reads: its
+    parts' joints and the legs (hip, knee, ankle) its thresholds scale with."""
+    from .body_contacts import BODY_PARTS
+
+    legs = (f"{side}_{j}" for side in SIDES for j in ("hip", "knee", "ankle"))
+    return frozenset([*legs, *(j for joints in BODY_PARTS.values() for j in joints)])
+
+
+def joint_world_positions(motion, joints: Sequence[int], block: int = WORLD_BLOCK_FRAMES) -> tuple[np.ndarray, dict[int, int]]:
+    """World positions of some of ``motion``'s joints: ``(positions (F, K, 3) metres Z-up,
+    joint index -> column of it)``.
+
+    A rotational motion's forward kinematics runs ``block`` frames at a time and keeps only
+    the ``joints`` asked for (the same values as :meth:`~physmocap.motion.Motion.world_positions`,
+    without its whole ``(F, J, 3)``); a positional motion's positions are returned as they are.
+    """
+    if motion.rotations is None:
+        return motion.world_positions(), {j: j for j in joints}
+    wanted = sorted(set(int(j) for j in joints))
+    F = motion.num_frames
+    out = np.empty((F, len(wanted), 3))
+    for start in range(0, F, block):
+        end = min(start + block, F)
+        out[start:end] = motion.slice_frames(start, end).world_positions()[:, wanted]
+    return out, {j: k for k, j in enumerate(wanted)}
 
 
 # ---------------------------------------------------------------------------

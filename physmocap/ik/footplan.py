@@ -280,6 +280,8 @@ def planted_positions(
     leg_lengths: Mapping[str, tuple[float, float]],
     heights: Mapping[str, float],
     toe_sites: Mapping[str, "ToeContact"] | None = None,
+    *,
+    in_place: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Targets with both feet planted: ``(new positions (F, N, 3), foot offsets (F, 2, 2))``.
 
@@ -296,7 +298,7 @@ def planted_positions(
     toe tip are each held at their stance heights (the toes lie flat).
 
     Args:
-        positions: ``(F, N, 3)`` target positions (not modified).
+        positions: ``(F, N, 3)`` target positions (not modified, unless ``in_place``).
         names: Canonical joint of each target column.
         labels: ``left_heel``, ``left_toe``, ``right_heel``, ``right_toe`` -> ``(F,)`` bool.
         fps, ease_time: See :func:`foot_offsets`.
@@ -306,8 +308,11 @@ def planted_positions(
         toe_sites: Side -> the :class:`ToeContact` of a foot whose toe segment
             carries contact sites (:meth:`~physmocap.ik.planting.Planting.toe_contacts`);
             None or a missing side: that foot's toes lie flat in contact.
+        in_place: Plan ``positions`` themselves (a writeable float64 array the caller gives
+            up; each column is read before it is changed) and return them: one
+            ``(F, N, 3)`` copy less, the same numbers.
     """
-    out = np.array(positions, dtype=float, copy=True)
+    out = positions if in_place else np.array(positions, dtype=float, copy=True)
     F = out.shape[0]
     offsets = np.zeros((F, 2, 2))
     col = {n: i for i, n in enumerate(names)}
@@ -336,6 +341,8 @@ def planted_positions(
                 lab[ankle] = heel_label | toe_label
             hts = {j: heights[j] for j in pts}
         plan = foot_offsets(pts, lab, fps, ease_time, hts)
+        if segment is not None:  # the toe joint as it was, read before the foot is moved
+            own = foot_offsets({toe: positions[:, col[toe]]}, {toe: toe_label}, fps, ease_time, {toe: heights[toe]}).z[toe]
         offsets[:, s] = plan.xy
         moved = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
         feet[moved] = True
@@ -344,7 +351,6 @@ def planted_positions(
             if j in col:
                 out[:, col[j], 2] += plan.z[j]
         if segment is not None:
-            own = foot_offsets({toe: positions[:, col[toe]]}, {toe: toe_label}, fps, ease_time, {toe: heights[toe]}).z[toe]
             out[:, col[tip], 2] += plan.z["toe_sites"]
             out[:, col[toe], 2] += np.maximum(plan.z["toe_sites"], own)
         hip, knee = f"{side}_hip", f"{side}_knee"
@@ -427,6 +433,8 @@ def plant_body_contacts(
     fps: float,
     ease_time: float,
     floor: float = 0.0,
+    *,
+    in_place: bool = False,
 ) -> np.ndarray:
     """Targets ``(F, N, 3)`` with knees, hands and pelvis held on the floor during their contacts.
 
@@ -439,13 +447,15 @@ def plant_body_contacts(
     pelvis's collision geoms end on the floor, whatever their thickness.
 
     Args:
-        positions: ``(F, N, 3)`` target positions (not modified).
+        positions: ``(F, N, 3)`` target positions (not modified, unless ``in_place``).
         names: Canonical joint of each target column.
         body_labels: Part (``left_knee``, ``left_hand``, ``pelvis``...) -> ``(F,)`` bool.
         fps, ease_time: See :func:`foot_offsets`.
         floor: Floor height (metres).
+        in_place: Plan ``positions`` themselves (a writeable float64 array the caller gives
+            up; the parts move disjoint columns, each read before it is moved) and return them.
     """
-    out = np.array(positions, dtype=float, copy=True)
+    out = positions if in_place else np.array(positions, dtype=float, copy=True)
     col = {n: i for i, n in enumerate(names)}
     for part, label in body_labels.items():
         label = np.asarray(label, dtype=bool)

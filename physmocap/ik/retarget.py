@@ -21,6 +21,7 @@ from ..errors import InputError, MappingError, OptionError, warn
 from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
+from ..spill import in_memory, release, spill, spilled_empty
 from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
 from .config import RetargetConfig
@@ -195,7 +196,9 @@ def retarget(
         # the unplanned targets are let go before tracking (the planned ones keep their raw
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
-                               found.body_labels, own_orientations=ours)
+                               found.body_labels, own=ours)
+    if ours:
+        spill_targets(targets)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
     del targets
     traj.contacts = found
@@ -227,27 +230,42 @@ def plan_targets(
     floor_height: float,
     body_labels: dict[str, np.ndarray] | None = None,
     *,
-    own_orientations: bool = False,
+    own: bool = False,
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
     feet levelled on their flat-stance frames (:func:`~physmocap.ik.footlevel.level_feet`),
     then (and knees, hands, pelvis in contact) held where they land, eased in and out
     (``labels`` as planted: :func:`~physmocap.ik.body_contacts.release_kneeling_feet` applied).
     The unplanned positions are kept in ``info["raw_positions"]``, the feet's
-    horizontal offsets in ``info["foot_offsets"]``.  With ``own_orientations`` the caller
-    gives up ``targets.orientations``: the feet are levelled in that array (no copy)."""
+    horizontal offsets in ``info["foot_offsets"]``.  With ``own`` the caller gives up
+    ``targets``' arrays: the feet are levelled in its orientations (no copy), and its
+    positions, kept as the raw ones, move to a temporary file for a long clip
+    (:func:`~physmocap.spill.spill`) before they are copied."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
-    levelled = level_targets(targets, character, labels, own_orientations=own_orientations)
-    positions, offsets = planted_positions(
+    if own:
+        targets.positions = spill(targets.positions)
+    levelled = level_targets(targets, character, labels, own_orientations=own)
+    release(targets.positions)
+    # level_targets's copy of the positions is ours: planned where it is
+    _, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
-        planting.toe_contacts(),
+        planting.toe_contacts(), in_place=True,
     )
-    levelled.positions = positions  # the levelled copy is let go before the next one is made
     if body_labels:
-        levelled.positions = plant_body_contacts(positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height)
-    del positions
+        plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return levelled
+
+
+def spill_targets(targets: Targets) -> None:
+    """Keep ``targets``' positions and orientations, and the unplanned positions
+    (``info["raw_positions"]``), in temporary files (:mod:`physmocap.spill`; a long clip's
+    1.4 to 2 KB per frame): the tracker, the fidelity figures and the writers read them a
+    block of frames at a time.  Only for targets nothing writes any more."""
+    targets.positions = spill(targets.positions)
+    targets.orientations = spill(targets.orientations)
+    if "raw_positions" in targets.info:
+        targets.info["raw_positions"] = spill(targets.info["raw_positions"])
 
 
 #: The joints of a foot that :func:`~physmocap.ik.footlevel.level_feet` reads and levels.
@@ -269,16 +287,21 @@ def level_targets(targets: Targets, character, labels: dict[str, np.ndarray], *,
     else), then written into a copy of the positions and of the orientations, or into
     ``targets.orientations`` itself with ``own_orientations`` (the caller gives it up)."""
     cols = _foot_columns(targets.names)
+    feet = targets.positions[:, cols], targets.orientations[:, cols]
+    release(targets.positions)  # spilled arrays: the pages read leave the memory
+    release(targets.orientations)
     positions, orientations, levels = level_feet(
-        targets.positions[:, cols], targets.orientations[:, cols], targets.has_orientation[cols],
+        *feet, targets.has_orientation[cols],
         tuple(targets.names[i] for i in cols), labels, character_rest_frames(character), targets.fps,
     )
+    del feet
     levelled = copy.copy(targets)  # not dataclasses.replace: released source positions stay released
-    levelled.positions = targets.positions.copy()
+    levelled.positions = in_memory(targets.positions)
     levelled.orientations = targets.orientations if own_orientations else targets.orientations.copy()
     levelled.info = {**targets.info, "foot_levels": levels}
     levelled.positions[:, cols] = positions
     levelled.orientations[:, cols] = orientations
+    release(levelled.orientations)
     return levelled
 
 
@@ -311,6 +334,10 @@ def solve_targets(
     return _track(targets, character, options, source, progress, labels, plant)
 
 
+#: Frames :func:`_track` goes through between two releases of its spilled arrays' pages.
+RELEASE_FRAMES = 4096
+
+
 def _track(
     targets: Targets,
     character,
@@ -328,7 +355,7 @@ def _track(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False
     )
     F = targets.num_frames
-    qpos = np.empty((F, character.model.nq))
+    qpos = spilled_empty((F, character.model.nq))
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
     latency = np.zeros(F)
@@ -341,6 +368,9 @@ def _track(
             relaxation[t] = result.relaxation
             latency[t] = result.latency
             bar.update(1)
+            if (t + 1) % RELEASE_FRAMES == 0:  # spilled arrays: the frames done leave the memory
+                for array in (targets.positions, targets.orientations, qpos):
+                    release(array)
     for level in range(1, len(RELAXATION_LEVELS)):
         frames = np.flatnonzero(relaxation == level)
         if frames.size:

@@ -45,6 +45,7 @@ from ..options import check_fields
 from ..errors import MappingError, OptionError, warn
 from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
+from ..spill import blocks, spilled_empty
 from .calibration import CalibrationPose, calibration_pose
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -463,6 +464,18 @@ class _ActorKinematics:
         return [rot[0, j] for j in joints]
 
 
+def orientation_array(columns: dict[int, np.ndarray], frames: int, n: int) -> np.ndarray:
+    """``(frames, n, 4)`` orientations x-y-z-w: ``columns`` (target column -> ``(frames, 4)``)
+    where given, the identity elsewhere; written a block of frames at a time into an array
+    kept in a temporary file for a long clip (:func:`~physmocap.spill.spilled_empty`)."""
+    out = spilled_empty((frames, n, 4))
+    for s, rows in blocks(out):
+        rows[..., 3] = 1.0
+        for i, q in columns.items():
+            rows[:, i] = q[s : s + rows.shape[0]]
+    return out
+
+
 def _first_child(name: str, present: set[str]) -> str | None:
     for c in CANONICAL_NAMES:
         if c in present and canonical_parent(c, present) == name:
@@ -529,7 +542,7 @@ def build_targets(
     valid = np.all(np.isfinite(S), axis=-1)
     if motion.confidence is not None:
         valid &= motion.confidence[:, idx] > 0.0
-    S = _masked_positions(S, valid)
+    S[~valid] = 0.0  # as _masked_positions, in place: the actor's positions are held once
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
@@ -592,9 +605,8 @@ def build_targets(
     else:
         floor_s = motion.floor_height()
 
-    # --- orientations
-    Q = np.zeros((F, N, 4))
-    Q[..., 3] = 1.0
+    # --- orientations: only the columns with a target are held (the identity elsewhere)
+    Q: dict[int, np.ndarray] = {}
     has_q = np.zeros(N, dtype=bool)
     yaw = np.array([0.0, 0.0, 0.0, 1.0]) if cal is None else cal.yaw
     if cal is None and "left_hip" in pset and "right_hip" in pset:
@@ -619,20 +631,20 @@ def build_targets(
             if c not in offsets:
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
-            Q[:, i] = quat_mul(R_a, offsets[c])
+            Q[i] = quat_mul(R_a, offsets[c])
             has_q[i] = True
         elif source_orientations is not None and c in source_orientations:
             R_a = np.asarray(source_orientations[c], dtype=float)
             R_a0 = source_orientations.get(f"{c}@rest")
             if R_a0 is None:
                 continue
-            Q[:, i] = quat_mul(R_a, quat_mul(quat_conj(np.asarray(R_a0)), q_c0))
+            Q[i] = quat_mul(R_a, quat_mul(quat_conj(np.asarray(R_a0)), q_c0))
             has_q[i] = True
     # keep quaternion signs continuous over frames (nicer for users; SE3 does not care)
-    for i in np.flatnonzero(has_q):
-        d = np.sum(Q[1:, i] * Q[:-1, i], axis=-1)
+    for q in Q.values():
+        d = np.sum(q[1:] * q[:-1], axis=-1)
         flip = np.cumsum(d < 0) % 2 == 1
-        Q[1:, i][flip] *= -1.0
+        q[1:][flip] *= -1.0
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
@@ -640,7 +652,7 @@ def build_targets(
     delta: dict[str, np.ndarray] = {}
     for seg in RIGID_PARENTS:
         if seg in pset and has_q[col[seg]]:
-            delta[seg] = quat_mul(Q[:, col[seg]], quat_conj(rest_c[seg][1]))
+            delta[seg] = quat_mul(Q[col[seg]], quat_conj(rest_c[seg][1]))
         elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
             A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
             delta[seg] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
@@ -654,6 +666,7 @@ def build_targets(
                 delta["chest"] = delta[seg]
                 break
 
+    rot_all = actor.rotations = None  # read no more: let go before the positions are built
     # --- positions: root, then rigid children and limb chains in canonical order
     # Root: anchored on the midpoint of the hip joint centres where both are known
     # (vendors put their "pelvis" joint anywhere between the hips and the waist;
@@ -704,7 +717,7 @@ def build_targets(
             # target and the shoulders it carries agree with the trunk line
             fix = quat_between(walked - T[:, j], T[:, i] - T[:, j])
             if has_q[j]:
-                Q[:, j] = quat_mul(fix, Q[:, j])
+                Q[j] = quat_mul(fix, Q[j])
             carrier = p if p in delta else ("chest" if "chest" not in pset else None)
             if carrier is not None and carrier in delta:
                 delta[carrier] = quat_mul(fix, delta[carrier])
@@ -716,7 +729,7 @@ def build_targets(
             # undefined direction: keep the character's rest direction, rotated like the parent
             rest_dir = _unit(char_pts[c] - char_pts[p])[0]
             if has_q[j]:
-                fallback = quat_apply(quat_mul(Q[:, j], quat_conj(rest_c[p][1])), rest_dir)
+                fallback = quat_apply(quat_mul(Q[j], quat_conj(rest_c[p][1])), rest_dir)
             else:
                 fallback = np.broadcast_to(rest_dir, d.shape)
             d = np.where(bad[:, None], fallback, d)
@@ -744,7 +757,7 @@ def build_targets(
     return Targets(
         names=tuple(present),
         positions=T,
-        orientations=Q,
+        orientations=orientation_array(Q, F, N),
         has_orientation=has_q,
         valid=valid,
         fps=motion.fps,

@@ -39,6 +39,8 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from ..spill import blocks, release
+
 __all__ = [
     "SEGMENTS",
     "SegmentError",
@@ -200,13 +202,14 @@ def character_joint_positions(traj, names=None) -> dict[str, np.ndarray]:
     s_k, s_id = (np.array([a for a, _ in sites], int), np.array([b for _, b in sites], int))
     b_k, b_id = (np.array([a for a, _ in bodies], int), np.array([b for _, b in bodies], int))
     out = np.empty((traj.num_frames, len(wanted), 3))
-    for t, q in enumerate(traj.qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        if s_k.size:
-            out[t, s_k] = data.site_xpos[s_id]
-        if b_k.size:
-            out[t, b_k] = data.xpos[b_id]
+    for s, rows in blocks(traj.qpos, BLOCK_FRAMES):  # a spilled trajectory: read a block at a time
+        for t, q in enumerate(rows, start=s):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            if s_k.size:
+                out[t, s_k] = data.site_xpos[s_id]
+            if b_k.size:
+                out[t, b_k] = data.xpos[b_id]
     return {n: out[:, k] for k, n in enumerate(wanted)}
 
 
@@ -311,6 +314,7 @@ def saturation_matrix(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limit
         e = min(F - 1, s + BLOCK_FRAMES)
         speed = np.abs(np.diff(qpos[s : e + 1, adr], axis=0)) * fps
         out[s:e] = speed >= SATURATION_RATIO * vmax
+        release(qpos)
     return out
 
 

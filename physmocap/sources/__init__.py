@@ -111,11 +111,14 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
         check_distances(arr, path, what, names if what == "joint" else None, allow_nan)
 
     if motion.rotations is not None:
-        norms = np.linalg.norm(motion.rotations, axis=-1)
-        ok = np.isfinite(norms) & (norms > 1e-9)
-        if not ok.all():
-            f, j = (int(x) for x in np.argwhere(~ok)[0])
-            raise InputError(f"frame {f}: joint {names[j]} has no valid rotation (zero or non-finite)", path=path)
+        from ..spill import blocks
+
+        for s, rows in blocks(motion.rotations):  # a block at a time: no temporaries the clip's size
+            norms = np.linalg.norm(rows, axis=-1)
+            ok = np.isfinite(norms) & (norms > 1e-9)
+            if not ok.all():
+                f, j = (int(x) for x in np.argwhere(~ok)[0])
+                raise InputError(f"frame {s + f}: joint {names[j]} has no valid rotation (zero or non-finite)", path=path)
         if motion.translations is not None and motion.translations.size:
             first_bad(motion.translations, "translated joint", allow_nan=False)
     if motion.positions is not None:

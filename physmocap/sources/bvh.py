@@ -63,6 +63,7 @@ import numpy as np
 from ..errors import InputError, OptionError, warn
 from ..motion import Motion, Skeleton, forward_kinematics
 from ..rotations import euler_to_quat, up_axis_matrix
+from ..spill import release, spilled_empty
 
 __all__ = [
     "CHANNEL_NAMES",
@@ -763,11 +764,13 @@ LONG_CLIP_JOINT_FRAMES = 4_000_000
 
 class _Store:
     """Growing output arrays: rotations (F, J, 4) in world axes and
-    translations (F, K, 3) in world axes and *file* units."""
+    translations (F, K, 3) in world axes and *file* units.  A long clip's are
+    kept in temporary files (:mod:`physmocap.spill`), each chunk's pages let go
+    once written."""
 
     def __init__(self, capacity: int, J: int, K: int, dtype=np.float64) -> None:
-        self.rot = np.empty((capacity, J, 4), dtype=dtype)
-        self.tra = np.empty((capacity, K, 3), dtype=dtype)
+        self.rot = spilled_empty((capacity, J, 4), dtype=dtype)
+        self.tra = spilled_empty((capacity, K, 3), dtype=dtype)
         self.n = 0
         self.extra: list[tuple[np.ndarray, np.ndarray]] = []
 
@@ -778,6 +781,8 @@ class _Store:
         if k:
             self.rot[self.n : self.n + k] = rot[:k]
             self.tra[self.n : self.n + k] = tra[:k]
+            release(self.rot)
+            release(self.tra)
         if k < n:
             self.extra.append((rot[k:].copy(), tra[k:].copy()))
         self.n += n

@@ -1,0 +1,30 @@
+"""Contact detection reads the actor's world positions in blocks of frames, only the joints it needs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from conftest import shared_file
+
+
+def test_joint_world_positions_match_the_whole_clip() -> None:
+    from physmocap.ik.contacts import joint_world_positions
+    from physmocap.sources import load_motion
+
+    motion = load_motion(shared_file("cmu_12_01_walk.bvh"))
+    joints = [5, 2, 7, 2]
+    world, column = joint_world_positions(motion, joints, block=97)  # several blocks, the last one short
+    assert world.shape == (motion.num_frames, 3, 3)
+    full = motion.world_positions()
+    for j in joints:
+        assert np.array_equal(world[:, column[j]], full[:, j])
+
+
+def test_positional_motion_is_not_copied() -> None:
+    from physmocap.ik.contacts import joint_world_positions
+    from physmocap.sources import load_motion
+
+    motion = load_motion(shared_file("cmu_12_01_walk.bvh"))
+    positional = motion.replace(positions=motion.world_positions(), rotations=None, translations=None)
+    world, column = joint_world_positions(positional, [3, 1])
+    assert world is positional.positions and column == {3: 3, 1: 1}

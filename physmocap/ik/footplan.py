@@ -129,24 +129,28 @@ def foot_offsets(
         z_num = np.zeros(F)
         z_den = np.zeros(F)
         for a, b in contact_intervals(labels[name]):
+            # an interval's weights are 0 beyond its ease ramps: only that window is summed
+            # (the same sums: whole-clip arrays per interval made planting an hour-long clip
+            # take minutes, growing with the square of its length)
+            lo, hi = max(0, a - ease - 1), min(F, b + ease + 2)
             anchor = anchors[(name, a)]
-            o = np.empty((F, 3))
-            o[a : b + 1, :2] = anchor - x[a : b + 1, :2]
-            o[a : b + 1, 2] = heights[name] - x[a : b + 1, 2]
-            o[:a] = o[a]
-            o[b + 1 :] = o[b]
+            o = np.empty((hi - lo, 3))
+            o[a - lo : b + 1 - lo, :2] = anchor - x[a : b + 1, :2]
+            o[a - lo : b + 1 - lo, 2] = heights[name] - x[a : b + 1, 2]
+            o[: a - lo] = o[a - lo]
+            o[b + 1 - lo :] = o[b - lo]
             # another point of the foot already down at the start (still down at the end):
             # ease in (out) within the interval so the planted point is not disturbed
             others = [v for k, v in down.items() if k != name]
             before = any(v[a - 1] for v in others) if a > 0 else False
             after = any(v[b + 1] for v in others) if b + 1 < F else False
-            w = ease_weights(F, a, b, min(ease, (b - a) // 2), (before, after))
-            num += w[:, None] * o[:, :2]
-            den += w
+            w = ease_weights(hi - lo, a - lo, b - lo, min(ease, (b - a) // 2), (before, after))
+            num[lo:hi] += w[:, None] * o[:, :2]
+            den[lo:hi] += w
             # heights always ease outside the interval (module docstring)
-            wz = ease_weights(F, a, b, ease)
-            z_num += wz * o[:, 2]
-            z_den += wz
+            wz = ease_weights(hi - lo, a - lo, b - lo, ease)
+            z_num[lo:hi] += wz * o[:, 2]
+            z_den[lo:hi] += wz
         z[name] = z_num / np.maximum(z_den, 1.0)
     return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
 

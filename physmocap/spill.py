@@ -19,7 +19,7 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_memory"]
+__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_memory", "is_spilled"]
 
 #: Arrays of at least this many bytes are spilled (a 10-minute clip's targets are about 40 MB).
 SPILL_BYTES = 32 << 20
@@ -89,6 +89,11 @@ def _mapping(array: np.ndarray | None) -> mmap.mmap | None:
     if isinstance(base, memoryview):  # np.frombuffer's view of the mapping
         base = base.obj
     return base if isinstance(base, mmap.mmap) and not base.closed else None
+
+
+def is_spilled(array: np.ndarray | None) -> bool:
+    """Whether ``array`` (or the array it is a view of) lives in a temporary file."""
+    return _mapping(array) is not None
 
 
 def release(array: np.ndarray | None) -> None:

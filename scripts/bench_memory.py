@@ -100,11 +100,17 @@ def cli_run(clip: Path, tmp: Path) -> tuple[float, float]:
 
 
 def array_bytes(obj, seen: set[int] | None = None, depth: int = 0) -> int:
-    """Bytes of the numpy arrays reachable from ``obj`` (dataclasses, dicts, lists), each once."""
+    """Bytes of the numpy arrays reachable from ``obj`` (dataclasses, dicts, lists), each once;
+    an array spilled to a temporary file (:mod:`physmocap.spill`) counts nothing: its pages
+    are on disk and in the page cache, not the process's own memory."""
+    from physmocap.spill import is_spilled
+
     seen = set() if seen is None else seen
     if id(obj) in seen or depth > 6:
         return 0
     seen.add(id(obj))
+    if isinstance(obj, np.ndarray) and is_spilled(obj):
+        return 0
     if isinstance(obj, np.ndarray):
         base = obj if obj.base is None else obj.base
         if isinstance(base, np.ndarray) and base is not obj:

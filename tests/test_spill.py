@@ -47,3 +47,13 @@ def test_everything_spilled_writes_the_same_bytes(tmp_path, monkeypatch, rows):
     monkeypatch.setattr(spill_mod, "BLOCK_ROWS", rows)
     monkeypatch.setattr(importlib.import_module("physmocap.ik.retarget"), "RELEASE_FRAMES", rows)
     assert _retarget(tmp_path, "spilled") == kept
+
+
+def test_is_spilled_tells_a_temporary_file_from_memory():
+    import numpy as np
+
+    from physmocap.spill import is_spilled, spilled_empty
+
+    on_disk = spilled_empty((64,), min_bytes=1)
+    assert is_spilled(on_disk) and is_spilled(on_disk[8:16])
+    assert not is_spilled(np.zeros(64)) and not is_spilled(spilled_empty((4,), min_bytes=1 << 30))

@@ -323,12 +323,8 @@ class FootPlanter:
                     self.anchor[k, 2] = self.floor
                     self.locked[k] = True
                 self.xy[k].set_target(self.anchor[k])
-                if self.turning[k]:
-                    self.xy[k].set_cost(opt.cost_xy)
-                    soft.append(self.xy[k])
-                else:
-                    self.xy[k].set_cost(opt.cost_xy)
-                    hard.append(self.xy[k])
+                # a foot turning about another held point: this one held softly (FootPlanter.turn)
+                (soft if self.turning[k] else hard).append(self.xy[k])
             else:
                 self.locked[k] = False
             self.free[k] = not flags[k] and not engaged[k]

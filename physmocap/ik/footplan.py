@@ -26,6 +26,13 @@ target) and each contact interval :math:`k = [a_k, b_k]` of a point's label:
   frame at toe-off;
 * the foot's offset is :math:`o(t) = \sum_k w_k o_k / \max(1, \sum_k w_k)`.
 
+A foot without toe joints (a robot's) cannot roll over its toes: it rolls over its
+front edge.  Its toe contact is planned by that edge (:class:`RigidFoot`: horizontally
+its front contact site, vertically its lowest material point, both carried by the
+ankle's targets), and where its heel is not planned the whole foot moves by the
+edge's vertical offset, so the held edge and the targets agree through the roll
+instead of the plan holding its ball at its flat-stance height.
+
 Offsets are three-dimensional: horizontally the plant location, vertically
 the joint's stance height.  Only the foot moves (ankle, toe, toe tip; the knee is re-placed by two-bone
 IK so thigh and shank keep their lengths); the pelvis and the rest of the body
@@ -44,7 +51,7 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -89,11 +96,13 @@ class FootPlan:
         xy: ``(F, 2)`` horizontal offset of the whole foot.
         z: Contact point name -> ``(F,)`` vertical offset of the joint carrying it.
         weight: ``(F,)`` how much the foot is in contact, 0..1 (eased).
+        z_weight: Contact point name -> ``(F,)`` how much its height is planned, 0..1 (eased).
     """
 
     xy: np.ndarray
     z: dict[str, np.ndarray]
     weight: np.ndarray
+    z_weight: dict[str, np.ndarray]
 
 
 def foot_offsets(
@@ -124,6 +133,7 @@ def foot_offsets(
     z: dict[str, np.ndarray] = {}
     anchors = _consistent_anchors(points, labels)
     down = {name: np.asarray(labels[name], dtype=bool) for name in points}
+    z_weight: dict[str, np.ndarray] = {}
     for name, x in points.items():
         x = np.asarray(x, dtype=float)
         z_num = np.zeros(F)
@@ -152,7 +162,8 @@ def foot_offsets(
             z_num[lo:hi] += wz * o[:, 2]
             z_den[lo:hi] += wz
         z[name] = z_num / np.maximum(z_den, 1.0)
-    return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0))
+        z_weight[name] = np.minimum(z_den, 1.0)
+    return FootPlan(xy=num / np.maximum(den, 1.0)[:, None], z=z, weight=np.minimum(den, 1.0), z_weight=z_weight)
 
 
 def _consistent_anchors(
@@ -285,6 +296,7 @@ def planted_positions(
     heights: Mapping[str, float],
     toe_sites: Mapping[str, "ToeContact"] | None = None,
     *,
+    rigid_feet: Mapping[str, tuple["RigidFoot", np.ndarray]] | None = None,
     in_place: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Targets with both feet planted: ``(new positions (F, N, 3), foot offsets (F, 2, 2))``.
@@ -312,6 +324,9 @@ def planted_positions(
         toe_sites: Side -> the :class:`ToeContact` of a foot whose toe segment
             carries contact sites (:meth:`~physmocap.ik.planting.Planting.toe_contacts`);
             None or a missing side: that foot's toes lie flat in contact.
+        rigid_feet: Side -> ``(RigidFoot, (F, 4) ankle orientation targets)`` of a foot
+            without toe joints: its toe contact is planned by its own front edge
+            (:meth:`RigidFoot.toe_point`) and the whole foot moves as one.
         in_place: Plan ``positions`` themselves (a writeable float64 array the caller gives
             up; each column is read before it is changed) and return them: one
             ``(F, N, 3)`` copy less, the same numbers.
@@ -330,7 +345,12 @@ def planted_positions(
         toe_label = np.asarray(labels.get(f"{side}_toe", np.zeros(F, bool)), dtype=bool)
         toe, tip = f"{side}_toe", f"{side}_toe_end"
         segment = toe_sites.get(side) if toe_sites and toe in col and tip in col else None
-        if segment is not None:  # the toe segment's contact sites carry the toe contact
+        rigid = (rigid_feet or {}).get(side)
+        if rigid is not None:  # one rigid body: planned by its ankle and its own front edge
+            pts = {ankle: positions[:, col[ankle]], "front": rigid[0].toe_point(positions[:, col[ankle]], rigid[1])}
+            lab = {ankle: heel_label, "front": toe_label}
+            hts = {ankle: heights[ankle], "front": rigid[0].height}
+        elif segment is not None:  # the toe segment's contact sites carry the toe contact
             # held horizontally at the toe tip joint (the lowest candidate may switch ends of
             # the segment), vertically by the segment's lowest point
             site = np.concatenate([positions[:, col[tip], :2], segment.lowest(positions[:, col[toe]], positions[:, col[tip]])[:, 2:]], axis=1)
@@ -351,7 +371,20 @@ def planted_positions(
         moved = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
         feet[moved] = True
         out[:, moved, :2] += plan.xy[:, None, :]
-        for j in pts:
+        if rigid is not None:
+            # while the heel is planned, each joint at its own stance height (the foot lies
+            # flat, as with toes); where it is not, the whole foot by its front edge's height
+            # (and never lower than puts the front edge on the floor while it is planned: a heel
+            # easing down after its label would push a pitched foot's front edge into the floor)
+            rolled = (1.0 - plan.z_weight[ankle]) * plan.z["front"]
+            edge = np.where(plan.z_weight["front"] > 0.0, plan.z["front"], -np.inf)
+            lift = np.maximum(plan.z[ankle] + rolled, edge) - (plan.z[ankle] + rolled)
+            out[:, col[ankle], 2] += plan.z[ankle] + rolled + lift
+            for j in (f"{side}_{k}" for k in FOOT_JOINTS[1:]):
+                if j in col:
+                    own_j = foot_offsets({j: positions[:, col[j]]}, {j: toe_label}, fps, ease_time, {j: heights[j]}).z[j]
+                    out[:, col[j], 2] += plan.z_weight[ankle] * own_j + rolled + lift
+        for j in pts if rigid is None else ():
             if j in col:
                 out[:, col[j], 2] += plan.z[j]
         if segment is not None:
@@ -409,6 +442,53 @@ class ToeContact:
         k = np.argmin(low, axis=1)
         out = pts[np.arange(pts.shape[0]), k]
         out[:, 2] = low[np.arange(pts.shape[0]), k]
+        return out
+
+
+@dataclass(frozen=True)
+class RigidFoot:
+    r"""The material of a foot without toe joints, in the character's rest pose (metres).
+
+    A rigid foot rolls over its front edge where the actor rolls over the toes: its
+    toe contact is its lowest material point, carried by the ankle's target frame,
+    not the actor's toe joint (which bends).  Offline, such a foot is planned by
+    that point (:func:`planted_positions`), so the held front edge and the ankle's
+    targets agree all through the roll (:mod:`physmocap.ik.rigidfoot` turns the
+    ankle's orientation target with the actor's toe-tip line).
+
+    Attributes:
+        rest_quat: ``(4,)`` rest world orientation (x-y-z-w) of the ankle's tracked frame.
+        front: ``(3,)`` the foot's front contact site(s) (their mean) from the ankle, rest, world.
+        offsets: ``(K, 3)`` its lowest-point candidates
+            (:func:`~physmocap.models.geometry.geom_candidates` of its collision geoms,
+            else its contact sites) from the ankle, rest, world.
+        radii: ``(K,)`` their radii.
+        height: Rest height above the floor of the foot's lowest point.
+    """
+
+    rest_quat: np.ndarray
+    front: np.ndarray
+    offsets: np.ndarray
+    radii: np.ndarray
+    height: float
+
+    def toe_point(self, ankle: np.ndarray, orientation: np.ndarray, block: int = 4096) -> np.ndarray:
+        r"""``(F, 3)``: horizontally the front contact point, vertically the lowest
+        material point, of the foot whose ankle target is at ``ankle (F, 3)`` with
+        orientation target ``orientation (F, 4)``: :math:`x = T + Q\,Q_0^{-1} o`
+        (``block`` frames at a time: a mesh foot has many candidates)."""
+        from ..rotations import quat_apply, quat_conj, quat_mul
+
+        F = ankle.shape[0]
+        out = np.empty((F, 3))
+        q0 = quat_conj(self.rest_quat)
+        for s in range(0, F, block):
+            e = min(F, s + block)
+            R = quat_mul(np.asarray(orientation[s:e], dtype=float), q0)
+            a = np.asarray(ankle[s:e], dtype=float)
+            out[s:e, :2] = (a + quat_apply(R, np.broadcast_to(self.front, a.shape)))[:, :2]
+            pts = a[:, None, :] + quat_apply(R[:, None, :], self.offsets[None, :, :])
+            out[s:e, 2] = (pts[..., 2] - self.radii[None, :]).min(axis=1)
         return out
 
 

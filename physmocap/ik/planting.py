@@ -48,7 +48,8 @@ import numpy as np
 
 from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..options import check_fields
-from .footplan import FOOT_JOINTS, ToeContact, knee_between
+from ..rotations import Rotation
+from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
 from .tasks import SitePositionTask
 
 __all__ = ["PlantOptions", "PlanHints", "FootPlanter", "FootAnchor", "Planting"]
@@ -561,7 +562,7 @@ class Planting:
     def _toe_roles(model: mujoco.MjModel, character, side: str) -> dict[str, str]:
         """How each toe-group contact site acts while only the toes are down (offline).
 
-        ``"hold"``: on a toe segment (a body below the heel's): held and pulled down,
+        ``"hold"``: on a toe segment (a body below the heel's, moved by a joint): held and pulled down,
         the toes stay flat.  ``"release"``: on the heel's body of a foot that has a toe
         segment: the foot rolls over its toes and the site lifts.  ``"pivot"``: on the
         heel's body of a rigid foot: held horizontally and pulled down only softly
@@ -572,15 +573,20 @@ class Planting:
         if len(sites) < 2:
             return {}
 
-        def depth(name: str) -> int:
-            b, d = int(model.site(name).bodyid[0]), 0
-            while b > 0:
-                b, d = int(model.body_parentid[b]), d + 1
-            return d
+        heel = int(model.site(sites[0]).bodyid[0])
 
-        heel = depth(sites[0])
-        has_toes = any(depth(s) > heel for s in sites[1:])
-        return {s: "hold" if depth(s) > heel else ("release" if has_toes else "pivot") for s in sites[1:]}
+        def on_toes(name: str) -> bool:
+            """The site's body is below the heel's, with a joint between (a body welded
+            to the foot, such as a robot's toe link without a joint, is the foot)."""
+            b, jointed = int(model.site(name).bodyid[0]), False
+            while b > 0 and b != heel:
+                jointed |= bool(model.body_jntnum[b] > 0)
+                b = int(model.body_parentid[b])
+            return b == heel and jointed
+
+        toes = {s: on_toes(s) for s in sites[1:]}
+        has_toes = any(toes.values())
+        return {s: "hold" if toes[s] else ("release" if has_toes else "pivot") for s in sites[1:]}
 
     def stance_heights(self) -> dict[str, float]:
         """Canonical ankle/toe joint -> its height above the floor in the character's rest pose."""
@@ -607,6 +613,34 @@ class Planting:
             out[side] = ToeContact(
                 direction=rest[tip] - rest[toe],
                 offsets=points[:, :3] - rest[toe],
+                radii=points[:, 3],
+                height=float((points[:, 2] - points[:, 3]).min() - self.locks.floor),
+            )
+        return out
+
+    def rigid_feet(self) -> dict[str, RigidFoot]:
+        """Side -> the :class:`~physmocap.ik.footplan.RigidFoot` of a foot without toe joints
+        (its toe sites on the heel's body, role ``"pivot"``) whose ankle is tracked."""
+        model = self.character.model
+        data = mujoco.MjData(model)
+        data.qpos[:] = self.character.rest_qpos
+        mujoco.mj_kinematics(model, data)
+        out: dict[str, RigidFoot] = {}
+        for side in ("left", "right"):
+            ankle = f"{side}_ankle"
+            front = [s for s, role in self._toe_roles(model, self.character, side).items() if role == "pivot"]
+            if not front or ankle not in self.names:
+                continue
+            tf = self.character.tracked[ankle]
+            pos = tf.position(model, data).copy()
+            mat = (data.site_xmat if tf.kind == "site" else data.xmat)[tf.object_id(model)].reshape(3, 3)
+            points = _material_points(model, data, set(self._foot_bodies[side]))
+            if not len(points):  # no collision geometry: the contact sites
+                points = np.array([[*data.site(s).xpos, 0.0] for s in self.character.contacts[side]])
+            out[side] = RigidFoot(
+                rest_quat=Rotation.from_matrix(mat).as_quat(),
+                front=np.mean([data.site(s).xpos for s in front], axis=0) - pos,
+                offsets=points[:, :3] - pos,
                 radii=points[:, 3],
                 height=float((points[:, 2] - points[:, 3]).min() - self.locks.floor),
             )

@@ -247,9 +247,14 @@ def plan_targets(
     levelled = level_targets(targets, character, labels, own_orientations=own)
     release(targets.positions)
     # level_targets's copy of the positions is ours: planned where it is
+    rigid = {}
+    for side, foot in planting.rigid_feet().items():
+        i = targets.names.index(f"{side}_ankle")
+        if levelled.has_orientation[i]:  # its front edge is carried by the ankle's orientation target
+            rigid[side] = (foot, levelled.orientations[:, i])
     _, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
-        planting.toe_contacts(), in_place=True,
+        planting.toe_contacts(), rigid_feet=rigid, in_place=True,
     )
     if body_labels:
         plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)

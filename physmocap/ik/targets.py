@@ -26,6 +26,9 @@ have different proportions:
   segment direction (after :math:`Y`) onto the actor's (T-pose arms versus
   arms-down, for example).  For positional sources the same formula uses
   frames built from positions (:mod:`physmocap.frames`) on both sides.
+  A character whose foot has no toe joint follows the actor's ankle-to-toe-tip
+  line rather than the foot segment (:mod:`physmocap.ik.rigidfoot`), and its
+  ball target turns with it.
 
 All quantities are metres and radians, Z-up, quaternions x-y-z-w.
 """
@@ -47,6 +50,7 @@ from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from ..spill import blocks, spilled_empty
 from .calibration import CalibrationPose, calibration_pose
+from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
@@ -148,6 +152,7 @@ class Calibration:
     level: np.ndarray | None = None
     level_centre: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    foot_tips: dict = field(default_factory=dict)  # side -> toe-tip direction in the foot's frame (rigidfoot)
 
 
 @dataclass(eq=False)
@@ -424,12 +429,15 @@ class _ActorKinematics:
 
     Attributes:
         positions: ``(F, N, 3)`` world positions (metres) of the joints ``idx``.
+        extra: Source joint -> ``(F, 3)`` world positions of the joints ``extra``
+            (read by the targets, not tracked: the toe tips of a rigid foot).
         rotations: Source joint -> ``(F, 4)`` world rotation x-y-z-w of the joints
             ``turning``, or None for a positional source (or kinematics without rotations).
     """
 
     def __init__(self, motion: Motion, idx: np.ndarray, turning: list[int], level: np.ndarray | None,
-                 centre: np.ndarray | None, kinematics: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+                 centre: np.ndarray | None, kinematics: tuple[np.ndarray, np.ndarray | None] | None = None,
+                 extra: list[int] | None = None) -> None:
         self.motion, self.level, self.centre, self.kinematics = motion, level, centre, kinematics
         F = motion.num_frames
         # laid out joint-major, as numpy lays out ``positions[:, idx]`` (the clip's joints picked
@@ -438,10 +446,13 @@ class _ActorKinematics:
         self.positions = np.empty((len(idx), F, 3)).transpose(1, 0, 2)
         rotational = motion.is_rotational and (kinematics is None or kinematics[1] is not None)
         self.rotations = {j: np.empty((F, 4)) for j in turning} if rotational else None
+        self.extra = {j: np.empty((F, 3)) for j in extra or ()}
         for s in range(0, F, BLOCK_FRAMES):
             e = min(F, s + BLOCK_FRAMES)
             pos, rot = self._block(s, e)
             self.positions[s:e] = pos[:, idx]
+            for j, out in self.extra.items():
+                out[s:e] = pos[:, j]
             for j, out in (self.rotations or {}).items():
                 out[s:e] = rot[:, j]
 
@@ -474,6 +485,39 @@ def orientation_array(columns: dict[int, np.ndarray], frames: int, n: int) -> np
         for i, q in columns.items():
             rows[:, i] = q[s : s + rows.shape[0]]
     return out
+
+
+def _rigid_foot_tips(motion: Motion, joint_indices: dict[str, int], character, pset: set[str],
+                     opt: TargetOptions, cal: Calibration | None) -> dict[str, int]:
+    """Side -> the actor's toe-tip joint, for each foot the character carries rigidly
+    (:mod:`physmocap.ik.rigidfoot`): an oriented ankle with no joint between it and the
+    character's foremost mapped foot point, on a rotational source that has toe tips."""
+    if not motion.is_rotational:
+        return {}
+    out = {}
+    for side in ("left", "right"):
+        ankle, toe, tip = f"{side}_ankle", f"{side}_toe", f"{side}_toe_end"
+        if ankle not in pset or ankle not in opt.oriented or tip not in joint_indices:
+            continue
+        if cal is not None and side not in cal.foot_tips:
+            continue
+        front = tip if tip in pset else (toe if toe in pset else None)
+        if front is not None and _has_dofs_between(character, front, ankle):
+            continue  # the character bends at its own toes
+        out[side] = int(joint_indices[tip])
+    return out
+
+
+def _tip_reference(motion: Motion, pose, pose_rot: dict, S: np.ndarray, S_rest: np.ndarray, col: dict,
+                   ankle: str, tip: int, actor: "_ActorKinematics") -> np.ndarray | None:
+    """The actor's toe-tip direction in its foot's frame in the calibration pose: the rest
+    pose (BVH rest world rotations are the identity) or the chosen frame."""
+    if pose is None or pose.frame is None:
+        rest_tip = motion.skeleton.rest_positions()[tip]
+        return tip_reference(np.array([0.0, 0.0, 0.0, 1.0]), S_rest[col[ankle]], rest_tip)
+    if ankle not in pose_rot:
+        return None
+    return tip_reference(pose_rot[ankle], S[pose.frame, col[ankle]], actor.extra[tip][pose.frame])
 
 
 def _first_child(name: str, present: set[str]) -> str | None:
@@ -536,7 +580,8 @@ def build_targets(
         level = _min_rotation(np.array([-sx, -sy, 1.0]), np.array([0.0, 0.0, 1.0]))
         level_info = {"floor_slope": [sx, sy], "floor_height": float(floor.height)}
     turning = [joint_indices[c] for c in present if c in opt.oriented or c in RIGID_PARENTS or c in TORSO_CARRIERS]
-    actor = _ActorKinematics(motion, idx, turning, level, centre, kinematics)
+    tips = _rigid_foot_tips(motion, joint_indices, character, pset, opt, cal)
+    actor = _ActorKinematics(motion, idx, turning, level, centre, kinematics, extra=list(tips.values()))
     S, rot_all = actor.positions, actor.rotations  # (F, N, 3) actor canonical positions; rotations by joint
     F, N = S.shape[:2]
     valid = np.all(np.isfinite(S), axis=-1)
@@ -619,6 +664,8 @@ def build_targets(
     else:
         movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
     offsets = {} if cal is None else cal.orientation_offsets
+    foot_tips = {} if cal is None else cal.foot_tips
+    toe_turn: dict[str, np.ndarray] = {}  # side -> (F, 4) a rigid foot's toe-line correction
     if not motion.is_rotational and source_orientations is None:
         source_orientations = _positional_orientations(S, col, pset, char_pts)
     for c in opt.oriented:
@@ -633,6 +680,15 @@ def build_targets(
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
             Q[i] = quat_mul(R_a, offsets[c])
             has_q[i] = True
+            side = c.split("_", 1)[0]
+            if c.endswith("_ankle") and side in tips:
+                u = foot_tips.get(side)
+                if u is None and cal is None:
+                    u = foot_tips[side] = _tip_reference(motion, pose, pose_rot, S, S_rest, col, c, tips[side], actor)
+                if u is not None:
+                    ok_t = valid[:, i] & np.all(np.isfinite(actor.extra[tips[side]]), axis=-1)
+                    toe_turn[side] = toe_line_correction(R_a, S[:, i], actor.extra[tips[side]], u, ok_t)
+                    Q[i] = quat_mul(toe_turn[side], Q[i])
         elif source_orientations is not None and c in source_orientations:
             R_a = np.asarray(source_orientations[c], dtype=float)
             R_a0 = source_orientations.get(f"{c}@rest")
@@ -724,6 +780,8 @@ def build_targets(
             continue
         length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])
+        if c.endswith("_toe") and p.endswith("_ankle") and c.split("_", 1)[0] in toe_turn:
+            d = quat_apply(toe_turn[c.split("_", 1)[0]], d)  # the ball turns with its rigid foot
         bad = (n < 1e-6) | ~valid[:, i] | ~valid[:, j]
         if np.any(bad):
             # undefined direction: keep the character's rest direction, rotated like the parent
@@ -753,6 +811,7 @@ def build_targets(
             level=level,
             level_centre=centre,
             info=level_info,
+            foot_tips=foot_tips,
         )
     return Targets(
         names=tuple(present),

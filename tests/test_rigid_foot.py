@@ -1,0 +1,93 @@
+"""A character without toe joints rolls its rigid foot over its front edge (issue 9: pops at toe-off).
+
+Before: a robot's foot tracked the actor's foot segment (ankle to ball), which pitches 20-40
+degrees further than a rigid foot can while the actor's toes bend, and its toe target was
+planned like a toe joint held at the floor; the held front edge fought both through the roll
+and the ankle snapped at its velocity cap (1150 deg/s) when the toes lifted (CMU walk, bundled
+robot: every toe-off; 1.5 % of the clip's transitions for the worst joint).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import RETARGET_DIAGNOSTICS, retargeted
+from physmocap.ik.footplan import RigidFoot, planted_positions
+from physmocap.ik.rigidfoot import tip_reference, toe_line_correction
+from physmocap.metrics.fidelity import saturation_matrix
+from physmocap.rotations import Rotation
+
+
+def _pitch(deg: float) -> np.ndarray:
+    return Rotation.from_euler("y", deg, degrees=True).as_quat()
+
+
+def test_straight_toes_leave_the_foot_alone_and_bent_toes_turn_it_to_the_tip_line():
+    # a foot along +x, ankle at the origin, ball 10 cm ahead and 5 cm down, tip 5 cm further
+    ankle, ball, tip = np.zeros(3), np.array([0.10, 0.0, -0.05]), np.array([0.15, 0.0, -0.05])
+    u = tip_reference(np.array([0.0, 0.0, 0.0, 1.0]), ankle, tip)
+    R = np.array([_pitch(20.0), _pitch(20.0)])  # the foot pitched toe-down by 20 degrees
+    straight = Rotation.from_quat(_pitch(20.0)).apply(tip)
+    # frame 1: the toes bent back up by 30 degrees about the ball, tip on the line it would have
+    ball_w = Rotation.from_quat(_pitch(20.0)).apply(ball)
+    bent = ball_w + Rotation.from_quat(_pitch(-10.0)).apply(tip - ball)
+    C = toe_line_correction(R, np.zeros((2, 3)), np.array([straight, bent]), u, np.array([True, True]))
+    assert np.allclose(C[0], [0, 0, 0, 1])
+    # C takes the rigid tip line onto the bent one: a pitch back up, about the lateral axis only
+    turned = Rotation.from_quat(C[1]).apply(straight)
+    assert np.allclose(turned / np.linalg.norm(turned), bent / np.linalg.norm(bent))
+    axis = Rotation.from_quat(C[1]).as_rotvec()
+    assert abs(axis[0]) < 1e-9 and abs(axis[2]) < 1e-9 and axis[1] < 0
+    # an unknown tip: the identity
+    C = toe_line_correction(R, np.zeros((2, 3)), np.array([straight, bent]), u, np.array([True, False]))
+    assert np.allclose(C[1], [0, 0, 0, 1])
+
+
+def test_a_rigid_foot_is_planned_by_its_front_edge_and_moves_as_one():
+    """While only the toes are down the rigid foot's front edge is the held point: a foot
+    pitching about it keeps it on its plant location and at the floor, and ankle and ball
+    move together; while the heel is down each stands at its own stance height."""
+    F, fps = 60, 60.0
+    foot = RigidFoot(rest_quat=np.array([0.0, 0.0, 0.0, 1.0]), front=np.array([0.15, 0.0, -0.08]),
+                     offsets=np.array([[-0.05, 0.0, -0.08], [0.15, 0.0, -0.08]]), radii=np.zeros(2), height=0.0)
+    pitch = np.clip(np.linspace(-10, 40, F), 0, None)  # flat, then rolling onto the front edge
+    Q = Rotation.from_euler("y", pitch[:, None], degrees=True).as_quat()
+    front0 = np.array([0.15, 0.0, 0.0])
+    ankle = front0 - Rotation.from_quat(Q).apply(foot.front)  # the actor's foot rolls about its front edge...
+    ankle[:, 0] += np.linspace(0.0, 0.03, F)  # ...but its scaled targets drift 3 cm forward
+    ball = ankle + Rotation.from_quat(Q).apply([0.10, 0.0, -0.06])
+    names = ("left_ankle", "left_toe")
+    pos = np.stack([ankle, ball], axis=1)
+    heel = pitch <= 0.0
+    labels = {"left_heel": heel, "left_toe": np.ones(F, bool)}
+    out, _ = planted_positions(pos, names, labels, fps, 0.1, {}, {"left_ankle": 0.08, "left_toe": 0.02},
+                               rigid_feet={"left": (foot, Q)})
+    planted_front = foot.toe_point(out[:, 0], Q)
+    rolling = np.flatnonzero(~heel)[8:]  # past the heel height's ease-out (0.1 s)
+    assert np.ptp(planted_front[rolling, 0]) < 1e-3  # the edge stays put
+    assert np.allclose(planted_front[rolling, 2], 0.0, atol=1e-3)  # on the floor
+    assert np.allclose(out[rolling, 1] - out[rolling, 0], (ball - ankle)[rolling])  # the foot moved as one
+    flat = np.flatnonzero(heel)[:-8]
+    assert np.allclose(out[flat, :, 2], [0.08, 0.02])  # flat: each joint at its stance height
+
+
+@pytest.mark.filterwarnings("ignore")
+@RETARGET_DIAGNOSTICS
+def test_a_rigid_foot_does_not_snap_at_toe_off():
+    """The bundled robot on the CMU walk: no ankle joint at its velocity cap within
+    three frames of a toe-off."""
+    _, traj = retargeted("cmu_12_01_walk.bvh", "robot")
+    ch = traj.character
+    model = ch.model
+    limits = {n: v for n, v in ch.velocity_limits.items() if "ankle" in n}
+    sat = saturation_matrix(model, traj.qpos, traj.fps, limits)
+    offs = []
+    for side in ("left", "right"):
+        toe = np.asarray(traj.contacts.labels[f"{side}_toe"], dtype=bool)
+        offs += list(np.flatnonzero(toe[:-1] & ~toe[1:]))
+    assert offs
+    near = np.zeros(sat.shape[0], dtype=bool)
+    for t in offs:
+        near[max(0, t - 3) : t + 4] = True
+    assert not sat[near].any(), np.flatnonzero(sat.any(axis=1) & near)

@@ -374,16 +374,12 @@ def planted_positions(
         if rigid is not None:
             # while the heel is planned, each joint at its own stance height (the foot lies
             # flat, as with toes); where it is not, the whole foot by its front edge's height
-            # (and never lower than puts the front edge on the floor while it is planned: a heel
-            # easing down after its label would push a pitched foot's front edge into the floor)
             rolled = (1.0 - plan.z_weight[ankle]) * plan.z["front"]
-            edge = np.where(plan.z_weight["front"] > 0.0, plan.z["front"], -np.inf)
-            lift = np.maximum(plan.z[ankle] + rolled, edge) - (plan.z[ankle] + rolled)
-            out[:, col[ankle], 2] += plan.z[ankle] + rolled + lift
+            out[:, col[ankle], 2] += plan.z[ankle] + rolled
             for j in (f"{side}_{k}" for k in FOOT_JOINTS[1:]):
                 if j in col:
                     own_j = foot_offsets({j: positions[:, col[j]]}, {j: toe_label}, fps, ease_time, {j: heights[j]}).z[j]
-                    out[:, col[j], 2] += plan.z_weight[ankle] * own_j + rolled + lift
+                    out[:, col[j], 2] += plan.z_weight[ankle] * own_j + rolled
         for j in pts if rigid is None else ():
             if j in col:
                 out[:, col[j], 2] += plan.z[j]

@@ -199,6 +199,9 @@ class FootPlanter:
         self.labelled = np.zeros(n, dtype=bool)
         #: sites neither labelled nor held this frame (they get the swing clearance)
         self.free = np.zeros(n, dtype=bool)
+        #: sites that have been down since their foot last swung (a heel lifting off over its
+        #: toes has; a toe still coming down after its heel has not)
+        self.landed = np.zeros(n, dtype=bool)
         self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
         self.anchor = np.zeros((n, 3))
@@ -257,6 +260,7 @@ class FootPlanter:
     def reset(self) -> None:
         self.locked[:] = False
         self.labelled[:] = False
+        self.landed[:] = False
         self._prev_z = None
         self.age[:] = 0
 
@@ -329,6 +333,7 @@ class FootPlanter:
             else:
                 self.locked[k] = False
             self.free[k] = not flags[k] and not engaged[k]
+            self.landed[k] |= not self.free[k]
             lifting = hints is not None and hints.lifting is not None and bool(hints.lifting[k])
             if flags[k] and not rolling and not lifting:
                 # pulled onto the floor, the pull ramping in over onset_time
@@ -341,6 +346,10 @@ class FootPlanter:
                 task.set_target(np.array([0.0, 0.0, z_goal]))
                 soft.append(task)
             self.labelled[k] = flags[k]
+        for f in np.unique(self.feet):
+            mine = self.feet == f
+            if self.free[mine].all():  # the foot swings: its sites land afresh
+                self.landed[mine] = False
         self.turning[:] = False
         return soft, hard, engaged
 
@@ -665,11 +674,16 @@ class Planting:
         return out
 
     def clearance_sites(self) -> dict[int, float]:
-        """Site id -> clearance height for this frame's swing sites (after :meth:`step`)."""
+        """Site id -> clearance height for this frame's swing sites (after :meth:`step`): free
+        sites that have not been down since their foot last swung.  A heel lifting off while
+        its toes are still down is not swinging: held up to the clearance at once, it rose
+        12 mm in one frame at every heel-off (and the pelvis with it); a toe still coming
+        down after its heel keeps the clearance until it lands."""
         c = self.options.clearance
         if not self.options.plant or c <= 0:
             return {}
-        return {t.site_id: c for t, free in zip(self.locks.tasks, self.locks.free) if free}
+        locks = self.locks
+        return {t.site_id: c for t, f, down in zip(locks.tasks, locks.free, locks.landed) if f and not down}
 
     def _turn_with_plan(self, positions: np.ndarray) -> None:
         """Turn each foot's holds (:meth:`FootPlanter.turn`) by its planned heading's change

@@ -345,3 +345,30 @@ def test_a_heel_lifts_off_without_a_jump(character):
             rises.append(z[1] - z[0])
     assert len(rises) >= 5
     assert max(rises) < 0.005, np.round(np.array(rises) * 1000, 1)
+
+
+def test_hands_without_fingers_calibrate_on_the_forearm_not_the_rest_hand():
+    """Before: a hand without finger joints (Bandai) was calibrated as the character's rest
+    hand, hanging, on the calibration frame; on the Bandai punch the actor's forearms point up
+    (a boxing guard, the whole clip), so the targets asked for wrists bent by 180 degrees and
+    dragged the arms against their limits: with planting off the left forearm was 65 degrees
+    off (median), the upper arm 47, and the wrists and forearm twist sat at their limits on
+    every frame.  Now the hand turns with the forearm, its twist from the bent elbow."""
+    import mujoco
+
+    _, traj = retargeted("bandai_punch.bvh", "humanoid", plant=False)
+    fid = trajectory_fidelity(traj, floor_contact=False)
+    for seg in ("left_forearm", "right_forearm", "left_upper_arm", "right_upper_arm"):
+        assert fid.segments[seg].median_deg < 5.0, (seg, fid.segments[seg].median_deg)
+    model = traj.character.model
+    stuck = []
+    for j in range(model.njnt):
+        name = model.joint(j).name
+        if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE or not any(k in name for k in ("wrist", "forearm")):
+            continue
+        q = traj.qpos[:, model.jnt_qposadr[j]]
+        lo, hi = model.jnt_range[j]
+        share = float(np.mean((q < lo + 0.02) | (q > hi - 0.02)))
+        if share > 0.25:
+            stuck.append((name, round(share, 2)))
+    assert not stuck, stuck

@@ -296,7 +296,8 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     facing yaw) onto the actor's rest segment direction, x-y-z-w.
 
     The segment runs from ``c`` to its first canonical child (limbs) or up the
-    torso (:data:`TORSO_UP`; the pelvis is not aligned).  It calibrates a
+    torso (:data:`TORSO_UP`; the pelvis on the trunk line); a limb's end with no child
+    on both sides, from its parent to ``c``.  It calibrates a
     rest posture that differs between actor and character: T-pose arms against
     arms down, a rest spine that leans.
     """
@@ -318,14 +319,57 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
         child = next((x for x in TORSO_UP[c] if x in present), None)
     else:
         child = _first_child(c, present)
-    if child is None:
+    if child is not None:
+        d_a = actor_pts[child] - actor_pts[c]
+        d_c = quat_apply(yaw, char_pts[child] - char_pts[c])
+    elif c not in TORSO_UP and canonical_parent(c, present) is not None:
+        # a limb's end without a child on both sides (a hand without finger joints): it turns
+        # with the limb ending at it (a wrist is near neutral in a calibration pose), not left
+        # as the character's rest hand, which calibrated on an actor whose forearms point up
+        # (a boxing guard) asked for a wrist bent by 180 degrees
+        return _limb_alignment(c, present, actor_pts, char_pts, yaw)
+    else:
         return ident
-    base_a, base_c = actor_pts[c], char_pts[c]
-    d_a = actor_pts[child] - base_a
-    d_c = quat_apply(yaw, char_pts[child] - base_c)
     if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
         return ident
     return _min_rotation(d_c, d_a)
+
+
+def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
+    r"""The rotation that takes the character's rest limb ending at ``c`` onto the actor's,
+    x-y-z-w, following the chain: the upper segment (grandparent to parent, the upper arm)
+    by its smallest rotation :math:`M_1`, then the lower one (parent to ``c``, the forearm)
+    about the actor's hinge axis :math:`\hat n \propto a_1 \times a_2` by the angle that
+    takes :math:`M_1 c_2` onto :math:`a_2`.
+
+    The twist about the lower segment then comes from the actor's bent elbow, not from the
+    smallest rotation between two nearly opposite directions (a character's forearm hanging
+    at rest, an actor's raised), which is arbitrary about them.  A straight actor's limb
+    (no hinge plane) or a limb without its upper segment falls back to the smallest rotation
+    of the lower segment.
+    """
+    p = canonical_parent(c, present)
+    a2, c2 = actor_pts[c] - actor_pts[p], quat_apply(yaw, char_pts[c] - char_pts[p])
+    if np.linalg.norm(a2) < 1e-6 or np.linalg.norm(c2) < 1e-6:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    g = canonical_parent(p, present)
+    if g is None:
+        return _min_rotation(c2, a2)
+    a1, c1 = actor_pts[p] - actor_pts[g], quat_apply(yaw, char_pts[p] - char_pts[g])
+    if np.linalg.norm(a1) < 1e-6 or np.linalg.norm(c1) < 1e-6:
+        return _min_rotation(c2, a2)
+    M1 = _min_rotation(c1, a1)
+    b2 = quat_apply(M1, c2)
+    n = np.cross(a1, a2)
+    if np.linalg.norm(n) < np.sin(np.radians(20.0)) * np.linalg.norm(a1) * np.linalg.norm(a2):
+        return quat_mul(_min_rotation(b2, a2), M1)  # a nearly straight limb: no hinge plane
+    n = n / np.linalg.norm(n)
+    b, a = b2 - np.dot(b2, n) * n, a2 - np.dot(a2, n) * n
+    angle = np.arctan2(np.dot(np.cross(b, a), n), np.dot(b, a))
+    hinge = Rotation.from_rotvec(angle * n).as_quat()
+    # what the hinge leaves of the lower segment off the plane, by its smallest rotation
+    rest = _min_rotation(quat_apply(hinge, b2), a2)
+    return quat_mul(rest, quat_mul(hinge, M1))
 
 
 def _relative_to_pose(pose_rot: dict[str, np.ndarray], c: str, q: np.ndarray) -> np.ndarray:

@@ -123,3 +123,16 @@ def test_a_cloud_without_labels_is_one_error_naming_the_file(takes, tmp_path, ca
     assert len(err) == 1 and "nolabels.mcap: /markers is a foxglove.PointCloud without marker labels" in err[0], err
     assert "Traceback" not in captured.err and captured.out == ""
     assert not any((tmp_path / name).exists() for name in outputs)
+
+
+def test_report_reads_a_marker_source_as_the_retarget_did(takes, tmp_path):
+    """Before: ``report`` re-read a marker source with the default solve whatever the retarget
+    had used (no --marker-set, --joint-centres or solve options), so its source figures were
+    those of another actor; a marker option on a source that is not a marker file is one error."""
+    out, a, b = tmp_path / "o.npz", tmp_path / "a.json", tmp_path / "b.json"
+    assert _run(["retarget", takes / "take.c3d", "-o", out, "--joint-centres", "--quiet", "--end", "60"]) == 0
+    assert _run(["report", out, "--joint-centres", "--json", a]) == 0
+    assert _run(["report", out, "--json", b]) == 0
+    ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert ra["source"] != rb["source"]  # the joint centres are not the solved actor
+    assert _run(["report", out, "--no-source", "--joint-centres"]) != 0

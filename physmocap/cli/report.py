@@ -30,6 +30,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the source's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
+    from .retarget import add_marker_read_options
+
+    add_marker_read_options(p)  # a marker source is read as the retarget read it
     p.add_argument(
         "--start", type=int, default=None,
         help="source frame the trajectory starts at (retarget --start; default: stored in the file, else 0)"
@@ -75,11 +78,15 @@ def run(args: argparse.Namespace) -> int:
     motion = None
     joint_indices = None
     src = _source_path(args, traj.source)
+    from .retarget import marker_read_options
+
+    marker_opts = marker_read_options(args, src)  # refused without a marker source
     if src is not None:
         from ..ik.retarget import map_motion
         from ..sources import load_motion
 
         opts = {"units": args.in_units} if args.in_units else {}
+        opts.update(marker_opts)
         motion = load_motion(src, min_frames=1, **opts)
         # as retarget does: cut at the source's rate (--start is a source frame), then resample
         if args.start >= motion.num_frames:

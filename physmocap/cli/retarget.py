@@ -36,20 +36,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def add_retarget_options(p: argparse.ArgumentParser) -> None:
     """The options that say how to retarget (shared by ``retarget``, ``preview``, ``view`` and
-    ``batch``), with the marker solve's (:func:`~physmocap.cli.solve.add_marker_solve_options`)."""
-    from .solve import add_marker_solve_options
-
+    ``batch``), with the marker reader's (:func:`add_marker_read_options`)."""
     p.add_argument("--character", metavar="PATH", help="MJCF file or bundled name (humanoid, robot)")
     p.add_argument("--map", metavar="MAP.toml", help="character mapping file (TOML)")
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
-    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc, marker .mcap): marker roles overriding the aliases")
-    p.add_argument("--joint-centres", action="store_true",
-                   help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
-                   "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
-                   "and no joint ranges before the character's")
-    add_marker_solve_options(p, prefix="marker-")
+    add_marker_read_options(p)
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -65,6 +58,19 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar, report table or 'wrote' lines (warnings and errors still print)")
+
+
+def add_marker_read_options(p: argparse.ArgumentParser) -> None:
+    """How a marker input becomes the actor's motion (:data:`MARKER_OPTIONS_UNSET`; shared by the
+    commands that retarget and by ``report``, which must read its source as the retarget did)."""
+    from .solve import add_marker_solve_options
+
+    p.add_argument("--marker-set", metavar="SET.toml", help="marker files (.c3d, .trc, marker .mcap): marker roles overriding the aliases")
+    p.add_argument("--joint-centres", action="store_true",
+                   help="marker files (.c3d, .trc, marker .mcap): retarget the markers' joint centres instead of the "
+                   "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
+                   "and no joint ranges before the character's")
+    add_marker_solve_options(p, prefix="marker-")
 
 
 def add_bvh_output_options(p: argparse.ArgumentParser) -> None:
@@ -196,11 +202,11 @@ MARKER_OPTIONS_UNSET: dict = {"marker_set": None, "joint_centres": False, "marke
                               "marker_no_floor": False}
 
 
-def marker_read_options(args: argparse.Namespace) -> dict:
+def marker_read_options(args: argparse.Namespace, path=None) -> dict:
     """What ``load_motion`` is told about a marker input by :data:`MARKER_OPTIONS_UNSET`'s
     options: ``marker_set``, ``solve`` False (``--joint-centres``) and ``solve_options`` (one
     validated :class:`~physmocap.markers.solve.MarkerSolveOptions`, as ``physmocap solve``
-    builds it).
+    builds it), for the file ``path`` (default: ``args.input``).
 
     Raises:
         OptionError: These options on an input that is not a marker file, or the solve's
@@ -216,11 +222,12 @@ def marker_read_options(args: argparse.Namespace) -> dict:
                                       ("--marker-max-iterations / --marker-no-floor", solve_options)) if value]
     if not given:
         return {}
-    if not is_marker_file(args.input):
-        raise OptionError(f"{', '.join(given)}: for marker files only ({MARKER_FILE_TYPES})", path=args.input)
+    path = getattr(args, "input", None) if path is None else path
+    if path is None or not is_marker_file(path):
+        raise OptionError(f"{', '.join(given)}: for marker files only ({MARKER_FILE_TYPES})", path=path)
     if joint_centres and solve_options:
         raise OptionError("--marker-max-iterations and --marker-no-floor shape the actor's solve, which "
-                          "--joint-centres skips", path=args.input)
+                          "--joint-centres skips", path=path)
     out: dict = {"marker_set": marker_set} if marker_set else {}
     if joint_centres:
         out["solve"] = False

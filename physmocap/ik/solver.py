@@ -120,6 +120,15 @@ class SolverOptions:
             its target (a robot's stance ankle at its roll limit under a leaning actor)
             keeps its arms in the actor's pose instead of twisting them to reach hand
             targets placed for a body elsewhere.
+        extrapolate_start: Start a frame's iterations from the constant-velocity prediction
+            (the smoothness prior's target, clipped to the joint ranges and the velocity band)
+            instead of the previous frame's pose, when the two previous frames converged
+            (last step below ``tolerance`` with every hard constraint held: an unconverged
+            pose's lag would be extrapolated too).  A frame that needs a relaxation on the
+            way is solved again from the previous pose.  Off by default (the default output
+            is unchanged); on, the 120 Hz walks need about 20 % fewer QPs a frame at the same
+            tracking error, but the answers change (README, speed: the dance clip's tracking
+            error and joint acceleration rise by 1-2 %).
     """
 
     max_iterations: int = 4
@@ -143,6 +152,7 @@ class SolverOptions:
     second_order_correction: bool = False
     upper_body_follows_pelvis: bool = True
     smoothness_cost: float = 0.5
+    extrapolate_start: bool = False
 
     def __post_init__(self) -> None:
         check_fields(
@@ -232,6 +242,7 @@ class FrameSolver:
         #: pull towards the constant-velocity prediction from the two previous frames
         self.momentum = mink.PostureTask(model, cost=max(opt.smoothness_cost * (fps / SMOOTHNESS_RATE) ** 2, 1e-12))
         self._q_prev2: np.ndarray | None = None
+        self._converged = (False, False)  # whether the two previous frames' iterations converged
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
         self.step_limit = FrameStepLimit(model, character.velocity_limits, 1.0 / fps)
         self.root_limit = RootStepLimit(model, 1.0 / fps)
@@ -326,6 +337,18 @@ class FrameSolver:
         q = self.q_prev.copy()
         mujoco.mj_integratePos(self.model, q, v, 1.0)
         self.momentum.set_target(q)
+        self._prediction = q
+
+    def _start_from_prediction(self) -> None:
+        """Move to the constant-velocity prediction (:meth:`_predict`), kept inside the joint
+        ranges and the frame's velocity band (``SolverOptions.extrapolate_start``)."""
+        q = self._prediction.copy()
+        q[self._lim_qadr] = np.clip(q[self._lim_qadr], self._lim_range[:, 0], self._lim_range[:, 1])
+        if self.options.velocity_limits and self.step_limit.q_prev is not None and len(self.step_limit.qposadr):
+            lo, hi = self.step_limit.step_bounds()
+            qa = self.step_limit.qposadr
+            q[qa] = np.clip(q[qa], lo, hi)
+        self._set_q(q)
 
     def forget_previous(self) -> None:
         """Keep the current pose as the warm start but drop the previous frame, so the
@@ -341,6 +364,7 @@ class FrameSolver:
         self._daqp.reset()
         self.q_prev = None
         self._q_prev2 = None
+        self._converged = (False, False)
 
     # -- solving ----------------------------------------------------------------
     def _limits(self, level: int) -> tuple[list, list[mink.Limit]]:
@@ -606,6 +630,36 @@ class FrameSolver:
         """
         return not self.options.floor or self._residuals()[1] <= 1e-4
 
+    def _iterate(self, total: int, iters: int, base: int) -> tuple[int, int, bool]:
+        """The frame's QP iterations from the current configuration: ``iters``, then up to
+        ``total`` while a hard constraint is off; ``(iterations, worst relaxation level,
+        converged)``, converged when the last step was below ``tolerance`` with every hard
+        constraint held."""
+        opt = self.options
+        worst = 0
+        it = 0
+        self._residual = None  # hard-constraint residual, cached between line searches
+        self._res_cache = None  # the constraints may have changed since the last frame
+        for it in range(1, total + 1):
+            if it > iters and self._floor_ok() and self._constraints_ok() and self._apart_ok():
+                return it - 1, worst, False
+            level = base
+            v = None
+            while level < 5:
+                try:
+                    v = self._step(level)
+                    break
+                except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                    level += 1
+            if level > base:
+                worst = max(worst, level)
+            if v is None:
+                return it, 5, False
+            self._line_search(v)
+            if np.abs(v).max() < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
+                return it, worst, True
+        return it, worst, False
+
     def solve_frame(
         self,
         positions: np.ndarray,
@@ -636,37 +690,25 @@ class FrameSolver:
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
         self.root_limit.set_previous(self.q_prev)
+        self._prediction = None
         self._predict()
+        start = None  # the previous frame's pose when the iterations start from the prediction
+        if opt.extrapolate_start and not first and self._prediction is not None and all(self._converged):
+            start = self.configuration.data.qpos.copy()
+            self._start_from_prediction()
         iters = opt.first_frame_iterations if first else opt.max_iterations
         if first:
             self._settle_from_rest()
-        worst = 0
-        it = 0
         base = 0 if self._constraints else 1
-        self._residual = None  # hard-constraint residual, cached between line searches
-        self._res_cache = None  # the constraints may have changed since the last frame
         extra = opt.floor_iterations if opt.floor else 0
         extra = max(extra, opt.floor_iterations if (self._constraints or self.self_limit is not None) else 0)
-        for it in range(1, iters + extra + 1):
-            if it > iters and self._floor_ok() and self._constraints_ok() and self._apart_ok():
-                it -= 1
-                break
-            level = base
-            v = None
-            while level < 5:
-                try:
-                    v = self._step(level)
-                    break
-                except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
-                    level += 1
-            if level > base:
-                worst = max(worst, level)
-            if v is None:
-                worst = 5
-                break
-            self._line_search(v)
-            if np.abs(v).max() < opt.tolerance and self._floor_ok() and self._constraints_ok() and self._apart_ok():
-                break
+        it, worst, converged = self._iterate(iters + extra, iters, base)
+        if start is not None and worst > 0:
+            # a relaxation was needed on the way from the predicted start: the frame again,
+            # from the previous frame's pose (as without extrapolate_start)
+            self._set_q(start)
+            it, worst, converged = self._iterate(iters + extra, iters, base)
+        self._converged = (self._converged[1], converged)
         if opt.floor and worst < 3 and not self._floor_ok():
             self._project_floor(base)
         q = self.configuration.data.qpos.copy()

@@ -96,6 +96,13 @@ class FrameRetargeter:
         self._upper = self._upper_body(character, self.names)
         #: ``(3,)`` the pelvis's low-passed offset from its target up to the previous frame (metres)
         self._lag = np.zeros(3)
+        #: ``(target index, the pelvis's world position (a view of the solver's data), low-pass
+        #: gain)`` for :meth:`_measure_lag`, or None when the upper body has nothing to follow
+        self._pelvis: tuple[int, np.ndarray, float] | None = None
+        if "pelvis" in self.names and self._upper.size:
+            tracked = character.tracked["pelvis"]
+            x = tracked.position(character.model, self.solver.configuration.data)
+            self._pelvis = (self.names.index("pelvis"), x, 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps)))
         self.restart_contacts()
 
     @staticmethod
@@ -135,17 +142,13 @@ class FrameRetargeter:
         r"""Update the low-passed offset :math:`e` of the pelvis from the target the solver was
         given (after the planting's shift: a stream's body following its planted feet is not
         a lag) after this frame's solve: :math:`e \leftarrow e + a (x - T - e)`, :math:`a = 1 - e^{-1/(\tau f)}`."""
-        if "pelvis" not in self.names or not self._upper.size:
+        if self._pelvis is None:
             return
-        i = self.names.index("pelvis")
+        i, x, a = self._pelvis
         if not bool(valid[i]):
             self._lag = np.zeros(3)
             return
-        tracked = self.character.tracked["pelvis"]
-        data = self.solver.configuration.data
-        x = tracked.position(self.character.model, data)
-        a = 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps))
-        self._lag = self._lag + a * (np.asarray(x, dtype=float) - positions[i] - self._lag)
+        self._lag = self._lag + a * (x - positions[i] - self._lag)
 
     def restart_contacts(self) -> None:
         """Forget every anchor and lock (a stream calibrating again); the pose is kept."""

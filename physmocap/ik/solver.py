@@ -315,10 +315,9 @@ class FrameSolver:
         # the planted contacts' residual rows at once: site, world axis, target (metres)
         self._hold_rows = None
         if self._constraints and all(type(t) is SitePositionTask for t in self._constraints):
-            sites = np.repeat([t.site_id for t in self._constraints], [t.k for t in self._constraints])
-            axes = np.concatenate([np.array(t.axes, dtype=int) for t in self._constraints])
-            target = np.concatenate([t.target[list(t.axes)] for t in self._constraints])
-            self._hold_rows = (sites, axes, target)
+            rows = [(t.site_id, a, t.target[a]) for t in self._constraints for a in t.axes]
+            sites, axes, target = zip(*rows)
+            self._hold_rows = (np.array(sites, dtype=int), np.array(axes, dtype=int), np.array(target, dtype=float))
         self.floor_limit.clearance = dict(holds.clearance_sites)
         self.floor_limit.swing_bodies = dict(holds.clearance_bodies)
 

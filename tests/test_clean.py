@@ -378,14 +378,13 @@ def test_shortened_benchmark_on_the_bundled_walk(walk):
 
 def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
     """A knee frozen for 0.4 s of a walk: no curve knows the swing it hides, but the other
-    strides do; the matched motion takes off most of the error."""
+    strides (or the other leg's, mirrored) do; the matched motion takes off most of the error."""
     j = _joint(walk, "RightLeg")
     frames = list(range(300, 348))
     bad = _with(walk, j, frames, hold=True)
     fixed, report = clean(bad)
-    assert [(g.kind, g.start, g.end, g.corrected) for g in report.glitches if g.joint == "RightLeg"] == [
-        ("frozen", 300, 347, "matched")
-    ]
+    mine = [(g.kind, g.start, g.end, g.corrected) for g in report.glitches if g.joint == "RightLeg"]
+    assert mine in ([("frozen", 300, 347, "matched")], [("frozen", 300, 347, "mirrored")])
     P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
     before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
     after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
@@ -393,6 +392,38 @@ def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
     untouched = np.ones(walk.num_frames, bool)
     untouched[frames] = False
     assert np.array_equal(fixed.rotations[untouched], bad.rotations[untouched])
+
+
+def _span_rms(m, reference, frames) -> float:
+    P, P0 = m.world_positions()[frames], reference.world_positions()[frames]
+    return float(np.sqrt(np.mean(np.sum((P - P0) ** 2, axis=-1))))
+
+
+def test_frozen_thigh_gets_the_other_legs_motion_mirrored(walk):
+    """A left thigh frozen for 0.4 s: the right leg, half a stride later and reflected
+    across the body's midplane, shows its swing better than the left leg's other strides."""
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import _matcher, _mirror, correct_glitches
+    from physmocap.clean.detect import Glitch
+
+    twin, reflect = _mirror(walk)
+    names = walk.skeleton.names
+    assert names[twin[_joint(walk, "LeftUpLeg")]] == "RightUpLeg" and twin[_joint(walk, "Spine")] == _joint(walk, "Spine")
+    assert abs(reflect[0, 0] + 1.0) < 0.01  # the skeleton's left-right axis is x
+    j, frames = _joint(walk, "LeftUpLeg"), list(range(300, 348))
+    bad = _with(walk, j, frames, hold=True)
+    glitch = [Glitch("frozen", "LeftUpLeg", 300, 347, 1.0)]
+    matcher = _matcher(bad, glitch, CleanOptions())
+    errors = {}
+    for mirrored in (False, True):
+        R = np.array(bad.rotations, copy=True)
+        R[frames, j] = matcher.bridge(j, 300, 347, None, mirrored)
+        errors[mirrored] = _span_rms(dataclasses.replace(walk, rotations=R), walk, frames)
+    assert errors[True] < 0.5 * errors[False], errors
+    # chosen on the thigh's own motion next to the span
+    fixed, done = correct_glitches(bad, glitch)
+    assert done[0].corrected == "mirrored"
+    assert _span_rms(fixed, walk, frames) < 0.05 * _span_rms(bad, walk, frames)
 
 
 def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):
@@ -455,7 +486,7 @@ def test_repair_settings_come_from_the_options(walk):
     bad = _with(walk, j, frames, q)
     _, report = clean(bad, CleanOptions(offset_min_time=1.0, match_windows=1))
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
-    assert len(mine) == 1 and mine[0].corrected in ("cubic", "matched")
+    assert len(mine) == 1 and mine[0].corrected.split(",")[0] in ("cubic", "matched", "mirrored")
 
 
 def test_glitch_at_the_clips_start_holds_the_first_good_rotation(walk):

@@ -61,7 +61,7 @@ def _check_resolved(motion, s: int) -> None:
     ji = canonical_joints(motion)
     never, done_never = correct_glitches(bad, glitch, resolve="never")
     fixed, done = correct_glitches(bad, glitch)
-    assert done_never[0].corrected in ("cubic", "matched")
+    assert done_never[0].corrected.split(",")[0] in ("cubic", "matched", "mirrored")
     assert beyond_range_mask(never, CleanOptions(), ji)[s : e + 1, j].sum() >= SPAN // 2  # the curve overshoots
     assert done[0].corrected == "re-solved"
     assert not beyond_range_mask(fixed, CleanOptions(), ji)[s : e + 1, j].any()
@@ -99,7 +99,7 @@ def test_interpolation_within_the_range_is_kept():
     bad, glitch = _twisted(_load("example"), "LeftForeArm", 200, 205)
     never, _ = correct_glitches(bad, glitch, resolve="never")
     fixed, done = correct_glitches(bad, glitch)
-    assert done[0].corrected in ("cubic", "matched")
+    assert done[0].corrected.split(",")[0] in ("cubic", "matched", "mirrored")
     assert np.array_equal(np.asarray(fixed.rotations), np.asarray(never.rotations))
 
 

@@ -4,12 +4,14 @@ A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its off
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
-it and its first good one after it by whichever of two estimates rebuilds the joint's own
-good motion next to the span better (:func:`_bridge`): a cubic Hermite curve in rotation
-space, leaving and arriving at the joint's own speed, or the joint's motion in the windows
+it and its first good one after it by whichever of three estimates rebuilds the joint's
+own good motion next to the span best (:func:`_bridge`): a cubic Hermite curve in rotation
+space, leaving and arriving at the joint's own speed, the joint's motion in the windows
 of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
-what it was doing).  At the clip's ends the nearest good rotation is held.  A
+what it was doing), or its other side's motion, reflected, in the windows where the body
+mirrored left to right moves most like it (half a stride away in a walk).  At the clip's
+ends the nearest good rotation is held.  A
 positional glitch (bone stretch, gap, a held position) is bridged by the joint's offset
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked),
@@ -34,6 +36,7 @@ from .detect import CleanOptions, Glitch, _angle, animated_joints
 from .positional import twin as positional_twin
 
 __all__ = ["correct_glitches"]
+
 
 #: Glitch kinds that are repaired (the others are reported only).
 REPAIRED = {
@@ -86,19 +89,36 @@ class _Matcher:
     applied from the last good rotation :math:`q_j(s-1)`; the mismatch left at
     :math:`e+1` is spread linearly over the span in the joint's frame, so both ends join
     exactly.
+
+    Mirrored (``mirror``: each joint's other side and the reflection :math:`M` across the
+    body's midplane, :func:`_mirror`), the clip side of the correlation is the body mirrored,
+    :math:`M R_{k'}(t) M` for every joint :math:`k` with its other side :math:`k'` (itself on
+    the midline), and the windows lend the other side's increments reflected, :math:`-Mv`
+    for a rotation vector :math:`v`; they may overlap the template (the other leg at the
+    same time, in a jump).
     """
 
     def __init__(
-        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float, own_weight: float, best: int
+        self, R: np.ndarray, animated: list[int], bad: np.ndarray, context: float, own_weight: float, best: int,
+        mirror: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
         F = len(R)
         self.R, self.animated, self.bad = R, animated, bad
         self.context, self.own_weight, self.best = context, own_weight, best
         self.M = Rotation.from_quat(R[:, animated].reshape(-1, 4)).as_matrix().reshape(F, len(animated), 9)
+        self.twin = self.reflect = self.Mm = None
+        if mirror is not None:
+            twin, reflect = mirror  # (J,) each joint's other side (itself on the midline), (3, 3)
+            self.twin, self.reflect = twin, reflect
+            src = Rotation.from_quat(R[:, twin[animated]].reshape(-1, 4)).as_matrix()
+            self.Mm = (reflect @ src @ reflect).reshape(F, len(animated), 9)
+            self.Mm = self.Mm * ~bad[:, twin[animated]][..., None]
 
-    def _scores(self, j: int, s: int, e: int, hidden: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _scores(self, j: int, s: int, e: int, hidden: np.ndarray, mirrored: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(offsets d, scores)`` of the windows that may lend joint ``j`` motion for
-        ``s..e`` (``hidden (F,)``: joint ``j``'s frames not to use, the span included)."""
+        ``s..e`` (``hidden (F,)``: joint ``j``'s frames not to use, the span included);
+        ``mirrored``: windows of the body mirrored left to right (joint ``j``'s other side
+        lends its motion, reflected)."""
         from scipy.signal import fftconvolve
 
         F, n = len(self.R), e - s + 1
@@ -109,25 +129,33 @@ class _Matcher:
             col = self.animated.index(j)
             w[:, col] *= self.own_weight * ~hidden[lo:hi]
         T = (self.M[lo:hi] * w[..., None]).reshape(hi - lo, -1)
-        score = fftconvolve(self.M.reshape(F, -1), T[::-1], mode="valid", axes=0).sum(axis=1)
+        body = self.Mm if mirrored else self.M
+        score = fftconvolve(body.reshape(F, -1), T[::-1], mode="valid", axes=0).sum(axis=1)
         d = np.arange(len(score)) - lo
-        ok = (np.abs(d) >= hi - lo) & (s - 1 + d >= 0) & (e + 1 + d < F)
-        cum = np.concatenate([[0], np.cumsum(self.bad[:, j] | hidden)])
+        src = int(self.twin[j]) if mirrored else j
+        ok = (s - 1 + d >= 0) & (e + 1 + d < F)
+        if src == j:
+            ok &= np.abs(d) >= hi - lo
+        cum = np.concatenate([[0], np.cumsum(self.bad[:, src] | (hidden if src == j else False))])
         first, last = np.clip(s - 1 + d, 0, F), np.clip(e + 2 + d, 0, F)
-        ok &= cum[last] == cum[first]  # joint j's own motion there is clean
+        ok &= cum[last] == cum[first]  # the lending joint's own motion there is clean
         return d[ok], score[ok]
 
-    def bridge(self, j: int, s: int, e: int, hidden: np.ndarray | None = None) -> np.ndarray | None:
+    def bridge(
+        self, j: int, s: int, e: int, hidden: np.ndarray | None = None, mirrored: bool = False
+    ) -> np.ndarray | None:
         """``(e - s + 1, 4)`` rotations of joint ``j`` on ``s..e``, or None (no window
-        fits); ``hidden (F,)`` marks more of joint ``j``'s frames not to use."""
+        fits); ``hidden (F,)`` marks more of joint ``j``'s frames not to use; ``mirrored``:
+        the windows of the body mirrored left to right lend the motion of joint ``j``'s other
+        side, reflected."""
         from ..rotations import quat_conj, quat_mul
 
         F, n = len(self.R), e - s + 1
-        if s < 1 or e + 1 >= F:
+        if s < 1 or e + 1 >= F or (mirrored and self.Mm is None):
             return None
         hide = np.zeros(F, dtype=bool) if hidden is None else hidden.copy()
         hide[s : e + 1] = True
-        d, score = self._scores(j, s, e, hide)
+        d, score = self._scores(j, s, e, hide, mirrored)
         picks: list[int] = []
         for k in d[np.argsort(-score, kind="stable")]:
             if all(abs(k - p) > n for p in picks):
@@ -136,10 +164,12 @@ class _Matcher:
                 break
         if not picks:
             return None
+        lender = int(self.twin[j]) if mirrored else j
         inc = np.zeros((n + 2, 3))
         for k in picks:
-            src = self.R[s - 1 + k : e + 2 + k, j]
-            inc += Rotation.from_quat(quat_mul(np.broadcast_to(quat_conj(src[0]), src.shape), src)).as_rotvec()
+            src = self.R[s - 1 + k : e + 2 + k, lender]
+            v = Rotation.from_quat(quat_mul(np.broadcast_to(quat_conj(src[0]), src.shape), src)).as_rotvec()
+            inc += -v @ self.reflect if mirrored else v  # a rotation vector reflected: -M v
         step = Rotation.from_rotvec(inc / len(picks)).as_quat()
         est = quat_mul(np.broadcast_to(self.R[s - 1, j], step.shape), step)
         miss = Rotation.from_quat(quat_mul(quat_conj(est[-1]), self.R[e + 1, j])).as_rotvec()
@@ -156,11 +186,33 @@ def _glitched(motion: Motion, glitches: list[Glitch]) -> np.ndarray:
     return bad
 
 
+def _mirror(motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(twin (J,), reflection (3, 3))``: each joint's other side (by name,
+    :func:`.positional.twin`; itself on the midline) and the reflection across the body's
+    midplane, its normal the mean left-to-right direction of the twin joints' rest positions;
+    None without twins."""
+    names = {n: j for j, n in enumerate(motion.skeleton.names)}
+    twin = np.arange(len(names))
+    for n, j in names.items():
+        t = positional_twin(n, names)
+        if t is not None:
+            twin[j] = t
+    pairs = [(j, int(t)) for j, t in enumerate(twin) if t > j]
+    if not pairs:
+        return None
+    rest = np.asarray(motion.skeleton.rest_positions(), dtype=float)
+    d = np.stack([rest[a] - rest[b] for a, b in pairs])
+    w, v = np.linalg.eigh(d.T @ d)
+    normal = v[:, -1]
+    return twin, np.eye(3) - 2.0 * np.outer(normal, normal)
+
+
 def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matcher:
     """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out."""
     R = np.asarray(motion.rotations, dtype=float)
     bad = _glitched(motion, glitches)
-    return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows)
+    return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows,
+                    _mirror(motion))
 
 
 def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
@@ -186,32 +238,40 @@ def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
 
 
 def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
-    """The better of the Hermite curve and the matched motion (:class:`_Matcher`) over
-    frames ``s..e`` of joint ``j`` of ``R (F, J, 4)``, judged on the joint's own good motion
-    next to the span: each method rebuilds the ``n = e - s + 1`` frames just before the
-    span (leaving one frame between) and just after it as if they were glitched too, and
-    the one with the smaller RMS rotation error there (degrees) is used.  Returns the
-    rotations and the method's name ("cubic" or "matched")."""
+    """The best of the Hermite curve, the matched motion and the mirrored matched motion
+    (:class:`_Matcher`) over frames ``s..e`` of joint ``j`` of ``R (F, J, 4)``, judged on
+    the joint's own good motion next to the span: each method rebuilds the ``n = e - s + 1``
+    frames just before the span (leaving one frame between) and just after it as if they were
+    glitched too (:func:`_pseudo_gaps`), and the one with the smallest RMS rotation error
+    there (degrees) is used.  Returns the rotations and the method's name ("cubic",
+    "matched" or "mirrored")."""
     cubic = _hermite(R[:, j], s - 1, e + 1)
     if matcher is None:
         return cubic, "cubic"
     F, n = len(R), e - s + 1
-    err = np.zeros(2)
-    tested = False
+    kinds = [False, True] if matcher.Mm is not None else [False]  # mirrored or not
+    err = np.zeros(1 + len(kinds))
+    tested = np.zeros(1 + len(kinds), dtype=bool)
     for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
         hidden = np.zeros(F, bool)
         hidden[a : b + 1] = True
-        matched = matcher.bridge(j, a, b, hidden)
-        if matched is None:
-            continue
         truth = R[a : b + 1, j]
-        err += [np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2), np.sum(_angle(matched, truth) ** 2)]
-        tested = True
-    if tested and err[1] < err[0]:
-        matched = matcher.bridge(j, s, e)
+        err[0] += np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2)
+        for i, mirrored in enumerate(kinds):
+            matched = matcher.bridge(j, a, b, hidden, mirrored)
+            if matched is None:
+                err[1 + i] = np.inf
+                continue
+            err[1 + i] += np.sum(_angle(matched, truth) ** 2)
+            tested[1 + i] = True
+    err[1:][~tested[1:]] = np.inf
+    for i in np.argsort(err, kind="stable"):
+        if i == 0:
+            break
+        matched = matcher.bridge(j, s, e, None, kinds[i - 1])
         if matched is not None:
-            return matched, "matched"
+            return matched, "mirrored" if kinds[i - 1] else "matched"
     return cubic, "cubic"
 
 
@@ -392,7 +452,7 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" (:class:`_Matcher`), "re-solved" (the hard-limited IK on an actor-fitted
+    "matched" or "mirrored" (:class:`_Matcher`), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`; ", on bones" where it was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",

@@ -106,7 +106,8 @@ class CleanOptions:
         match_own_weight: Weight of the glitched joint's own rotations on those context
             frames in the template (its motion into and out of the span says most about it).
         match_windows: How many best-matching windows of the clip lend their motion
-            (averaged) to the matched bridge.
+            (averaged) to the matched bridge (and as many windows of the body mirrored left
+            to right to the mirrored one).
     """
 
     jump_deg: float = _opt(10.0, "deg")

@@ -420,10 +420,32 @@ def test_frozen_thigh_gets_the_other_legs_motion_mirrored(walk):
         R[frames, j] = matcher.bridge(j, 300, 347, None, mirrored)
         errors[mirrored] = _span_rms(dataclasses.replace(walk, rotations=R), walk, frames)
     assert errors[True] < 0.5 * errors[False], errors
-    # chosen on the thigh's own motion next to the span
-    fixed, done = correct_glitches(bad, glitch)
+    # chosen on the thigh's own motion next to the span (no foot held: contact_height ~ 0)
+    fixed, done = correct_glitches(bad, glitch, CleanOptions(contact_height=1e-6))
     assert done[0].corrected == "mirrored"
     assert _span_rms(fixed, walk, frames) < 0.05 * _span_rms(bad, walk, frames)
+
+
+def test_frozen_thigh_in_stance_keeps_its_foot_planted(walk):
+    """A right thigh frozen for 0.4 s while its foot stands: the hip moves on, the knee and
+    ankle rotations are good, so the thigh is turned to keep the toes where they stand; the
+    bridge alone slides them."""
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import correct_glitches
+    from physmocap.clean.detect import Glitch
+
+    j, frames = _joint(walk, "RightUpLeg"), list(range(200, 248))
+    bad = _with(walk, j, frames, hold=True)
+    glitch = [Glitch("frozen", "RightUpLeg", 200, 247, 1.0)]
+    fixed, done = correct_glitches(bad, glitch)
+    loose, done_loose = correct_glitches(bad, glitch, CleanOptions(contact_height=1e-6))
+    assert done[0].corrected.endswith(", on contact") and "contact" not in done_loose[0].corrected
+    assert _span_rms(fixed, walk, frames) < 0.4 * _span_rms(loose, walk, frames)
+    toe = _joint(walk, "RightToeBase_End")
+    assert np.abs(fixed.world_positions()[frames, toe] - walk.world_positions()[frames, toe]).max() < 0.01
+    untouched = np.ones(np.shape(fixed.rotations)[:2], bool)
+    untouched[frames, j] = False
+    assert np.array_equal(np.asarray(fixed.rotations)[untouched], np.asarray(bad.rotations)[untouched])
 
 
 def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):

@@ -10,8 +10,10 @@ space, leaving and arriving at the joint's own speed, the joint's motion in the 
 of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
 what it was doing), or its other side's motion, reflected, in the windows where the body
-mirrored left to right moves most like it (half a stride away in a walk).  At the clip's
-ends the nearest good rotation is held.  A
+mirrored left to right moves most like it (half a stride away in a walk).  Where a point
+below the joint stands on the floor next to the span, the bridge is turned so that it goes
+on standing there while the rest of the limb can reach it (:func:`_on_contact`: a frozen
+thigh keeps its foot planted).  At the clip's ends the nearest good rotation is held.  A
 positional glitch (bone stretch, gap, a held position) is bridged by the joint's offset
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked),
@@ -275,6 +277,133 @@ def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> 
     return cubic, "cubic"
 
 
+def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
+    """Per child of joint ``j``, the lowest (median height over the clip) joint of its
+    subtree (end sites included): the points below ``j`` that may touch the floor."""
+    top = {}
+    for k in range(j + 1, len(parents)):
+        p, c = int(parents[k]), k
+        while p > j:
+            p, c = int(parents[p]), p
+        if p == j:
+            top.setdefault(c, []).append(k)
+    return [ks[int(np.argmin(np.median(P[:, ks, 2], axis=0)))] for ks in top.values()]
+
+
+def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``(n, 4)``: per frame the rotation taking the vectors ``a (n, K, 3)`` onto ``b`` best
+    (the ``K`` weighted ``w (n, K)``): the shortest arc where one has weight, the Kabsch
+    fit where several have."""
+    from ..rotations import quat_between
+
+    n = len(a)
+    out = np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+    count = (w > 0).sum(axis=1)
+    one = count == 1
+    if one.any():
+        k = np.argmax(w[one] > 0, axis=1)
+        rows = np.flatnonzero(one)
+        out[one] = quat_between(a[rows, k], b[rows, k])
+    for t in np.flatnonzero(count > 1):
+        H = (a[t] * w[t][:, None]).T @ b[t]
+        U, _, Vt = np.linalg.svd(H)
+        d = np.sign(np.linalg.det(Vt.T @ U.T))
+        out[t] = Rotation.from_matrix(Vt.T @ np.diag([1.0, 1.0, d]) @ U.T).as_quat()
+    return out
+
+
+def _on_contact(
+    motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+    opt: CleanOptions,
+) -> np.ndarray | None:
+    r"""``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
+    that what stands on the floor below the joint stays where it stands, or None where
+    nothing does.
+
+    Below each child of ``j`` the lowest point (median height; a toe, a heel) is a contact
+    where, on the good frames just before the span (or just after it), it is within
+    ``contact_height`` of the clip's floor and slower than ``contact_speed``
+    (``P (F, J, 3)``: the clip's world positions; ``bad (F, J)``: the glitched pairs; a
+    contact whose chain another glitch moves near the span is left out).  The stance goes on
+    into the span (or back from its end) while the bridged pose keeps the point within
+    ``contact_radius`` of where it stood (and ``contact_lever`` of its distance from joint
+    ``j``: a short lever, a foot's toe, says less) and the rest of the limb, its rotations
+    all good, can still reach it (the distance from joint ``j`` within ``contact_reach``);
+    on those frames joint ``j`` is turned so the points stand where they stood (the shortest
+    arc for one, the Kabsch fit for several), the turn easing out over ``contact_ramp``
+    seconds after the stance.  A frozen thigh or knee keeps its foot planted instead of
+    sliding it; in the swing nothing holds the foot and the bridge is left as it is."""
+    from ..motion import forward_kinematics
+    from ..rotations import quat_conj, quat_mul
+
+    F, n = len(R), e - s + 1
+    if s < 2 or e + 2 >= F:
+        return None
+    fps = float(motion.fps)
+    parents = np.asarray(motion.skeleton.parents)
+    low = float(np.percentile(P[..., 2].min(axis=1), 5)) + opt.contact_height
+    points = []
+    for f in _contact_points(parents, P, j):
+        chain = [f]
+        while chain[-1] >= 0:
+            chain.append(int(parents[chain[-1]]))
+        chain = [k for k in chain[:-1] if k != j]
+        if bad[s - 2 : e + 3, chain].any():
+            continue  # another glitch moves the contact point there
+
+        def planted(t0: int, t1: int) -> bool:
+            return bool(np.linalg.norm(P[t1, f] - P[t0, f]) * fps < opt.contact_speed and P[t0, f, 2] < low)
+
+        first, last = planted(s - 2, s - 1), planted(e + 1, e + 2)
+        if first or last:
+            points.append((f, first, last))
+    if not points:
+        return None
+    Rt = np.array(R[s - 1 : e + 2], copy=True)
+    Rt[1:-1, j] = q
+    tr = None if motion.translations is None else np.asarray(motion.translations)[s - 1 : e + 2]
+    pos, wr = forward_kinematics(motion.skeleton, Rt, tr, motion.translated)
+    pj = pos[1:-1, j]
+    target = np.zeros((n, len(points), 3))
+    active = np.zeros((n, len(points)), dtype=bool)
+    for i, (f, first, last) in enumerate(points):
+        pc = pos[1:-1, f]
+        lever = np.linalg.norm(pc - pj, axis=-1)
+        radius = np.minimum(opt.contact_radius, opt.contact_lever * lever)
+
+        def holds(x: np.ndarray) -> np.ndarray:
+            reach = np.abs(np.linalg.norm(x - pj, axis=-1) - lever) < opt.contact_reach
+            return (np.linalg.norm(pc - x, axis=-1) < radius) & reach & (pc[:, 2] < low)
+
+        if first:
+            still = holds(P[s - 1, f])
+            k = int(np.argmin(still)) if not still.all() else n
+            target[:k, i] = P[s - 1, f]
+            active[:k, i] = True
+        if last:
+            still = holds(P[e + 1, f])
+            k = n - (int(np.argmin(still[::-1])) if not still.all() else n)
+            end = P[e + 1, f]
+            frac = ((np.arange(k, n) + 1.0) / (n + 1))[:, None]
+            both = active[k:, i][:, None]  # one stance through the span: from one end to the other
+            target[k:, i] = np.where(both, (1 - frac) * target[k:, i] + frac * end, end)
+            active[k:, i] = True
+    if not active.any():
+        return None
+    f_idx = [f for f, _, _ in points]
+    turn = _turn(pos[1:-1, f_idx] - pj[:, None], target - pj[:, None], active.astype(float))  # world
+    on = np.flatnonzero(active.any(axis=1))
+    idx = np.arange(n)
+    near = on[np.argmin(np.abs(idx[:, None] - on[None]), axis=1)]
+    ramp = max(1, int(round(opt.contact_ramp * fps)))
+    weight = np.clip(1.0 - np.abs(idx - near) / (ramp + 1.0), 0.0, 1.0)
+    p = int(parents[j])
+    wp = wr[1:-1, p][near] if p >= 0 else np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
+    local = quat_mul(quat_mul(quat_conj(wp), turn[near]), wp)  # the world turn in the parent's frame
+    local = Rotation.from_rotvec(Rotation.from_quat(local).as_rotvec() * weight[:, None]).as_quat()
+    return quat_mul(local, q)
+
+
 def _remove_offset(R: np.ndarray, a: int, b: int) -> np.ndarray | None:
     """Frames ``a+1 .. b-1`` of ``R (F, 4)`` with the glitch's offset taken off: the entry
     jump :math:`q_{a+1} q_a^{-1}` (or, in the joint's own frame, :math:`q_a^{-1} q_{a+1}`)
@@ -452,7 +581,8 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" or "mirrored" (:class:`_Matcher`), "re-solved" (the hard-limited IK on an actor-fitted
+    "matched" or "mirrored" (:class:`_Matcher`; ", on contact" where :func:`_on_contact`
+    then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`; ", on bones" where it was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
@@ -474,6 +604,7 @@ def correct_glitches(
     names_of = motion.skeleton.names
     swapped: set[tuple[int, int, int]] = set()
     matcher: _Matcher | None = None
+    world = None
     bad = _glitched(motion, glitches) if pos is not None else None
     for g in glitches:
         if g.kind == "lr_swap" and pos is not None:
@@ -498,7 +629,15 @@ def correct_glitches(
         if how == "rotation":
             if 0 <= a and b < F:
                 matcher = matcher or _matcher(motion, glitches, opt)
-            arr[g.start : g.end + 1, j], curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
+            fixed_q, curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
+            if curve in ("cubic", "matched", "mirrored"):
+                if world is None:
+                    world = np.asarray(motion.world_positions(), dtype=float)
+                bad = _glitched(motion, glitches) if bad is None else bad
+                planted = _on_contact(motion, arr, world, bad, j, g.start, g.end, fixed_q, opt)
+                if planted is not None:
+                    fixed_q, curve = planted, f"{curve}, on contact"
+            arr[g.start : g.end + 1, j] = fixed_q
             out.append(dataclasses.replace(g, corrected=curve))
             continue
         parents = np.asarray(motion.skeleton.parents)

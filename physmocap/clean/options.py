@@ -108,6 +108,19 @@ class CleanOptions:
         match_windows: How many best-matching windows of the clip lend their motion
             (averaged) to the matched bridge (and as many windows of the body mirrored left
             to right to the mirrored one).
+        contact_speed: A point below a bridged joint (its lowest, a toe or a heel) stands on
+            the floor on a good frame next to the span where it moves slower than this
+            (metres per second) ...
+        contact_height: ... within this many metres of the clip's floor (the lowest joint,
+            a low percentile over the frames).
+        contact_radius: The stance goes on into the bridged span while the bridge keeps the
+            point within this many metres of where it stood ...
+        contact_lever: ... and within this fraction of its distance from the bridged joint
+            (a foot's toe, 15 cm from the ankle, is held to 4 cm) ...
+        contact_reach: ... and the limb below the joint, its rotations all good, can still
+            reach it: its distance from the joint within this many metres of the limb's own.
+        contact_ramp: The turn that keeps the point standing eases out over this many
+            seconds after the stance.
     """
 
     jump_deg: float = _opt(10.0, "deg")
@@ -133,6 +146,12 @@ class CleanOptions:
     match_context: float = _opt(0.5, "ratio")
     match_own_weight: float = _opt(5.0, "ratio")
     match_windows: int = _opt(3, "count")
+    contact_speed: float = _opt(0.2, "m/s")
+    contact_height: float = _opt(0.1, "m")
+    contact_radius: float = _opt(0.1, "m")
+    contact_lever: float = _opt(0.25, "ratio")
+    contact_reach: float = _opt(0.02, "m")
+    contact_ramp: float = _opt(0.1, "s")
 
     def __post_init__(self) -> None:
         from ..options import check_fields

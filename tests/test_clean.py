@@ -426,6 +426,28 @@ def test_frozen_thigh_gets_the_other_legs_motion_mirrored(walk):
     assert _span_rms(fixed, walk, frames) < 0.05 * _span_rms(bad, walk, frames)
 
 
+def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
+    """Where two or three bridges rebuild the joint's own motion next to the span about as
+    well (``blend_ratio``), their mean, weighted by the inverse of that error, is used;
+    ``blend_ratio=1`` keeps the best one alone."""
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import _bridge, _hermite, _matcher
+    from physmocap.clean.detect import Glitch, _angle
+
+    j, frames = _joint(walk, "LeftForeArm"), list(range(200, 248))
+    bad = _with(walk, j, frames, hold=True)
+    matcher = _matcher(bad, [Glitch("frozen", "LeftForeArm", 200, 247, 1.0)], CleanOptions())
+    R = np.asarray(bad.rotations)
+    found = [_hermite(R[:, j], 199, 248), matcher.bridge(j, 200, 247), matcher.bridge(j, 200, 247, None, True)]
+    alone, name = _bridge(R, j, 200, 247, matcher, 1.0)
+    assert any(np.allclose(alone, q) for q in found)
+    mixed, name_mixed = _bridge(R, j, 200, 247, matcher, 1e9)  # every bridge counts
+    assert name_mixed == name
+    spread = max(_angle(a, b).max() for a in found for b in found)
+    assert min(_angle(mixed, q).max() for q in found) > 0.01 * spread  # none of them alone
+    assert max(_angle(mixed, q).max() for q in found) <= spread + 1e-6  # among them
+
+
 def test_frozen_thigh_in_stance_keeps_its_foot_planted(walk):
     """A right thigh frozen for 0.4 s while its foot stands: the hip moves on, the knee and
     ankle rotations are good, so the thigh is turned to keep the toes where they stand; the

@@ -239,14 +239,21 @@ def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
     return []
 
 
-def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> tuple[np.ndarray, str]:
-    """The best of the Hermite curve, the matched motion and the mirrored matched motion
-    (:class:`_Matcher`) over frames ``s..e`` of joint ``j`` of ``R (F, J, 4)``, judged on
-    the joint's own good motion next to the span: each method rebuilds the ``n = e - s + 1``
-    frames just before the span (leaving one frame between) and just after it as if they were
-    glitched too (:func:`_pseudo_gaps`), and the one with the smallest RMS rotation error
-    there (degrees) is used.  Returns the rotations and the method's name ("cubic",
-    "matched" or "mirrored")."""
+def _bridge(
+    R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0
+) -> tuple[np.ndarray, str]:
+    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from three estimates,
+    the Hermite curve, the matched motion and the mirrored matched motion
+    (:class:`_Matcher`), judged on the joint's own good motion next to the span: each
+    rebuilds the ``n = e - s + 1`` frames just before the span (leaving one frame between)
+    and just after it as if they were glitched too (:func:`_pseudo_gaps`), its error there
+    the sum of squared rotation errors.  The estimates within ``blend`` times the best one's
+    error are averaged (in the tangent space at the best one), weighted by the inverse of
+    their errors: where two rebuild the joint's motion about as well, the test cannot tell
+    which is right and their mean is off by less than the wrong one.  Returns the rotations
+    and the best estimate's name ("cubic", "matched" or "mirrored")."""
+    from ..rotations import quat_conj, quat_mul
+
     cubic = _hermite(R[:, j], s - 1, e + 1)
     if matcher is None:
         return cubic, "cubic"
@@ -268,13 +275,19 @@ def _bridge(R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None) -> 
             err[1 + i] += np.sum(_angle(matched, truth) ** 2)
             tested[1 + i] = True
     err[1:][~tested[1:]] = np.inf
-    for i in np.argsort(err, kind="stable"):
-        if i == 0:
-            break
-        matched = matcher.bridge(j, s, e, None, kinds[i - 1])
-        if matched is not None:
-            return matched, "mirrored" if kinds[i - 1] else "matched"
-    return cubic, "cubic"
+    if not np.isfinite(err[1:]).any():
+        return cubic, "cubic"
+    found = [cubic] + [matcher.bridge(j, s, e, None, mirrored) for mirrored in kinds]
+    err = np.array([x if q is not None else np.inf for x, q in zip(err, found)])
+    names = ["cubic"] + ["mirrored" if mirrored else "matched" for mirrored in kinds]
+    best = int(np.argmin(err))
+    near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= blend * err[best]]
+    if len(near) < 2:
+        return found[best], names[best]
+    w = 1.0 / np.maximum(err[near], 1e-12)
+    base = found[best]
+    step = sum(wi * Rotation.from_quat(quat_mul(quat_conj(base), found[i])).as_rotvec() for wi, i in zip(w, near))
+    return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), names[best]
 
 
 def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
@@ -445,7 +458,7 @@ def _repair_rotation(
         if fixed is not None:
             return fixed, "offset removed"
     if 0 <= a and b < F:
-        return _bridge(R, j, g.start, g.end, matcher)
+        return _bridge(R, j, g.start, g.end, matcher, opt.blend_ratio)
     held = R[a, j] if a >= 0 else R[b, j]
     return np.repeat(held[None], n, axis=0), "held"
 

@@ -108,6 +108,10 @@ class CleanOptions:
         match_windows: How many best-matching windows of the clip lend their motion
             (averaged) to the matched bridge (and as many windows of the body mirrored left
             to right to the mirrored one).
+        blend_ratio: The bridges (cubic, matched, mirrored) whose error at rebuilding the
+            joint's own motion next to the span is within this many times the best one's
+            (summed squared degrees) are averaged, weighted by the inverse of that error; 1
+            keeps the best alone where it is strictly best.
         contact_speed: A point below a bridged joint (its lowest, a toe or a heel) stands on
             the floor on a good frame next to the span where it moves slower than this
             (metres per second) ...
@@ -146,6 +150,7 @@ class CleanOptions:
     match_context: float = _opt(0.5, "ratio")
     match_own_weight: float = _opt(5.0, "ratio")
     match_windows: int = _opt(3, "count")
+    blend_ratio: float = _opt(3.0, "ratio")
     contact_speed: float = _opt(0.2, "m/s")
     contact_height: float = _opt(0.1, "m")
     contact_radius: float = _opt(0.1, "m")

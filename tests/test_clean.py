@@ -470,6 +470,21 @@ def test_frozen_thigh_in_stance_keeps_its_foot_planted(walk):
     assert np.array_equal(np.asarray(fixed.rotations)[untouched], np.asarray(bad.rotations)[untouched])
 
 
+def test_a_second_glitch_below_the_joint_leaves_the_stance_before_it(walk):
+    """The knee frozen too, from the thigh's last 8 frames on: the foot is no guide where the
+    knee is wrong (nor on the good frames after the thigh's span), but it still stands on the
+    frames before the knee's freeze."""
+    from physmocap.clean.correct import correct_glitches
+    from physmocap.clean.detect import Glitch
+
+    thigh, knee = _joint(walk, "RightUpLeg"), _joint(walk, "RightLeg")
+    bad = _with(_with(walk, thigh, list(range(200, 248)), hold=True), knee, list(range(240, 276)), hold=True)
+    glitches = [Glitch("frozen", "RightUpLeg", 200, 247, 1.0), Glitch("frozen", "RightLeg", 240, 275, 1.0)]
+    fixed, done = correct_glitches(bad, glitches)
+    assert done[0].corrected.endswith(", on contact")
+    assert _span_rms(fixed, walk, list(range(200, 240))) < 0.002  # 0.5 cm without the stance
+
+
 def test_frozen_arm_of_a_still_body_is_found_by_its_catch_up(walk):
     """The body standing (every other joint still but for noise) while the forearm moves:
     a forearm held for 0.25 s is found by the jump it makes to catch up, not by the body."""

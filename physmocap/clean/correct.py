@@ -336,8 +336,8 @@ def _on_contact(
     Below each child of ``j`` the lowest point (median height; a toe, a heel) is a contact
     where, on the good frames just before the span (or just after it), it is within
     ``contact_height`` of the clip's floor and slower than ``contact_speed``
-    (``P (F, J, 3)``: the clip's world positions; ``bad (F, J)``: the glitched pairs; a
-    contact whose chain another glitch moves near the span is left out).  The stance goes on
+    (``P (F, J, 3)``: the clip's world positions; ``bad (F, J)``: the glitched pairs; the
+    frames where another glitch moves the point, a joint above it, are no stance).  The stance goes on
     into the span (or back from its end) while the bridged pose keeps the point within
     ``contact_radius`` of where it stood (and ``contact_lever`` of its distance from joint
     ``j``: a short lever, a foot's toe, says less) and the rest of the limb, its rotations
@@ -361,15 +361,15 @@ def _on_contact(
         while chain[-1] >= 0:
             chain.append(int(parents[chain[-1]]))
         chain = [k for k in chain[:-1] if k != j]
-        if bad[s - 2 : e + 3, chain].any():
-            continue  # another glitch moves the contact point there
+        moved = bad[:, chain].any(axis=1)  # frames another glitch moves the contact point on
 
         def planted(t0: int, t1: int) -> bool:
-            return bool(np.linalg.norm(P[t1, f] - P[t0, f]) * fps < opt.contact_speed and P[t0, f, 2] < low)
+            fast = np.linalg.norm(P[t1, f] - P[t0, f]) * fps >= opt.contact_speed
+            return not (fast or moved[t0] or moved[t1] or P[t0, f, 2] >= low)
 
         first, last = planted(s - 2, s - 1), planted(e + 1, e + 2)
         if first or last:
-            points.append((f, first, last))
+            points.append((f, first, last, ~moved[s : e + 1]))
     if not points:
         return None
     Rt = np.array(R[s - 1 : e + 2], copy=True)
@@ -379,14 +379,14 @@ def _on_contact(
     pj = pos[1:-1, j]
     target = np.zeros((n, len(points), 3))
     active = np.zeros((n, len(points)), dtype=bool)
-    for i, (f, first, last) in enumerate(points):
+    for i, (f, first, last, kept) in enumerate(points):
         pc = pos[1:-1, f]
         lever = np.linalg.norm(pc - pj, axis=-1)
         radius = np.minimum(opt.contact_radius, opt.contact_lever * lever)
 
         def holds(x: np.ndarray) -> np.ndarray:
             reach = np.abs(np.linalg.norm(x - pj, axis=-1) - lever) < opt.contact_reach
-            return (np.linalg.norm(pc - x, axis=-1) < radius) & reach & (pc[:, 2] < low)
+            return (np.linalg.norm(pc - x, axis=-1) < radius) & reach & (pc[:, 2] < low) & kept
 
         if first:
             still = holds(P[s - 1, f])
@@ -403,7 +403,7 @@ def _on_contact(
             active[k:, i] = True
     if not active.any():
         return None
-    f_idx = [f for f, _, _ in points]
+    f_idx = [f for f, _, _, _ in points]
     turn = _turn(pos[1:-1, f_idx] - pj[:, None], target - pj[:, None], active.astype(float))  # world
     on = np.flatnonzero(active.any(axis=1))
     idx = np.arange(n)

@@ -19,7 +19,7 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_memory", "is_spilled"]
+__all__ = ["SPILL_BYTES", "spill", "spilled_empty", "release", "blocks", "in_memory", "spilled_copy", "is_spilled"]
 
 #: Arrays of at least this many bytes are spilled (a 10-minute clip's targets are about 40 MB).
 SPILL_BYTES = 32 << 20
@@ -61,7 +61,13 @@ def spill(array: np.ndarray, min_bytes: int | None = None) -> np.ndarray:
         view = array.view()
         view.flags.writeable = False
         return view
-    data = np.ascontiguousarray(array)
+    if not array.flags.c_contiguous:  # copied a block of rows at a time: never held whole
+        out = spilled_copy(array, min_bytes)
+        if _mapping(out) is None:
+            return array
+        out.flags.writeable = False
+        return out
+    data = array
     mapping = _mapped(data.nbytes, data)
     if mapping is None:
         return array
@@ -70,9 +76,14 @@ def spill(array: np.ndarray, min_bytes: int | None = None) -> np.ndarray:
     return out
 
 
-def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int | None = None) -> np.ndarray:
-    """A writable C-ordered array of zeros in a temporary file (in memory, ``np.zeros``, if
-    smaller than ``min_bytes``, default :data:`SPILL_BYTES`, or where no file can be made)."""
+def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int | None = None, by_column: bool = False) -> np.ndarray:
+    """A writable array of zeros in a temporary file (in memory, ``np.zeros``, if smaller
+    than ``min_bytes``, default :data:`SPILL_BYTES`, or where no file can be made).
+    C-ordered, or with ``by_column`` laid out column by column (the first two axes swapped
+    in memory: ``array[:, k]`` is contiguous, so a reader that goes through the columns maps
+    in one at a time)."""
+    if by_column:
+        return spilled_empty((shape[1], shape[0], *shape[2:]), dtype, min_bytes).swapaxes(0, 1)
     dtype = np.dtype(dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     mapping = _mapped(nbytes) if nbytes >= _threshold(min_bytes) else None
@@ -119,10 +130,23 @@ def blocks(array: np.ndarray, rows: int | None = None) -> Iterator[tuple[int, np
         release(array)
 
 
+def _copy_rows(out: np.ndarray, array: np.ndarray) -> np.ndarray:
+    """``out`` with ``array``'s rows copied into it :data:`BLOCK_ROWS` at a time, the pages
+    of either that is spilled let go after each block."""
+    for s, rows in blocks(array):
+        out[s : s + rows.shape[0]] = rows
+        release(out)
+    return out
+
+
 def in_memory(array: np.ndarray) -> np.ndarray:
     """A C-ordered copy of ``array`` in memory, read :data:`BLOCK_ROWS` rows at a time (a
     spilled array's pages let go after each block: only the copy is held)."""
-    out = np.empty(array.shape, dtype=array.dtype)
-    for s, rows in blocks(array):
-        out[s : s + rows.shape[0]] = rows
-    return out
+    return _copy_rows(np.empty(array.shape, dtype=array.dtype), array)
+
+
+def spilled_copy(array: np.ndarray, min_bytes: int | None = None, by_column: bool = False) -> np.ndarray:
+    """A writable copy of ``array`` (any layout) laid out as :func:`spilled_empty` lays it out
+    (C-ordered, or column by column), in a temporary file if it has ``min_bytes`` or more,
+    copied a block of rows at a time: neither it nor a spilled ``array`` is ever held whole."""
+    return _copy_rows(spilled_empty(array.shape, array.dtype, min_bytes, by_column), array)

@@ -57,3 +57,24 @@ def test_is_spilled_tells_a_temporary_file_from_memory():
     on_disk = spilled_empty((64,), min_bytes=1)
     assert is_spilled(on_disk) and is_spilled(on_disk[8:16])
     assert not is_spilled(np.zeros(64)) and not is_spilled(spilled_empty((4,), min_bytes=1 << 30))
+
+
+def test_spilled_copy_keeps_values_in_either_layout():
+    """spilled_copy: the same values, C-ordered or laid out column by column (each column
+    contiguous), in a temporary file from min_bytes on; spill() of an array in any layout
+    is a C-ordered spilled copy, made a block of rows at a time."""
+    from physmocap.spill import is_spilled, spilled_copy
+
+    a = np.arange(5 * 4 * 3, dtype=float).reshape(5, 4, 3)
+    strided = a.transpose(1, 0, 2)  # not C-contiguous
+    for src in (a, strided):
+        c = spilled_copy(src, min_bytes=1)
+        assert is_spilled(c) and c.flags.c_contiguous and c.flags.writeable and np.array_equal(c, src)
+        k = spilled_copy(src, min_bytes=1, by_column=True)
+        assert is_spilled(k) and np.array_equal(k, src)
+        assert k[:, 2].flags.c_contiguous and not k.flags.c_contiguous
+        s = spill(src, min_bytes=1)
+        assert is_spilled(s) and s.flags.c_contiguous and not s.flags.writeable and np.array_equal(s, src)
+    assert not is_spilled(spilled_copy(a)) and np.array_equal(spilled_copy(a), a)  # small: in memory
+    assert spill(strided) is strided
+

@@ -189,6 +189,28 @@ def test_hysteresis_does_not_flicker():
     assert len(det.transitions) == 1
 
 
+def test_run_over_blocks_is_step_by_step(monkeypatch):
+    """run() turns the clip into Python numbers a block of frames at a time: the state
+    carries over the blocks' seams, so it commits what stepping frame by frame commits."""
+    import physmocap.ik.contacts as contacts
+
+    fps, F = 120.0, 400
+    t = np.arange(F)
+    h = np.stack([0.05 * (np.sin(t * 0.11) > 0), 0.05 * (np.sin(t * 0.07 + 1.0) > 0)], axis=1)
+    v = np.abs(np.stack([np.cos(t * 0.05), np.sin(t * 0.03)], axis=1)) * 0.2
+    c = np.zeros_like(h)
+    c[::37] = np.nan  # unknown samples hold the count, across a seam too
+    stepped = ContactDetector(["heel", "toe"], fps)
+    for frame in range(F):
+        stepped.step(h[frame], v[frame], c[frame])
+    monkeypatch.setattr(contacts, "RUN_BLOCK_FRAMES", 7)
+    run = ContactDetector(["heel", "toe"], fps)
+    run.run(h, v, c)
+    assert len(stepped.transitions) > 6
+    assert run.transitions == stepped.transitions
+    assert (run.state, run.count, run.frame) == (stepped.state, stepped.count, stepped.frame)
+
+
 def test_min_durations_are_seconds_not_frames():
     for fps in (30.0, 120.0):
         n = int(fps)

@@ -74,6 +74,7 @@ import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
 from ..fileio import atomic_open
+from ..spill import release, spilled_empty
 
 __all__ = [
     "CONTACT_LABELS",
@@ -312,6 +313,7 @@ def estimate_floor(
         sel = p[slow]
         samples.append(np.column_stack([np.full(len(sel), i), sel]))
     data = np.concatenate(samples) if samples else np.zeros((0, 4))
+    del samples  # held once (a long clip has several samples a frame, and the fit copies them)
     if data.shape[0] == 0:
         raise InputError("no finite foot positions to estimate the floor from")
     idx = data[:, 0].astype(int)
@@ -329,6 +331,7 @@ def estimate_floor(
         span = np.array(
             [max(float(np.ptp(proj[idx == i, a])) if np.any(idx == i) else 0.0 for i in range(P)) for a in range(2)]
         )
+        del proj
         use = axes[:, span >= opt.slope_min_extent]
         if use.shape[1]:
             u = d @ use
@@ -345,6 +348,7 @@ def estimate_floor(
                 A[np.arange(A.shape[0]), idx[keep]] = 1.0
                 A[:, P:] = u[keep]
                 sol, *_ = np.linalg.lstsq(A, z[keep], rcond=None)
+                del A  # not held while the next band's is built
                 offset, coef = sol[:P], sol[P:]
             slope = use @ coef
             steep = float(np.hypot(*slope))
@@ -366,6 +370,10 @@ def estimate_floor(
 # ---------------------------------------------------------------------------
 # The state machine
 # ---------------------------------------------------------------------------
+
+
+#: Frames :meth:`ContactDetector.run` turns into Python numbers at a time.
+RUN_BLOCK_FRAMES = 4096
 
 
 class ContactDetector:
@@ -416,12 +424,15 @@ class ContactDetector:
 
     def run(self, heights: np.ndarray, speeds: np.ndarray, climb: np.ndarray | None = None) -> None:
         """:meth:`step` over a whole clip: ``(F, P)`` heights, speeds and vertical velocities
-        (None: not used), frame by frame; the labels are in :attr:`transitions`."""
-        H = np.asarray(heights, dtype=float).tolist()
-        V = np.asarray(speeds, dtype=float).tolist()
-        C = np.zeros(np.shape(heights)).tolist() if climb is None else np.asarray(climb, dtype=float).tolist()
-        for h, v, c in zip(H, V, C):
-            self._advance(h, v, c)
+        (None: not used), frame by frame; the labels are in :attr:`transitions`.  The samples
+        are turned into Python floats :data:`RUN_BLOCK_FRAMES` frames at a time (a whole
+        clip's would take about 150 bytes per point and frame)."""
+        H = np.asarray(heights, dtype=float)
+        V = np.asarray(speeds, dtype=float)
+        C = np.zeros(H.shape) if climb is None else np.asarray(climb, dtype=float)
+        for s in range(0, H.shape[0], RUN_BLOCK_FRAMES):
+            for h, v, c in zip(*(a[s : s + RUN_BLOCK_FRAMES].tolist() for a in (H, V, C))):
+                self._advance(h, v, c)
 
     def _advance(self, h: list[float], v: list[float], c: list[float]) -> None:
         """One frame, point by point.  A point *wants* to change when its sample is known
@@ -688,6 +699,7 @@ def detect_contacts(
         raise InputError(exc.message, path=motion.source) from None
     contacts.joints = pts
     contacts.source = "detected"
+    release(world)  # a long clip's: the feet's pages leave the memory before the body's are read
     if contacts.floor is not None:
         canonical = {name: world[:, column[j]] for name, j in body.items()}
         contacts.body_labels = detect_body_contacts(canonical, motion.fps, contacts.floor, body_options)
@@ -713,16 +725,20 @@ def joint_world_positions(motion, joints: Sequence[int], block: int = WORLD_BLOC
 
     A rotational motion's forward kinematics runs ``block`` frames at a time and keeps only
     the ``joints`` asked for (the same values as :meth:`~physmocap.motion.Motion.world_positions`,
-    without its whole ``(F, J, 3)``); a positional motion's positions are returned as they are.
+    without its whole ``(F, J, 3)``), laid out joint by joint, in a temporary file for a long
+    clip (:func:`~physmocap.spill.spilled_empty`; each block's pages let go once written), so
+    a reader of a few joints maps in only theirs; a positional motion's positions are
+    returned as they are.
     """
     if motion.rotations is None:
         return motion.world_positions(), {j: j for j in joints}
     wanted = sorted(set(int(j) for j in joints))
     F = motion.num_frames
-    out = np.empty((F, len(wanted), 3))
+    out = spilled_empty((F, len(wanted), 3), by_column=True)
     for start in range(0, F, block):
         end = min(start + block, F)
         out[start:end] = motion.slice_frames(start, end).world_positions()[:, wanted]
+        release(out)
     return out, {j: k for k, j in enumerate(wanted)}
 
 

@@ -184,3 +184,24 @@ def test_large_frees_are_returned_where_the_c_library_can(monkeypatch):
 
     monkeypatch.setattr(ctypes, "CDLL", no_libc)
     assert return_large_frees_to_the_system() is False
+
+
+def test_calibration_reads_the_motion_only_when_the_rest_pose_does_not_stand():
+    """calibration_pose takes the clip's positions as a function, called only when the rest
+    pose does not stand (build_targets then gathers only POSE_JOINTS' columns)."""
+    from physmocap.ik.calibration import POSE_JOINTS, calibration_pose
+
+    standing = {"left_hip": np.array([0.1, 0.0, 0.9]), "right_hip": np.array([-0.1, 0.0, 0.9]),
+                "left_knee": np.array([0.1, 0.0, 0.5]), "right_knee": np.array([-0.1, 0.0, 0.5]),
+                "left_ankle": np.array([0.1, 0.0, 0.1]), "right_ankle": np.array([-0.1, 0.0, 0.1]),
+                "neck": np.array([0.0, 0.0, 1.5])}
+    assert set(standing) <= POSE_JOINTS
+
+    def never():
+        raise AssertionError("the motion was read although the rest pose stands")
+
+    assert calibration_pose(standing, never).frame is None
+    sitting = dict(standing, neck=np.array([0.0, 0.6, 0.95]))  # the torso lies forward
+    frames = {k: np.repeat(v[None], 3, axis=0) for k, v in standing.items()}
+    pose = calibration_pose(sitting, lambda: frames)
+    assert pose.frame == 0 and pose.standing

@@ -68,6 +68,11 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(n, 1e-9)
 
 
+#: The joints :func:`standing_score` and :func:`is_standing` read (where present).
+POSE_JOINTS = frozenset(("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
+                         "neck", "head", "chest", "spine"))
+
+
 def _parts(P: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Torso uprightness, leg straightness, hip levelness, feet-below-hips for ``(F, 3)`` joints."""
     need = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle")
@@ -108,13 +113,15 @@ def is_standing(P: dict[str, np.ndarray]) -> np.ndarray | None:
     return below & (up >= UPRIGHT_COS) & (straight >= STRAIGHT_LEG) & (level >= LEVEL_HIPS)
 
 
-def calibration_pose(rest: dict[str, np.ndarray], frames: dict[str, np.ndarray]) -> CalibrationPose:
+def calibration_pose(rest: dict[str, np.ndarray], frames) -> CalibrationPose:
     """Choose the calibration pose: the rest pose if it stands, else the motion's most upright frame.
 
     Args:
         rest: Canonical joint -> ``(3,)`` rest-pose position, or an empty dict
             when the source has no rest pose (positional sources).
-        frames: Canonical joint -> ``(F, 3)`` positions over the motion (NaN where lost).
+        frames: Canonical joint -> ``(F, 3)`` positions over the motion (NaN where lost),
+            at least :data:`POSE_JOINTS`; or a function returning them, called only when
+            the rest pose does not stand.
 
     Returns:
         The :class:`CalibrationPose`; ``standing`` False means no pose of the
@@ -125,6 +132,8 @@ def calibration_pose(rest: dict[str, np.ndarray], frames: dict[str, np.ndarray])
         if ok is None or bool(ok[0]):
             score = standing_score({k: v[None] for k, v in rest.items()})
             return CalibrationPose(None, True, float(score[0]) if score is not None else 0.0)
+    if callable(frames):
+        frames = frames()
     score = standing_score(frames)
     if score is None or not np.isfinite(score).any():
         return CalibrationPose(None if rest else 0, False, float("-inf"))

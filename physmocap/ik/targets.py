@@ -48,8 +48,8 @@ from ..options import check_fields
 from ..errors import MappingError, OptionError, warn
 from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
-from ..spill import blocks, spilled_empty
-from .calibration import CalibrationPose, calibration_pose
+from ..spill import blocks, release, spilled_copy, spilled_empty
+from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
 from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -219,6 +219,20 @@ Targets.source_positions = property(_get_source_positions, _set_source_positions
 def _masked_positions(positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """The actor's positions with 0 where the joint is lost (``valid`` False)."""
     return np.where(valid[..., None], positions, 0.0)
+
+
+def _mask_lost(S: np.ndarray, motion: Motion, idx: np.ndarray) -> np.ndarray:
+    """``(F, N)`` False where the actor lost a joint (not finite, or no confidence), laid out
+    as numpy lays out ``np.all(np.isfinite(S), axis=-1)``; ``S`` is set to 0 there, in place.
+    A block of frames at a time (a spilled ``S``: its pages let go after each block)."""
+    valid = np.empty(S.shape[1::-1], dtype=bool).T  # joint-major, as S
+    for s, rows in blocks(S, BLOCK_FRAMES):
+        ok = valid[s : s + rows.shape[0]]
+        np.all(np.isfinite(rows), axis=-1, out=ok)
+        if motion.confidence is not None:
+            ok &= motion.confidence[s : s + rows.shape[0], idx] > 0.0
+        rows[~ok] = 0.0
+    return valid
 
 
 def _source_positions_again(motion: Motion, idx: np.ndarray, level: np.ndarray | None, centre: np.ndarray | None,
@@ -487,7 +501,9 @@ class _ActorKinematics:
         # laid out joint-major, as numpy lays out ``positions[:, idx]`` (the clip's joints picked
         # from the whole skeleton's kinematics): arrays derived from it (``valid``) keep that
         # layout, and the NPZ writer records it (``fortran_order``), so outputs keep their bytes
-        self.positions = np.empty((len(idx), F, 3)).transpose(1, 0, 2)
+        # a long clip's in a temporary file (:func:`~physmocap.spill.spilled_empty`), each block's
+        # pages let go once written
+        self.positions = spilled_empty((F, len(idx), 3), by_column=True)
         rotational = motion.is_rotational and (kinematics is None or kinematics[1] is not None)
         self.rotations = {j: np.empty((F, 4)) for j in turning} if rotational else None
         self.extra = {j: np.empty((F, 3)) for j in extra or ()}
@@ -499,6 +515,7 @@ class _ActorKinematics:
                 out[s:e] = pos[:, j]
             for j, out in (self.rotations or {}).items():
                 out[s:e] = rot[:, j]
+            release(self.positions)
 
     def _block(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Levelled ``(positions (n, J, 3), rotations (n, J, 4) or None)`` of frames ``[s, e)``."""
@@ -628,10 +645,7 @@ def build_targets(
     actor = _ActorKinematics(motion, idx, turning, level, centre, kinematics, extra=list(tips.values()))
     S, rot_all = actor.positions, actor.rotations  # (F, N, 3) actor canonical positions; rotations by joint
     F, N = S.shape[:2]
-    valid = np.all(np.isfinite(S), axis=-1)
-    if motion.confidence is not None:
-        valid &= motion.confidence[:, idx] > 0.0
-    S[~valid] = 0.0  # as _masked_positions, in place: the actor's positions are held once
+    valid = _mask_lost(S, motion, idx)  # as _masked_positions, in place: the actor's positions are held once
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
@@ -648,7 +662,7 @@ def build_targets(
     elif motion.is_rotational and rot_all is not None:
         pose = calibration_pose(
             {c: S_rest[col[c]] for c in present},
-            {c: np.where(valid[:, col[c], None], S[:, col[c]], np.nan) for c in present},
+            lambda: {c: np.where(valid[:, col[c], None], S[:, col[c]], np.nan) for c in present if c in POSE_JOINTS},
         )
         if pose.frame is None:
             calib_pts = {c: S_rest[col[c]] for c in present}
@@ -771,7 +785,9 @@ def build_targets(
     # Root: anchored on the midpoint of the hip joint centres where both are known
     # (vendors put their "pelvis" joint anywhere between the hips and the waist;
     # the hip centres are anatomical), else on the pelvis joint.
-    T = np.zeros((F, N, 3))
+    # built joint by joint (each column's pages let go once placed: a long clip's are kept in a
+    # temporary file), then laid out frame by frame (spilled_copy)
+    T = spilled_empty((F, N, 3), by_column=True)
     ip = col["pelvis"]
     hips = "left_hip" in pset and "right_hip" in pset
     if hips:
@@ -794,6 +810,8 @@ def build_targets(
     off = char_pts["pelvis"] - anchor_c0
     T[:, ip] = anchor + (quat_apply(pelvis_delta, off) if pelvis_delta is not None else off)
     for c in present:
+        release(S)  # the columns read for the previous joint
+        release(T)
         if c == "pelvis":
             continue
         p = canonical_parent(c, pset)
@@ -857,10 +875,13 @@ def build_targets(
             info=level_info,
             foot_tips=foot_tips,
         )
+    release(S)
+    orientations = orientation_array(Q, F, N)
+    del Q, delta  # let go before the positions are laid out frame by frame
     return Targets(
         names=tuple(present),
-        positions=T,
-        orientations=orientation_array(Q, F, N),
+        positions=spilled_copy(T),
+        orientations=orientations,
         has_orientation=has_q,
         valid=valid,
         fps=motion.fps,

@@ -124,6 +124,19 @@ def test_fidelity_from_blocks_and_the_joints_it_reads_is_exact(traj, monkeypatch
     assert list(picked) == ["left_knee"] and np.array_equal(picked["left_knee"], actor["left_knee"])
 
 
+def test_fidelity_from_spilled_joint_columns_is_exact(traj, monkeypatch):
+    """Every joint's positions in a temporary file, laid out joint by joint and let go
+    segment by segment: the same figures as held in memory."""
+    import physmocap.spill as spill_mod
+    from physmocap.spill import is_spilled
+
+    held = fidelity_mod.trajectory_fidelity(traj)
+    monkeypatch.setattr(spill_mod, "SPILL_BYTES", 1)
+    columns = fidelity_mod.actor_joint_positions(traj.source_motion, traj.joint_indices, fidelity_mod.figure_joints())
+    assert all(is_spilled(c) and c.flags.c_contiguous for c in columns.values())
+    assert _fidelity_fields_equal(fidelity_mod.trajectory_fidelity(traj), held)
+
+
 def test_saturation_in_blocks_is_exact(traj, monkeypatch):
     ch = traj.character
     whole = fidelity_mod.saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits)

@@ -39,7 +39,7 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
-from ..spill import blocks, release
+from ..spill import blocks, release, spilled_empty
 
 __all__ = [
     "SEGMENTS",
@@ -175,10 +175,11 @@ def actor_joint_positions(motion, joint_indices: dict[str, int], names=None) -> 
 
     Only the joints in ``names`` are kept (None: every mapped joint); the skeleton's forward
     kinematics runs :data:`BLOCK_FRAMES` frames at a time (each frame on its own, so the same
-    numbers as one pass over the clip)."""
+    numbers as one pass over the clip).  The columns are views of one array laid out joint by
+    joint (:func:`_joint_columns`), whose pages are let go after each block."""
     wanted = {n: j for n, j in joint_indices.items() if names is None or n in names}
     F = motion.num_frames
-    out = {n: np.empty((F, 3)) for n in wanted}
+    array, out = _joint_columns(wanted, F)
     for s in range(0, F, BLOCK_FRAMES):
         e = min(F, s + BLOCK_FRAMES)
         world = motion.slice_frames(s, e).world_positions()
@@ -187,12 +188,31 @@ def actor_joint_positions(motion, joint_indices: dict[str, int], names=None) -> 
             block[:] = world[:, j]
             if motion.confidence is not None:
                 block[motion.confidence[s:e, j] <= 0.0] = np.nan
+        release(array)
     return out
+
+
+def _joint_columns(names, frames: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``(array (frames, K, 3), name -> array[:, k])``: the joints' positions laid out joint by
+    joint, in a temporary file for a long clip (:func:`~physmocap.spill.spilled_empty`), so a
+    figure reading a few joints maps in only their pages."""
+    names = list(names)
+    out = spilled_empty((int(frames), len(names), 3), by_column=True)
+    return out, {n: out[:, k] for k, n in enumerate(names)}
+
+
+def _let_go(*joint_sets: Mapping[str, np.ndarray]) -> None:
+    """:func:`~physmocap.spill.release` the joint positions of ``joint_sets`` (those kept in a
+    temporary file: the pages read so far leave the memory; nothing for arrays in memory)."""
+    for joints in joint_sets:
+        for column in joints.values():
+            release(column)
 
 
 def character_joint_positions(traj, names=None) -> dict[str, np.ndarray]:
     """Canonical joint -> ``(F, 3)`` world positions of the character's mapped sites/bodies
-    (only the joints in ``names``; None: every tracked joint)."""
+    (only the joints in ``names``; None: every tracked joint), kept as
+    :func:`actor_joint_positions` keeps them."""
     ch = traj.character
     model = ch.model
     data = mujoco.MjData(model)
@@ -201,7 +221,7 @@ def character_joint_positions(traj, names=None) -> dict[str, np.ndarray]:
     bodies = [(k, model.body(ch.tracked[n].name).id) for k, n in enumerate(wanted) if ch.tracked[n].kind != "site"]
     s_k, s_id = (np.array([a for a, _ in sites], int), np.array([b for _, b in sites], int))
     b_k, b_id = (np.array([a for a, _ in bodies], int), np.array([b for _, b in bodies], int))
-    out = np.empty((traj.num_frames, len(wanted), 3))
+    out, columns = _joint_columns(wanted, traj.num_frames)
     for s, rows in blocks(traj.qpos, BLOCK_FRAMES):  # a spilled trajectory: read a block at a time
         for t, q in enumerate(rows, start=s):
             data.qpos[:] = q
@@ -210,7 +230,8 @@ def character_joint_positions(traj, names=None) -> dict[str, np.ndarray]:
                 out[t, s_k] = data.site_xpos[s_id]
             if b_k.size:
                 out[t, b_k] = data.xpos[b_id]
-    return {n: out[:, k] for k, n in enumerate(wanted)}
+        release(out)
+    return columns
 
 
 def _point(joints: dict[str, np.ndarray], name: str) -> np.ndarray | None:
@@ -233,13 +254,15 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def segment_direction_errors(actor: dict[str, np.ndarray], character: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Segment name -> ``(F,)`` angle in degrees between the character's segment
-    and the actor's (NaN where the actor lost a joint); segments both have."""
+    and the actor's (NaN where the actor lost a joint); segments both have.  Joint
+    positions kept in a temporary file are let go segment by segment (:func:`_let_go`)."""
     out = {}
     for seg, (a, b) in SEGMENTS.items():
         pa, da, pc, dc = _point(actor, a), _point(actor, b), _point(character, a), _point(character, b)
         if pa is None or da is None or pc is None or dc is None:
             continue
         out[seg] = _angle_deg(dc - pc, da - pa)
+        _let_go(actor, character)
     return out
 
 
@@ -600,9 +623,11 @@ def fidelity(
     frames_over = np.flatnonzero(over) if over is not None else np.zeros(0, dtype=int)
     n = len(over) if over is not None else 1
     face = facing_errors(actor, character)
+    _let_go(actor, character)
     f_med, f_p95 = _nan_stats(face) if face is not None else (None, None)
     frames_face = np.flatnonzero(np.nan_to_num(face, nan=0.0) > FACING_WARN_DEG) if face is not None else np.zeros(0, dtype=int)
     path = path_deviation(actor, character)
+    _let_go(actor, character)
     p_mean = p_max = p_scale = None
     if path is not None:
         d, p_scale = path

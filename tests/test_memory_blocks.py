@@ -82,11 +82,25 @@ def test_feet_levelled_on_their_own_columns_match_levelling_every_column(walk, h
                                   contacts.labels, character_rest_frames(humanoid), targets.fps)
     assert levels, "the walk's feet are levelled somewhere"
     copy = level_targets(targets, humanoid, contacts.labels)
-    assert _same(copy.positions, pos) and _same(copy.orientations, ori) and copy.info["foot_levels"] == levels
+    assert np.array_equal(copy.positions, pos) and _same(copy.orientations, ori) and copy.info["foot_levels"] == levels
+    assert copy.positions[:, 3].flags.c_contiguous  # laid out joint by joint: planned a column at a time
     assert np.array_equal(targets.positions, raw_pos) and np.array_equal(targets.orientations, raw_ori)
     owned = level_targets(dataclasses.replace(targets, orientations=raw_ori), humanoid, contacts.labels, own_orientations=True)
     assert owned.orientations is raw_ori and np.array_equal(raw_ori, ori)
     assert np.array_equal(targets.positions, raw_pos)  # the positions are never levelled in place
+
+
+def test_feet_levelled_in_place_match_a_copy(walk, humanoid):
+    """level_feet(in_place=True) reads every value before it changes it: the same numbers
+    as levelling a copy, in the arrays it was given."""
+    motion, joints, contacts = walk
+    targets = build_targets(motion, joints, humanoid, floor=contacts.floor)
+    args = (targets.has_orientation, targets.names, contacts.labels, character_rest_frames(humanoid), targets.fps)
+    pos, ori, levels = level_feet(targets.positions, targets.orientations, *args)
+    mine = targets.positions.copy(), targets.orientations.copy()
+    got = level_feet(*mine, *args, in_place=True)
+    assert got[0] is mine[0] and got[1] is mine[1] and got[2] == levels
+    assert np.array_equal(got[0], pos) and np.array_equal(got[1], ori) and not np.array_equal(pos, targets.positions)
 
 
 def test_retarget_leaves_given_targets_alone(walk, humanoid):

@@ -104,6 +104,8 @@ def level_feet(
     labels: Mapping[str, np.ndarray],
     rest: Mapping[str, tuple[np.ndarray, np.ndarray]],
     fps: float,
+    *,
+    in_place: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, list[FootLevel]]:
     """Targets with each foot levelled on its flat-stance frames (see the module docstring).
 
@@ -116,13 +118,16 @@ def level_feet(
         rest: Canonical joint -> (rest position, rest orientation x-y-z-w) of the
             character (:func:`~physmocap.ik.targets.character_rest_frames`).
         fps: Frame rate.
+        in_place: Level ``positions`` and ``orientations`` themselves (writeable float64
+            arrays the caller gives up; every value is read before it is changed) and
+            return them: no copy of either, the same numbers.
 
     Returns:
-        ``(positions, orientations, levels)``: new arrays, and one
-        :class:`FootLevel` per foot that was levelled.
+        ``(positions, orientations, levels)``: new arrays (or the given ones, ``in_place``),
+        and one :class:`FootLevel` per foot that was levelled.
     """
-    pos = np.array(positions, dtype=float, copy=True)
-    ori = np.array(orientations, dtype=float, copy=True)
+    pos = positions if in_place else np.array(positions, dtype=float, copy=True)
+    ori = orientations if in_place else np.array(orientations, dtype=float, copy=True)
     col = {n: i for i, n in enumerate(names)}
     F = pos.shape[0]
     need = max(2, int(round(MIN_STANCE_TIME * fps)))
@@ -158,11 +163,13 @@ def level_feet(
             continue
         it = col[toe]
         old_dir = positions[good, it] - positions[good, ia]
+        tipped = tip in col and tip in rest
+        old_toes = positions[good, col[tip]] - positions[good, it] if tipped else None  # read before the toe moves
         pos[good, it] = pos[good, ia] + _toe_offset(new, q_c0, rest, side)
-        if tip in col and tip in rest:
+        if tipped:
             ie = col[tip]
             turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
-            toe_dir = quat_apply(turn, positions[good, ie] - positions[good, it])
+            toe_dir = quat_apply(turn, old_toes)
             pos[good, ie] = pos[good, it] + _level_toes(toe_dir, new, stance[good], q_c0, rest[tip][0] - rest[toe][0])
     return pos, ori, levels
 

@@ -51,6 +51,8 @@ from typing import Mapping
 
 import numpy as np
 
+from ..spill import release
+
 __all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
@@ -329,7 +331,9 @@ def planted_positions(
             (:meth:`RigidFoot.toe_point`) and the whole foot moves as one.
         in_place: Plan ``positions`` themselves (a writeable float64 array the caller gives
             up; each column is read before it is changed) and return them: one
-            ``(F, N, 3)`` copy less, the same numbers.
+            ``(F, N, 3)`` copy less, the same numbers.  Positions in a temporary file
+            (:mod:`physmocap.spill`, laid out joint by joint) have their pages let go
+            as the columns are planned.
     """
     out = positions if in_place else np.array(positions, dtype=float, copy=True)
     F = out.shape[0]
@@ -390,16 +394,20 @@ def planted_positions(
         if side in leg_lengths and hip in col and knee in col:
             feet[col[knee]] = True
             legs.append((side, col[hip], col[knee], col[ankle], leg_lengths[side], plan.weight))
+        release(out)  # positions in a temporary file (physmocap.spill): the pages read leave the memory
     if legs:
         hips = np.stack([out[:, h] for _, h, _, _, _, _ in legs], axis=1)
         ankles = np.stack([out[:, a] for _, _, _, a, _, _ in legs], axis=1)
         weights = np.stack([w for *_, w in legs], axis=1)
         reach = np.array([REACH * (l1 + l2) for *_, (l1, l2), _ in legs])
         drop = pelvis_drop(hips, ankles, weights, reach, fps, ease_time)
-        out[:, ~feet, 2] -= drop[:, None]
+        for i in np.flatnonzero(~feet):  # column by column: spilled positions map one in at a time
+            out[:, i, 2] -= drop
+            release(out)
         for side, h, k, a, (l1, l2), _ in legs:
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
+            release(out)
     return out, offsets
 
 
@@ -546,6 +554,7 @@ def plant_body_contacts(
         plan = foot_offsets({part: point}, {part: label}, fps, ease_time, {part: floor})
         out[:, idx, :2] += plan.xy[:, None, :]
         out[:, idx, 2] += plan.z[part][:, None]
+        release(out)  # positions in a temporary file (physmocap.spill): the pages read leave the memory
     return out
 
 

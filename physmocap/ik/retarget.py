@@ -21,7 +21,7 @@ from ..errors import InputError, MappingError, OptionError, warn
 from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
 from ..motion import Motion
 from ..progress import Progress
-from ..spill import in_memory, release, spill, spilled_empty
+from ..spill import blocks, release, spill, spilled_copy, spilled_empty
 from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
 from .config import RetargetConfig
@@ -251,7 +251,7 @@ def plan_targets(
     for side, foot in planting.rigid_feet().items():
         i = targets.names.index(f"{side}_ankle")
         if levelled.has_orientation[i]:  # its front edge is carried by the ankle's orientation target
-            rigid[side] = (foot, levelled.orientations[:, i])
+            rigid[side] = (foot, _get_columns(levelled.orientations, [i])[:, 0])  # gathered: one column is on every page
     _, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
         planting.toe_contacts(), rigid_feet=rigid, in_place=True,
@@ -277,36 +277,55 @@ def spill_targets(targets: Targets) -> None:
 LEVELLED_FOOT_JOINTS = ("ankle", "toe", "toe_end")
 
 
-def _foot_columns(names: tuple[str, ...]) -> list[int]:
-    """Target columns of the joints :func:`~physmocap.ik.footlevel.level_feet` works on
-    (:data:`LEVELLED_FOOT_JOINTS` of both feet), in target order."""
-    feet = {f"{side}_{j}" for side in ("left", "right") for j in LEVELLED_FOOT_JOINTS}
-    return [i for i, n in enumerate(names) if n in feet]
+def _foot_columns(names: tuple[str, ...], side: str) -> list[int]:
+    """Target columns of the joints of one foot (``side``) that
+    :func:`~physmocap.ik.footlevel.level_feet` works on (:data:`LEVELLED_FOOT_JOINTS`), in
+    target order."""
+    foot = {f"{side}_{j}" for j in LEVELLED_FOOT_JOINTS}
+    return [i for i, n in enumerate(names) if n in foot]
+
+
+def _set_columns(array: np.ndarray, cols: list[int], values: np.ndarray) -> None:
+    """``array[:, cols] = values``, a block of frames at a time (:func:`~physmocap.spill.blocks`:
+    a spilled ``array``'s pages let go after each block)."""
+    for s, rows in blocks(array):
+        rows[:, cols] = values[s : s + rows.shape[0]]
+
+
+def _get_columns(array: np.ndarray, cols: list[int]) -> np.ndarray:
+    """``array[:, cols]``, gathered a block of frames at a time (a spilled ``array``'s pages
+    let go after each block: one column of a frame-major array is on every page)."""
+    out = np.empty((array.shape[0], len(cols), *array.shape[2:]), dtype=array.dtype)
+    for s, rows in blocks(array):
+        out[s : s + rows.shape[0]] = rows[:, cols]
+    return out
 
 
 def level_targets(targets: Targets, character, labels: dict[str, np.ndarray], *, own_orientations: bool = False) -> Targets:
     """A copy of ``targets`` with the feet levelled on the actor's flat-stance frames
     (:func:`~physmocap.ik.footlevel.level_feet`); what was done is in ``info["foot_levels"]``.
 
-    Only the feet's columns are handed to ``level_feet`` (it reads and changes nothing
-    else), then written into a copy of the positions and of the orientations, or into
-    ``targets.orientations`` itself with ``own_orientations`` (the caller gives it up)."""
-    cols = _foot_columns(targets.names)
-    feet = targets.positions[:, cols], targets.orientations[:, cols]
-    release(targets.positions)  # spilled arrays: the pages read leave the memory
-    release(targets.orientations)
-    positions, orientations, levels = level_feet(
-        *feet, targets.has_orientation[cols],
-        tuple(targets.names[i] for i in cols), labels, character_rest_frames(character), targets.fps,
-    )
-    del feet
+    Only one foot's columns at a time are handed to ``level_feet`` (it reads and changes
+    nothing else, and levels each foot on its own), then written into a copy of the
+    positions (laid out joint by joint: :func:`~physmocap.ik.footplan.planted_positions`
+    plans it a column at a time; in a temporary file for a long clip) and of the
+    orientations, or into ``targets.orientations`` itself with ``own_orientations`` (the
+    caller gives it up)."""
     levelled = copy.copy(targets)  # not dataclasses.replace: released source positions stay released
-    levelled.positions = in_memory(targets.positions)
+    levelled.positions = spilled_copy(targets.positions, by_column=True)
     levelled.orientations = targets.orientations if own_orientations else targets.orientations.copy()
+    rest = character_rest_frames(character)
+    levels = []
+    for side in ("left", "right"):
+        cols = _foot_columns(targets.names, side)
+        positions, orientations, found = level_feet(
+            _get_columns(targets.positions, cols), _get_columns(targets.orientations, cols), targets.has_orientation[cols],
+            tuple(targets.names[i] for i in cols), labels, rest, targets.fps, in_place=True,
+        )
+        _set_columns(levelled.positions, cols, positions)
+        _set_columns(levelled.orientations, cols, orientations)
+        levels += found
     levelled.info = {**targets.info, "foot_levels": levels}
-    levelled.positions[:, cols] = positions
-    levelled.orientations[:, cols] = orientations
-    release(levelled.orientations)
     return levelled
 
 

@@ -21,10 +21,17 @@ numpy reports its buffers to), per frame.
 stage (``tracemalloc``, sampled every few milliseconds and filed under the functions the main
 thread is in), in bytes per frame.
 
+``--rss-stages`` instead runs the command on each clip in a fresh process that samples its own
+resident set size (``/proc/self/statm``) every 20 ms and prints the peak of each stage in MB
+(what the system sees, spilled pages included while they are mapped); with ``--stub-solve`` the
+per-frame IK solve returns the model's ``qpos0`` at once, which leaves every array and stage as
+it is (the solve itself holds a constant few MB) and makes an hour measurable in minutes.
+
 ``--identity REF_DIR`` instead retargets every shared BVH clip with the checkout ``REF_DIR``
 (``PYTHONPATH=REF_DIR``) and with this one, and compares the BVH and NPZ files byte for byte.
 
 Usage:  python scripts/bench_memory.py [--minutes 1 5 15] [--clip cmu_12_01_walk.bvh] [--breakdown] [--stages]
+        python scripts/bench_memory.py --minutes 60 --rss-stages --stub-solve
         python scripts/bench_memory.py --identity ../main
 """
 
@@ -234,6 +241,55 @@ def stages(clip: Path, frames: int, tmp: Path, depth: int = 3, every: float = 0.
             print(f"  {peaks[key] / MB:7.1f} MB {(peaks[key] - base) / frames:8.0f} B/frame  {key}")
 
 
+def _rss_stage_worker(argv: list[str], stub: bool, every: float = 0.02) -> None:
+    """In a fresh process: run ``physmocap argv`` while a thread samples this process's RSS
+    every ``every`` seconds, filed under the stage the main thread is in (:func:`_stage`);
+    print each stage's peak (MB), then the process's VmHWM.  ``stub``: the per-frame solve
+    returns ``qpos0`` (see the module docstring)."""
+    import threading
+
+    import physmocap.ik.frame as frame_mod
+    from physmocap.cli import main as cli_main
+
+    if stub:
+        def solve(self, positions, orientations, valid, labels=None):
+            self.frame += 1
+            return frame_mod.FrameResult(np.array(self.character.model.qpos0), 1, 0, 0.0)
+
+        frame_mod.FrameRetargeter.solve = solve
+    main_thread, page = threading.get_ident(), os.sysconf("SC_PAGE_SIZE")
+    peaks: dict[str, int] = {}
+    done = threading.Event()
+
+    def sample() -> None:
+        with open("/proc/self/statm", encoding="ascii") as fh:
+            while not done.wait(every):
+                fh.seek(0)
+                rss = int(fh.read().split()[1]) * page
+                key = _stage(sys._current_frames().get(main_thread), 3)
+                peaks[key] = max(peaks.get(key, 0), rss)
+
+    thread = threading.Thread(target=sample, daemon=True)
+    thread.start()
+    try:
+        cli_main(argv)
+    finally:
+        done.set()
+        thread.join()
+    for key, peak in peaks.items():
+        if "<module>" not in key:
+            print(f"  {peak / MB:7.0f} MB  {key}")
+    with open("/proc/self/status", encoding="ascii") as fh:
+        print(next(line for line in fh if line.startswith("VmHWM")).strip())
+
+
+def rss_stages(clip: Path, tmp: Path, stub: bool) -> None:
+    """Peak RSS of each stage of ``physmocap retarget clip`` in a fresh process (:func:`_rss_stage_worker`)."""
+    argv = [sys.executable, str(Path(__file__).resolve()), "--rss-worker", str(clip), str(tmp)] + (["--stub-solve"] if stub else [])
+    print(f"\nresident memory by stage of {clip.name}{' (solve stubbed)' if stub else ''}:", flush=True)
+    subprocess.run(argv, check=True)
+
+
 def retarget_with(checkout: Path, clip: Path, out: Path) -> None:
     """``physmocap retarget clip -o out.bvh --qpos out.npz`` with ``PYTHONPATH=checkout``."""
     env = dict(os.environ, PYTHONPATH=str(checkout))
@@ -271,9 +327,22 @@ def main() -> int:
                     help="also print the traced peak of each stage of the command (shortest clip, in this process)")
     ap.add_argument("--extrapolate", type=float, default=60.0, metavar="MIN",
                     help="print the peak extrapolated to this many minutes (default 60)")
+    ap.add_argument("--rss-stages", action="store_true",
+                    help="instead print the peak RSS of each stage of the command and its VmHWM (each clip, a fresh process)")
+    ap.add_argument("--stub-solve", action="store_true",
+                    help="with --rss-stages: the per-frame solve returns qpos0 (every array and stage as it is)")
     ap.add_argument("--identity", type=Path, metavar="REF_DIR",
                     help="compare outputs on every shared clip with the checkout REF_DIR, byte for byte")
+    ap.add_argument("--rss-worker", nargs=2, metavar=("CLIP", "OUTDIR"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.rss_worker is not None:
+        import warnings
+
+        warnings.simplefilter("ignore")
+        clip, out = (Path(a) for a in args.rss_worker)
+        _rss_stage_worker(["retarget", str(clip), "-o", str(out / "r.bvh"), "--qpos", str(out / "r.npz"), "--quiet"],
+                          args.stub_solve)
+        return 0
     if args.identity is not None:
         return identity(args.identity)
     src = DATA / args.clip
@@ -293,6 +362,10 @@ def main() -> int:
             frames = int(round(minutes * 60.0 * fps))
             clip = tmp / f"long_{minutes:g}min.bvh"
             ping_pong_bvh(src, frames, clip)
+            if args.rss_stages:
+                rss_stages(clip, tmp, args.stub_solve)
+                clip.unlink()
+                continue
             peak, wall = cli_run(clip, tmp)
             points.append((frames, peak))
             print(f"{minutes:6g} min {frames:8d} frames: peak RSS {peak:7.0f} MB "

@@ -67,6 +67,24 @@ def test_targets_built_from_blocks_of_kinematics_are_exact(walk, humanoid, monke
         assert np.array_equal(blocks.calibration.pose_rotations[c], q), c
 
 
+def test_targets_built_in_temporary_files_are_exact(walk, humanoid, monkeypatch):
+    """Every array of build_targets spilled (the actor's positions, the orientation columns,
+    the positions placed joint by joint) and tiny blocks: the same targets, C-ordered."""
+    import physmocap.spill as spill_mod
+    from physmocap.spill import is_spilled
+
+    motion, joints, contacts = walk
+    held = build_targets(motion, joints, humanoid, floor=contacts.floor)
+    monkeypatch.setattr(spill_mod, "SPILL_BYTES", 1)
+    monkeypatch.setattr(spill_mod, "BLOCK_ROWS", 7)
+    monkeypatch.setattr(targets_mod, "BLOCK_FRAMES", 5)
+    spilled = build_targets(motion, joints, humanoid, floor=contacts.floor)
+    assert is_spilled(spilled.positions) and spilled.positions.flags.c_contiguous
+    for name in ("positions", "orientations", "valid", "source_positions"):
+        assert np.array_equal(getattr(spilled, name), getattr(held, name)), name
+    assert _same(spilled.valid, held.valid)
+
+
 def test_targets_from_given_kinematics_match_the_motions(walk, humanoid):
     motion, joints, contacts = walk
     own = build_targets(motion, joints, humanoid, floor=contacts.floor)

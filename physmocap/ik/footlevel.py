@@ -158,6 +158,7 @@ def level_feet(
         # keep the quaternion sign continuous with the old track (nicer for users)
         q_new[np.sum(q_new * old_ankle_q, axis=-1) < 0] *= -1.0
         ori[good, ia] = q_new
+        del old_ankle_q, q_new  # not held while the toes are levelled (a long clip's are large)
         levels.append(FootLevel(side, float(np.degrees(C.magnitude())), int(stance.sum())))
         if toe not in col or toe not in rest:
             continue
@@ -170,6 +171,7 @@ def level_feet(
             ie = col[tip]
             turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
             toe_dir = quat_apply(turn, old_toes)
+            del turn, old_toes, old_dir
             pos[good, ie] = pos[good, it] + _level_toes(toe_dir, new, stance[good], q_c0, rest[tip][0] - rest[toe][0])
     return pos, ori, levels
 

@@ -539,13 +539,29 @@ class _ActorKinematics:
 def orientation_array(columns: dict[int, np.ndarray], frames: int, n: int) -> np.ndarray:
     """``(frames, n, 4)`` orientations x-y-z-w: ``columns`` (target column -> ``(frames, 4)``)
     where given, the identity elsewhere; written a block of frames at a time into an array
-    kept in a temporary file for a long clip (:func:`~physmocap.spill.spilled_empty`)."""
+    kept in a temporary file for a long clip (:func:`~physmocap.spill.spilled_empty`; spilled
+    ``columns``' pages are let go after each block too)."""
     out = spilled_empty((frames, n, 4))
     for s, rows in blocks(out):
         rows[..., 3] = 1.0
         for i, q in columns.items():
             rows[:, i] = q[s : s + rows.shape[0]]
+            release(q)
     return out
+
+
+def _column_store(columns: dict[int, np.ndarray], frames: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """``(store, column -> store[:, k])``: ``columns`` (``(frames, 4)`` each) copied into one
+    array laid out column by column, in a temporary file for a long clip
+    (:func:`~physmocap.spill.spilled_empty`; the pages written let go): the same values, of
+    which a reader maps in only the columns it reads until :func:`~physmocap.spill.release`."""
+    store = spilled_empty((frames, len(columns), 4), by_column=True)
+    out = {}
+    for k, (i, q) in enumerate(columns.items()):
+        store[:, k] = q
+        out[i] = store[:, k]
+        release(store)
+    return store, out
 
 
 def _rigid_foot_tips(motion: Motion, joint_indices: dict[str, int], character, pset: set[str],
@@ -759,6 +775,7 @@ def build_targets(
         d = np.sum(q[1:] * q[:-1], axis=-1)
         flip = np.cumsum(d < 0) % 2 == 1
         q[1:][flip] *= -1.0
+    held, Q = _column_store(Q, F)  # a long clip's in a temporary file: a column mapped in while read
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
@@ -810,8 +827,8 @@ def build_targets(
     off = char_pts["pelvis"] - anchor_c0
     T[:, ip] = anchor + (quat_apply(pelvis_delta, off) if pelvis_delta is not None else off)
     for c in present:
-        release(S)  # the columns read for the previous joint
-        release(T)
+        for array in (S, T, held):  # the columns read for the previous joint
+            release(array)
         if c == "pelvis":
             continue
         p = canonical_parent(c, pset)
@@ -876,8 +893,9 @@ def build_targets(
             foot_tips=foot_tips,
         )
     release(S)
+    del delta  # let go before the orientations and positions are laid out frame by frame
     orientations = orientation_array(Q, F, N)
-    del Q, delta  # let go before the positions are laid out frame by frame
+    del Q, held
     return Targets(
         names=tuple(present),
         positions=spilled_copy(T),

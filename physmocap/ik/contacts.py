@@ -311,18 +311,20 @@ def estimate_floor(
         if slow.sum() < max(10, 0.05 * ok.sum()):
             slow = ok  # a clip with hardly any slow frames: use all of them
         sel = p[slow]
+        release(p)  # positions in a temporary file: their pages not held through the fit
         samples.append(np.column_stack([np.full(len(sel), i), sel]))
     data = np.concatenate(samples) if samples else np.zeros((0, 4))
     del samples  # held once (a long clip has several samples a frame, and the fit copies them)
     if data.shape[0] == 0:
         raise InputError("no finite foot positions to estimate the floor from")
     idx = data[:, 0].astype(int)
-    xy, z = data[:, 1:3], data[:, 3]
-    origin = np.median(xy, axis=0)
-    d = xy - origin
+    z = data[:, 3].copy()
+    origin = np.median(data[:, 1:3], axis=0)
+    d = data[:, 1:3] - origin
+    del data  # what the fit reads is copied out: a long clip's samples are not held twice
     P = len(names)
     slope = np.zeros(2)
-    if opt.fit_slope and xy.shape[0] > 2:
+    if opt.fit_slope and d.shape[0] > 2:
         # fit along the principal horizontal directions along which some
         # point's slow samples span at least slope_min_extent (a walk is long
         # in one direction only; a slope across a few centimetres is noise)
@@ -342,6 +344,7 @@ def estimate_floor(
             for band in (0.05, 0.03, 0.02, opt.floor_trim, opt.floor_trim):
                 resid = z - offset[idx] - u @ coef
                 keep = np.abs(resid) < max(band, opt.floor_trim)
+                del resid
                 if keep.sum() < 3 * (P + 2):
                     break
                 A = np.zeros((int(keep.sum()), P + use.shape[1]))

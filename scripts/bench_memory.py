@@ -208,7 +208,7 @@ def stages(clip: Path, frames: int, tmp: Path, depth: int = 3, every: float = 0.
 
     for module in ("physmocap.ik.retarget", "physmocap.export.character_bvh", "physmocap.export.trajectory"):
         importlib.import_module(module)  # imported before tracing: not the clip's memory
-    from physmocap.cli import main as cli_main
+    importlib.import_module("physmocap.cli")
 
     main_thread = threading.get_ident()
     peaks: dict[str, float] = {}
@@ -227,6 +227,23 @@ def stages(clip: Path, frames: int, tmp: Path, depth: int = 3, every: float = 0.
     argv = ["retarget", str(clip), "-o", str(tmp / "s.bvh"), "--qpos", str(tmp / "s.npz"), "--quiet"]
     tracemalloc.start()
     base = tracemalloc.get_traced_memory()[0]
+    try:
+        _run_sampled(argv, sample, done)
+    finally:
+        tracemalloc.stop()
+    print(f"\nstages on {frames} frames: peak traced MB, and bytes per frame above the start")
+    for key in order:
+        if "<module>" not in key and peaks[key] - base > 0.05 * frames * 1000:  # imports, small stages: skipped
+            print(f"  {peaks[key] / MB:7.1f} MB {(peaks[key] - base) / frames:8.0f} B/frame  {key}")
+
+
+def _run_sampled(argv: list[str], sample, done) -> None:
+    """Run ``physmocap argv`` in this process while ``sample`` runs in a thread; ``done`` (a
+    ``threading.Event`` that ``sample`` waits on) is set when the command ends."""
+    import threading
+
+    from physmocap.cli import main as cli_main
+
     thread = threading.Thread(target=sample, daemon=True)
     thread.start()
     try:
@@ -234,11 +251,6 @@ def stages(clip: Path, frames: int, tmp: Path, depth: int = 3, every: float = 0.
     finally:
         done.set()
         thread.join()
-        tracemalloc.stop()
-    print(f"\nstages on {frames} frames: peak traced MB, and bytes per frame above the start")
-    for key in order:
-        if "<module>" not in key and peaks[key] - base > 0.05 * frames * 1000:  # imports, small stages: skipped
-            print(f"  {peaks[key] / MB:7.1f} MB {(peaks[key] - base) / frames:8.0f} B/frame  {key}")
 
 
 def _rss_stage_worker(argv: list[str], stub: bool, every: float = 0.02) -> None:
@@ -249,7 +261,6 @@ def _rss_stage_worker(argv: list[str], stub: bool, every: float = 0.02) -> None:
     import threading
 
     import physmocap.ik.frame as frame_mod
-    from physmocap.cli import main as cli_main
 
     if stub:
         def solve(self, positions, orientations, valid, labels=None):
@@ -269,13 +280,7 @@ def _rss_stage_worker(argv: list[str], stub: bool, every: float = 0.02) -> None:
                 key = _stage(sys._current_frames().get(main_thread), 3)
                 peaks[key] = max(peaks.get(key, 0), rss)
 
-    thread = threading.Thread(target=sample, daemon=True)
-    thread.start()
-    try:
-        cli_main(argv)
-    finally:
-        done.set()
-        thread.join()
+    _run_sampled(argv, sample, done)
     for key, peak in peaks.items():
         if "<module>" not in key:
             print(f"  {peak / MB:7.0f} MB  {key}")

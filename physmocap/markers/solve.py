@@ -706,10 +706,11 @@ def write_actor_bvh(sol: MarkerSolution, path: str | os.PathLike, up: str = "Y",
 
 
 def print_report(rep: dict, file=None) -> None:
-    """The residual table (per segment, overall), gaps and ignored markers, on ``file`` (stderr)."""
+    """The residual table (per segment, overall), gaps and ignored markers, on ``file``
+    (stdout: a result, as ``retarget``'s report table; warnings and progress go to stderr)."""
     import sys
 
-    out = file or sys.stderr
+    out = file or sys.stdout
     print(f"marker residuals (measured marker to solved marker site), {rep['frames']} frames:", file=out)
     print(f"  {'segment':16s} {'RMS mm':>7s} {'max mm':>7s}  markers", file=out)
     for seg, e in rep["segments"].items():

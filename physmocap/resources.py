@@ -46,7 +46,12 @@ def _bundled_mjcf_names() -> dict[Path, str]:
 def portable_path(path: str | Path, base: str | Path) -> str:
     """How an output file names another file without the machine's absolute paths:
     ``"example"`` for the bundled clip, the bundled character's name for its MJCF, else the
-    path relative to ``base`` (the output's folder), with ``/`` separators."""
+    path relative to ``base`` (the output's folder), with ``/`` separators.
+
+    The relative path is taken between the paths as given (made absolute, ``..`` folded), not
+    through symbolic links: ``../shared/data/walk.bvh`` stays that, whether ``shared`` is a
+    folder or a link to one elsewhere on this machine (its target would put this machine's
+    layout into the file, and the same command would write other bytes on another)."""
     s = str(path)
     if not s or s.startswith("<"):
         return s
@@ -57,9 +62,9 @@ def portable_path(path: str | Path, base: str | Path) -> str:
     if named is not None:
         return named
     try:
-        return Path(os.path.relpath(p, Path(base).resolve())).as_posix()
+        return Path(os.path.relpath(os.path.abspath(s), os.path.abspath(base))).as_posix()
     except ValueError:  # another drive (Windows)
-        return p.as_posix()
+        return Path(os.path.abspath(s)).as_posix()
 
 
 def resolve_portable(value: str, base: str | Path) -> str:

@@ -83,12 +83,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def describe(ch) -> dict:
     """A JSON-ready description of a :class:`~physmocap.models.Character` (degrees, metres, kg)."""
-    import mujoco
-
     model = ch.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = ch.rest_qpos
-    mujoco.mj_kinematics(model, data)
+    data = ch.rest_data()
     bodies = []
     for b in range(1, model.nbody):
         bodies.append(

@@ -68,9 +68,7 @@ def _leaf_tip(model: mujoco.MjModel, data: mujoco.MjData, body: int, exported: s
 def character_skeleton(character) -> tuple[Skeleton, list[int], mujoco.MjData]:
     """The BVH skeleton of a character (metres, Z-up) and the MuJoCo body of each joint."""
     model = character.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = character.rest_qpos
-    mujoco.mj_kinematics(model, data)
+    data = character.rest_data()
     bodies = _exported_bodies(model)
     exported = set(bodies)
     names, parents, offsets, end, body_of = [], [], [], [], []

@@ -369,8 +369,14 @@ def planted_positions(
                 lab[ankle] = heel_label | toe_label
             hts = {j: heights[j] for j in pts}
         plan = foot_offsets(pts, lab, fps, ease_time, hts)
+
+        def own_height(j: str) -> np.ndarray:
+            """Joint ``j``'s own vertical plan at its stance height while the toes are down
+            (read before the foot's heights move: only its horizontal offset is in yet)."""
+            return foot_offsets({j: positions[:, col[j]]}, {j: toe_label}, fps, ease_time, {j: heights[j]}).z[j]
+
         if segment is not None:  # the toe joint as it was, read before the foot is moved
-            own = foot_offsets({toe: positions[:, col[toe]]}, {toe: toe_label}, fps, ease_time, {toe: heights[toe]}).z[toe]
+            own = own_height(toe)
         offsets[:, s] = plan.xy
         moved = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
         feet[moved] = True
@@ -382,8 +388,7 @@ def planted_positions(
             out[:, col[ankle], 2] += plan.z[ankle] + rolled
             for j in (f"{side}_{k}" for k in FOOT_JOINTS[1:]):
                 if j in col:
-                    own_j = foot_offsets({j: positions[:, col[j]]}, {j: toe_label}, fps, ease_time, {j: heights[j]}).z[j]
-                    out[:, col[j], 2] += plan.z_weight[ankle] * own_j + rolled
+                    out[:, col[j], 2] += plan.z_weight[ankle] * own_height(j) + rolled
         for j in pts if rigid is None else ():
             if j in col:
                 out[:, col[j], 2] += plan.z[j]

@@ -48,8 +48,8 @@ import numpy as np
 
 from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..options import check_fields
-from ..rotations import Rotation
 from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
+from .targets import character_rest_frames
 from .tasks import SitePositionTask
 
 __all__ = ["PlantOptions", "PlanHints", "FootPlanter", "FootAnchor", "Planting"]
@@ -557,9 +557,7 @@ class Planting:
         only a rigid pair keeps its rest distance when both of its sites are down (toes
         may be bent)."""
         model = character.model
-        data = mujoco.MjData(model)
-        data.qpos[:] = character.rest_qpos
-        mujoco.mj_kinematics(model, data)
+        data = character.rest_data()
         xy = np.array([data.site(s).xpos[:2] for s in self.sites]).reshape(-1, 2)
         body = np.array([int(model.site(s).bodyid[0]) for s in self.sites])
         d = np.linalg.norm(xy[:, None] - xy[None], axis=-1)
@@ -607,9 +605,7 @@ class Planting:
         (``toe`` and ``toe_end`` tracked) carries contact sites (role ``"hold"``)."""
         model = self.character.model
         rest = self.character.rest_positions()
-        data = mujoco.MjData(model)
-        data.qpos[:] = self.character.rest_qpos
-        mujoco.mj_kinematics(model, data)
+        data = self.character.rest_data()
         out: dict[str, ToeContact] = {}
         for side in ("left", "right"):
             toe, tip = f"{side}_toe", f"{side}_toe_end"
@@ -631,23 +627,20 @@ class Planting:
         """Side -> the :class:`~physmocap.ik.footplan.RigidFoot` of a foot without toe joints
         (its toe sites on the heel's body, role ``"pivot"``) whose ankle is tracked."""
         model = self.character.model
-        data = mujoco.MjData(model)
-        data.qpos[:] = self.character.rest_qpos
-        mujoco.mj_kinematics(model, data)
+        data = self.character.rest_data()
+        rest_frames = character_rest_frames(self.character)
         out: dict[str, RigidFoot] = {}
         for side in ("left", "right"):
             ankle = f"{side}_ankle"
             front = [s for s, role in self._toe_roles(model, self.character, side).items() if role == "pivot"]
             if not front or ankle not in self.names:
                 continue
-            tf = self.character.tracked[ankle]
-            pos = tf.position(model, data).copy()
-            mat = (data.site_xmat if tf.kind == "site" else data.xmat)[tf.object_id(model)].reshape(3, 3)
+            pos, quat = rest_frames[ankle]
             points = _material_points(model, data, set(self._foot_bodies[side]))
             if not len(points):  # no collision geometry: the contact sites
                 points = np.array([[*data.site(s).xpos, 0.0] for s in self.character.contacts[side]])
             out[side] = RigidFoot(
-                rest_quat=Rotation.from_matrix(mat).as_quat(),
+                rest_quat=quat,
                 front=np.mean([data.site(s).xpos for s in front], axis=0) - pos,
                 offsets=points[:, :3] - pos,
                 radii=points[:, 3],

@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
 
-import mujoco
 import numpy as np
 
 from ..canonical import CANONICAL_NAMES, canonical_parent
@@ -244,9 +243,7 @@ def _source_positions_again(motion: Motion, idx: np.ndarray, level: np.ndarray |
 def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Canonical joint -> (rest world position, rest world quaternion xyzw) of the character."""
     model = character.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = character.rest_qpos
-    mujoco.mj_kinematics(model, data)
+    data = character.rest_data()
     out = {}
     for canon, tf in character.tracked.items():
         if tf.kind == "site":
@@ -349,6 +346,11 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     return _min_rotation(d_c, d_a)
 
 
+#: Least bend (radians) of an actor's limb at the calibration for its hinge plane to set the
+#: twist of the limb's end (:func:`_limb_alignment`); straighter, the plane is noise.
+HINGE_MIN_ANGLE = math.radians(20.0)
+
+
 def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
     r"""The rotation that takes the character's rest limb ending at ``c`` onto the actor's,
     x-y-z-w, following the chain: the upper segment (grandparent to parent, the upper arm)
@@ -375,7 +377,7 @@ def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     M1 = _min_rotation(c1, a1)
     b2 = quat_apply(M1, c2)
     n = np.cross(a1, a2)
-    if np.linalg.norm(n) < np.sin(np.radians(20.0)) * np.linalg.norm(a1) * np.linalg.norm(a2):
+    if np.linalg.norm(n) < np.sin(HINGE_MIN_ANGLE) * np.linalg.norm(a1) * np.linalg.norm(a2):
         return quat_mul(_min_rotation(b2, a2), M1)  # a nearly straight limb: no hinge plane
     n = n / np.linalg.norm(n)
     b, a = b2 - np.dot(b2, n) * n, a2 - np.dot(a2, n) * n

@@ -100,6 +100,13 @@ class Character:
         """Canonical joint -> world position (m) in the rest pose (copies)."""
         return {k: v.copy() for k, v in self._rest.items()}
 
+    def rest_data(self) -> mujoco.MjData:
+        """A new ``MjData`` posed in the rest pose (``rest_qpos``), kinematics computed."""
+        data = mujoco.MjData(self.model)
+        data.qpos[:] = self.rest_qpos
+        mujoco.mj_kinematics(self.model, data)
+        return data
+
     def frame_id(self, canonical: str) -> int:
         """MuJoCo id of the site or body tracked for ``canonical``."""
         return self.tracked[canonical].object_id(self.model)

@@ -128,9 +128,7 @@ def self_collision_pairs(character, rest_clearance: float = 0.01) -> list[tuple[
     groups = limb_groups(character)
     geoms = character_geoms(model, collision_only=True)
     of_group = {name: [g for g in geoms if int(model.geom_bodyid[g]) in bodies] for name, bodies in groups.items()}
-    data = mujoco.MjData(model)
-    data.qpos[:] = character.rest_qpos
-    mujoco.mj_kinematics(model, data)
+    data = character.rest_data()
     fromto = np.empty(6)
     pairs = set()
     for a, b in GROUP_PAIRS:

@@ -31,6 +31,12 @@ def _threshold(min_bytes: int | None) -> int:
     return max(1, SPILL_BYTES if min_bytes is None else int(min_bytes))
 
 
+class _SpillMap(mmap.mmap):
+    """A mapping this module made (of its own unlinked temporary file): the only kind
+    :func:`release` lets go of.  A caller's ``np.memmap`` or ``np.load(..., mmap_mode="c")``
+    is not ours: dropping its pages would throw away a copy-on-write mapping's changes."""
+
+
 def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
     """A shared, writable mapping of a new unlinked temporary file of ``nbytes`` bytes
     (zeros, or the bytes of the C-contiguous ``fill`` written through the file, so no page
@@ -46,7 +52,7 @@ def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
             else:
                 fill.tofile(fh)
             fh.flush()
-            return mmap.mmap(fh.fileno(), nbytes)
+            return _SpillMap(fh.fileno(), nbytes)
     except (OSError, ValueError):
         return None
 
@@ -93,13 +99,14 @@ def spilled_empty(shape: tuple[int, ...], dtype=np.float64, min_bytes: int | Non
 
 
 def _mapping(array: np.ndarray | None) -> mmap.mmap | None:
-    """The mapping of a temporary file under ``array`` (a spilled array or a view of one), or None."""
+    """The mapping of a temporary file of this module under ``array`` (a spilled array or a
+    view of one), or None (any other array, a caller's memory-mapped file included)."""
     base = array
     while isinstance(base, np.ndarray):
         base = base.base
     if isinstance(base, memoryview):  # np.frombuffer's view of the mapping
         base = base.obj
-    return base if isinstance(base, mmap.mmap) and not base.closed else None
+    return base if isinstance(base, _SpillMap) and not base.closed else None
 
 
 def is_spilled(array: np.ndarray | None) -> bool:

@@ -78,3 +78,19 @@ def test_spilled_copy_keeps_values_in_either_layout():
     assert not is_spilled(spilled_copy(a)) and np.array_equal(spilled_copy(a), a)  # small: in memory
     assert spill(strided) is strided
 
+
+
+def test_a_callers_memory_mapped_file_is_not_ours_to_release(tmp_path):
+    """Before: any array over an mmap counted as spilled, so going through a caller's
+    ``np.load(..., mmap_mode="c")`` array a block at a time dropped its pages, and with them
+    the caller's copy-on-write changes (a motion's rotations reset to the file's)."""
+    from physmocap.spill import blocks, is_spilled
+
+    path = tmp_path / "a.npy"
+    np.save(path, np.zeros((20000, 4)))
+    m = np.load(path, mmap_mode="c")
+    m[:] = -1.0
+    assert not is_spilled(m)
+    for _ in blocks(m, rows=1000):
+        pass
+    assert np.all(m == -1.0)

@@ -35,7 +35,7 @@ from typing import Sequence
 import numpy as np
 
 from .rotations import quat_apply, quat_mul
-from .spill import release
+from .spill import release, spilled_empty
 
 __all__ = ["Skeleton", "Motion", "forward_kinematics", "MAX_FPS"]
 
@@ -55,6 +55,10 @@ def hierarchy_depth(parents) -> int:
     for p in parents:
         depth.append(1 if p < 0 else depth[p] + 1)
     return max(depth, default=0)
+
+
+#: Frames of world positions computed at a time by :meth:`Motion.joint_world_positions`.
+WORLD_BLOCK_FRAMES = 4096
 
 
 @dataclass(frozen=True, eq=False)
@@ -357,6 +361,28 @@ class Motion:
         return forward_kinematics(
             self.skeleton, self.rotations, self.translations, self.translated, with_rotations=False
         )[0]
+
+    def joint_world_positions(self, joints: Sequence[int], block: int = WORLD_BLOCK_FRAMES) -> tuple[np.ndarray, dict[int, int]]:
+        """World positions of some joints: ``(positions (F, K, 3) metres Z-up, joint index ->
+        column of it)``.
+
+        A rotational motion's forward kinematics runs ``block`` frames at a time and keeps
+        only the ``joints`` asked for (the same values as :meth:`world_positions`, without its
+        whole ``(F, J, 3)``), laid out joint by joint, in a temporary file for a long clip
+        (:func:`~physmocap.spill.spilled_empty`; each block's pages let go once written), so
+        a reader of a few joints maps in only theirs; a positional motion's positions are
+        returned as they are (not a copy: do not write into them).
+        """
+        if self.rotations is None:
+            return self.world_positions(), {int(j): int(j) for j in joints}
+        wanted = sorted(set(int(j) for j in joints))
+        F = self.num_frames
+        out = spilled_empty((F, len(wanted), 3), by_column=True)
+        for start in range(0, F, block):
+            end = min(start + block, F)
+            out[start:end] = self.slice_frames(start, end).world_positions()[:, wanted]
+            release(out)
+        return out, {j: k for k, j in enumerate(wanted)}
 
     def world_rotations(self) -> np.ndarray | None:
         """``(F, J, 4)`` world rotations x-y-z-w, or None for positional motions."""

@@ -1,4 +1,5 @@
-"""Contact detection reads the actor's world positions in blocks of frames, only the joints it needs."""
+"""Contact detection and the fidelity figures read the actor's world positions in blocks of frames,
+only the joints they need (Motion.joint_world_positions)."""
 
 from __future__ import annotations
 
@@ -8,12 +9,11 @@ from conftest import shared_file
 
 
 def test_joint_world_positions_match_the_whole_clip() -> None:
-    from physmocap.ik.contacts import joint_world_positions
     from physmocap.sources import load_motion
 
     motion = load_motion(shared_file("cmu_12_01_walk.bvh"))
     joints = [5, 2, 7, 2]
-    world, column = joint_world_positions(motion, joints, block=97)  # several blocks, the last one short
+    world, column = motion.joint_world_positions(joints, block=97)  # several blocks, the last one short
     assert world.shape == (motion.num_frames, 3, 3)
     full = motion.world_positions()
     for j in joints:
@@ -21,10 +21,9 @@ def test_joint_world_positions_match_the_whole_clip() -> None:
 
 
 def test_positional_motion_is_not_copied() -> None:
-    from physmocap.ik.contacts import joint_world_positions
     from physmocap.sources import load_motion
 
     motion = load_motion(shared_file("cmu_12_01_walk.bvh"))
     positional = motion.replace(positions=motion.world_positions(), rotations=None, translations=None)
-    world, column = joint_world_positions(positional, [3, 1])
+    world, column = positional.joint_world_positions([3, 1])
     assert world is positional.positions and column == {3: 3, 1: 1}

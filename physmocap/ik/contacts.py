@@ -74,7 +74,7 @@ import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
 from ..fileio import atomic_open
-from ..spill import release, spilled_empty
+from ..spill import release
 
 __all__ = [
     "CONTACT_LABELS",
@@ -695,7 +695,7 @@ def detect_contacts(
 
     pts = contact_points(joint_indices)
     body = {name: j for name, j in joint_indices.items() if name in _body_contact_joints()}
-    world, column = joint_world_positions(motion, [*pts.values(), *body.values()])
+    world, column = motion.joint_world_positions([*pts.values(), *body.values()])
     try:
         contacts = detect_point_contacts({n: world[:, column[j]] for n, j in pts.items()}, motion.fps, options)
     except InputError as exc:
@@ -709,10 +709,6 @@ def detect_contacts(
     return contacts
 
 
-#: Frames of an actor's world positions computed at a time by :func:`joint_world_positions`.
-WORLD_BLOCK_FRAMES = 4096
-
-
 def _body_contact_joints() -> frozenset[str]:
     """Canonical joints :func:`~physmocap.ik.body_contacts.detect_body_contacts` reads: its
     parts' joints and the legs (hip, knee, ankle) its thresholds scale with."""
@@ -720,29 +716,6 @@ def _body_contact_joints() -> frozenset[str]:
 
     legs = (f"{side}_{j}" for side in SIDES for j in ("hip", "knee", "ankle"))
     return frozenset([*legs, *(j for joints in BODY_PARTS.values() for j in joints)])
-
-
-def joint_world_positions(motion, joints: Sequence[int], block: int = WORLD_BLOCK_FRAMES) -> tuple[np.ndarray, dict[int, int]]:
-    """World positions of some of ``motion``'s joints: ``(positions (F, K, 3) metres Z-up,
-    joint index -> column of it)``.
-
-    A rotational motion's forward kinematics runs ``block`` frames at a time and keeps only
-    the ``joints`` asked for (the same values as :meth:`~physmocap.motion.Motion.world_positions`,
-    without its whole ``(F, J, 3)``), laid out joint by joint, in a temporary file for a long
-    clip (:func:`~physmocap.spill.spilled_empty`; each block's pages let go once written), so
-    a reader of a few joints maps in only theirs; a positional motion's positions are
-    returned as they are.
-    """
-    if motion.rotations is None:
-        return motion.world_positions(), {j: j for j in joints}
-    wanted = sorted(set(int(j) for j in joints))
-    F = motion.num_frames
-    out = spilled_empty((F, len(wanted), 3), by_column=True)
-    for start in range(0, F, block):
-        end = min(start + block, F)
-        out[start:end] = motion.slice_frames(start, end).world_positions()[:, wanted]
-        release(out)
-    return out, {j: k for k, j in enumerate(wanted)}
 
 
 # ---------------------------------------------------------------------------

@@ -173,22 +173,23 @@ def figure_joints() -> frozenset[str]:
 def actor_joint_positions(motion, joint_indices: dict[str, int], names=None) -> dict[str, np.ndarray]:
     """Canonical joint -> ``(F, 3)`` world positions of the actor (metres, Z-up; NaN where lost).
 
-    Only the joints in ``names`` are kept (None: every mapped joint); the skeleton's forward
-    kinematics runs :data:`BLOCK_FRAMES` frames at a time (each frame on its own, so the same
-    numbers as one pass over the clip).  The columns are views of one array laid out joint by
-    joint (:func:`_joint_columns`), whose pages are let go after each block."""
+    Only the joints in ``names`` are kept (None: every mapped joint), read by
+    :meth:`~physmocap.motion.Motion.joint_world_positions` (the forward kinematics a block of
+    frames at a time, laid out joint by joint).  Where the motion says a joint is lost
+    (``confidence``) or its positions are the motion's own (a positional source), the
+    columns are copied into one array laid out joint by joint (:func:`_joint_columns`)
+    and marked NaN there, a column at a time."""
     wanted = {n: j for n, j in joint_indices.items() if names is None or n in names}
-    F = motion.num_frames
-    array, out = _joint_columns(wanted, F)
-    for s in range(0, F, BLOCK_FRAMES):
-        e = min(F, s + BLOCK_FRAMES)
-        world = motion.slice_frames(s, e).world_positions()
-        for name, j in wanted.items():
-            block = out[name][s:e]
-            block[:] = world[:, j]
-            if motion.confidence is not None:
-                block[motion.confidence[s:e, j] <= 0.0] = np.nan
+    world, column = motion.joint_world_positions(list(wanted.values()), BLOCK_FRAMES)
+    if motion.confidence is None and motion.rotations is not None:
+        return {name: world[:, column[j]] for name, j in wanted.items()}
+    array, out = _joint_columns(wanted, motion.num_frames)
+    for name, j in wanted.items():
+        out[name][:] = world[:, column[j]]
+        if motion.confidence is not None:
+            out[name][motion.confidence[:, j] <= 0.0] = np.nan
         release(array)
+        release(world)
     return out
 
 

@@ -49,6 +49,7 @@ from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
+from .limbtwist import LIMB_CHAINS, flexion_axis, follow_bend, twist_offset
 from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -62,7 +63,7 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float]] = {
     "head": (2.0, 0.5),
     "head_end": (0.5, 0.0),
     "clavicle": (0.5, 0.0),
-    "shoulder": (3.0, 0.0),
+    "shoulder": (3.0, 0.2),
     "elbow": (5.0, 0.0),
     "wrist": (5.0, 0.3),
     "hand_end": (1.0, 0.0),
@@ -73,7 +74,9 @@ DEFAULT_WEIGHTS: dict[str, tuple[float, float]] = {
     "toe_end": (2.0, 0.0),
 }
 
-ORIENTED = ("pelvis", "chest", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+ORIENTED = (
+    "pelvis", "chest", "head", "left_shoulder", "right_shoulder", "left_wrist", "right_wrist", "left_ankle", "right_ankle",
+)
 RIGID_PARENTS = ("pelvis", "chest", "head")
 #: Joints placed rigidly with a torso segment (not along the actor's segment direction).
 RIGID_SEGMENT = {
@@ -152,6 +155,7 @@ class Calibration:
     level_centre: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     foot_tips: dict = field(default_factory=dict)  # side -> toe-tip direction in the foot's frame (rigidfoot)
+    limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> (flexion axis, segment) or None (limbtwist)
 
 
 @dataclass(eq=False)
@@ -386,6 +390,22 @@ def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     # what the hinge leaves of the lower segment off the plane, by its smallest rotation
     rest = _min_rotation(quat_apply(hinge, b2), a2)
     return quat_mul(rest, quat_mul(hinge, M1))
+
+
+def _limb_chain(character, c: str, present: set, axes: dict) -> tuple[str, str, tuple] | None:
+    """``(middle, end, (h, u))`` of a limb's upper segment ``c`` whose middle joint is a
+    hinge on the character (:mod:`physmocap.ik.limbtwist`), else None; the axes are
+    found once and kept in ``axes`` (the calibration's)."""
+    side, _, stem = c.partition("_")
+    chain = LIMB_CHAINS.get(stem)
+    if not side or chain is None:
+        return None
+    middle, end = (f"{side}_{x}" for x in chain)
+    if middle not in present or end not in present:
+        return None
+    if c not in axes:
+        axes[c] = flexion_axis(character, c, middle, end)
+    return None if axes[c] is None else (middle, end, axes[c])
 
 
 def _relative_to_pose(pose_rot: dict[str, np.ndarray], c: str, q: np.ndarray) -> np.ndarray:
@@ -740,6 +760,7 @@ def build_targets(
     else:
         movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
     offsets = {} if cal is None else cal.orientation_offsets
+    limb_axes = {} if cal is None else cal.limb_axes
     foot_tips = {} if cal is None else cal.foot_tips
     toe_turn: dict[str, np.ndarray] = {}  # side -> (F, 4) a rigid foot's toe-line correction
     if not motion.is_rotational and source_orientations is None:
@@ -751,10 +772,22 @@ def build_targets(
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
             R_a = rot_all[joint_indices[c]]  # rest world rotation is identity for BVH
+            limb = _limb_chain(character, c, pset, limb_axes)
+            if limb is None and c.partition("_")[2] in LIMB_CHAINS:
+                continue  # a limb's upper segment whose twist the character's frame cannot show
+            if limb is not None:  # the upper segment's twist from the actor's bent elbow or knee
+                middle, end, axes = limb
+                segs = (S[:, col[middle]] - S[:, i], S[:, col[end]] - S[:, col[middle]])
+                ok = valid[:, i] & valid[:, col[middle]] & valid[:, col[end]]
             if c not in offsets:
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
+                turn = None if limb is None else twist_offset(quat_mul(R_a, offsets[c]), axes, *segs, ok)
+                if turn is not None:
+                    offsets[c] = quat_mul(offsets[c], turn)
             Q[i] = quat_mul(R_a, offsets[c])
+            if limb is not None:
+                Q[i] = quat_mul(Q[i], follow_bend(Q[i], axes, *segs, ok))
             has_q[i] = True
             side = c.split("_", 1)[0]
             if c.endswith("_ankle") and side in tips:
@@ -893,6 +926,7 @@ def build_targets(
             level_centre=centre,
             info=level_info,
             foot_tips=foot_tips,
+            limb_axes=limb_axes,
         )
     release(S)
     del delta  # let go before the orientations and positions are laid out frame by frame

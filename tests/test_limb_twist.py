@@ -1,0 +1,104 @@
+"""The upper arm's twist target comes from the actor's bent elbow (physmocap.ik.limbtwist),
+not from how the source skeleton happens to orient its upper-arm frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physmocap.ik.limbtwist import flexion_axis, twist_error
+from physmocap.ik.retarget import retarget
+from physmocap.ik.targets import build_targets
+from physmocap.models import load_character
+from physmocap.rotations import Rotation, quat_apply
+from physmocap.sources import load_motion
+
+
+@pytest.mark.parametrize("character", ["humanoid", "robot"])
+def test_the_flexion_axis_is_signed_so_a_positive_turn_flexes(character):
+    """The humanoid's elbow flexes with a positive angle, the robot's with a negative one:
+    either way the axis found turns the forearm towards flexion (the larger side of the
+    joint's range), in the upper arm's tracked frame."""
+    import mujoco
+
+    ch = load_character(character)
+    model = ch.model
+    for side in ("left", "right"):
+        axes = flexion_axis(ch, f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist")
+        assert axes is not None
+        h, u = axes
+        assert abs(float(h @ u)) < 0.2  # across the upper arm, not along it
+        data = ch.rest_data()
+        site = {k: ch.tracked[k] for k in (f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist")}
+
+        def pos(k):
+            return data.site_xpos[model.site(site[k].name).id].copy()
+
+        frame = data.site_xmat[model.site(site[f"{side}_shoulder"].name).id].reshape(3, 3).copy()
+        # flex the hinge that swings the wrist most halfway into its larger side
+        elbow_body = model.site_bodyid[model.site(site[f"{side}_elbow"].name).id]
+        joints = [j for j in range(model.njnt) if model.jnt_bodyid[j] == elbow_body and model.jnt_type[j] == 3]
+        lever = [np.linalg.norm(np.cross(data.xmat[elbow_body].reshape(3, 3) @ model.jnt_axis[j],
+                                         pos(f"{side}_wrist") - data.xanchor[j])) for j in joints]
+        j = joints[int(np.argmax(lever))]
+        lo, hi = model.jnt_range[j]
+        data.qpos[model.jnt_qposadr[j]] = 0.5 * (hi if hi + lo > 0 else lo)
+        mujoco.mj_kinematics(model, data)
+        upper = frame.T @ (pos(f"{side}_elbow") - pos(f"{side}_shoulder"))
+        lower = frame.T @ (pos(f"{side}_wrist") - pos(f"{side}_elbow"))
+        assert float(np.cross(upper, lower) @ h) > 0.0, (side, h)
+
+
+def _retwisted(motion, joint: int, degrees: float):
+    """The same motion with ``joint``'s frame turned by ``degrees`` about its bone (to its
+    child): every world position and every other world rotation unchanged, as another
+    vendor's skeleton might orient its upper arm."""
+    sk = motion.skeleton
+    children = [k for k in range(len(sk.names)) if sk.parents[k] == joint]
+    bone = sk.offsets[children[0]] / np.linalg.norm(sk.offsets[children[0]])
+    turn = Rotation.from_rotvec(np.radians(degrees) * bone)
+    rot = motion.rotations.copy()
+    rot[:, joint] = (Rotation.from_quat(rot[:, joint]) * turn).as_quat()
+    offsets = sk.offsets.copy()
+    for k in children:
+        rot[:, k] = (turn.inv() * Rotation.from_quat(rot[:, k])).as_quat()
+        offsets[k] = turn.inv().apply(offsets[k])
+    skeleton = type(sk)(names=sk.names, parents=sk.parents, offsets=offsets, end_site=sk.end_site)
+    import dataclasses
+
+    return dataclasses.replace(motion, skeleton=skeleton, rotations=rot)
+
+
+def test_the_upper_arm_target_does_not_depend_on_the_source_frame_twist():
+    """Before: the upper arm had no orientation target; its twist was whatever the wrist
+    target left (an arm hanging straight in a walk wandered; on the CMU dance the IK kept
+    a hyperextended elbow and turned its backward bend towards the hand).  Calibrated
+    from the rest poses alone its twist was 30 degrees off CMU's elbow plane, and would
+    follow any vendor's choice of upper-arm frame.  Now it is calibrated on the actor's
+    bent elbow: the same targets whichever way the source orients the upper arm."""
+    motion = load_motion("example")
+    ch = load_character("humanoid")
+    joints = retarget(motion, ch, progress=False, start=0, end=2).joint_indices
+    base = build_targets(motion, joints, ch)
+    for side in ("left", "right"):
+        i = base.index(f"{side}_shoulder")
+        assert base.has_orientation[i]
+        e, w = base.index(f"{side}_elbow"), base.index(f"{side}_wrist")
+        S = base.source_positions
+        axes = flexion_axis(ch, f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist")
+        phi, bend = twist_error(base.orientations[:, i], axes, S[:, e] - S[:, i], S[:, w] - S[:, e])
+        bent = bend > np.radians(20.0)
+        assert bent.sum() > 50
+        assert np.degrees(np.abs(phi[bent])).max() < 1.0  # CMU's elbow is a hinge: exact
+        for degrees in (70.0, -130.0):
+            other = build_targets(_retwisted(motion, joints[f"{side}_shoulder"], degrees), joints, ch)
+            np.testing.assert_allclose(other.positions, base.positions, atol=1e-9)
+            # the same orientation (quaternion sign aside)
+            dots = np.abs(np.sum(other.orientations[:, i] * base.orientations[:, i], axis=-1))
+            assert dots.min() > 1.0 - 1e-9, degrees
+            # the predicted flexion axis lies in the actor's elbow plane
+            h = quat_apply(other.orientations[bent, i], axes[0])
+            n = np.cross(S[bent, e] - S[bent, i], S[bent, w] - S[bent, e])
+            cos = np.sum(h * n, axis=-1) / np.linalg.norm(n, axis=-1)
+            assert cos.min() > np.cos(np.radians(1.0))
+

@@ -75,9 +75,9 @@ def test_offline_and_streaming_run_the_same_frame_pipeline(walk, monkeypatch):
     calls = []
     original = FrameRetargeter.solve
 
-    def counting(self, positions, orientations, valid, labels=None):
+    def counting(self, positions, orientations, valid, labels=None, guide=None):
         calls.append((self.anchored, positions.copy()))
-        return original(self, positions, orientations, valid, labels)
+        return original(self, positions, orientations, valid, labels, guide)
 
     monkeypatch.setattr(FrameRetargeter, "solve", counting)
     retarget(walk, None, start=0, progress=False)

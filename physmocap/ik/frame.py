@@ -165,6 +165,7 @@ class FrameRetargeter:
         orientations: np.ndarray,
         valid: np.ndarray,
         labels: Mapping[str, bool] | None = None,
+        guide=None,
     ) -> FrameResult:
         """Retarget the next frame.
 
@@ -174,6 +175,8 @@ class FrameRetargeter:
             valid: ``(N,)`` which targets are tracked on this frame.
             labels: Contact label -> in contact on this frame (``left_heel``,
                 ``left_toe``, ``right_heel``, ``right_toe``); None: no planting.
+            guide: A posture pull for this frame (:class:`~physmocap.ik.branches.Guide`;
+                offline second passes), or None.
         """
         t0 = time.perf_counter()
         first = self.frame == 0
@@ -181,7 +184,7 @@ class FrameRetargeter:
         positions = self._follow_pelvis(positions)
         aimed = positions  # the targets the solver is given (streaming: shifted onto the planted feet)
         if self.planting is None or labels is None:
-            q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first)
+            q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first, guide=guide)
         else:
             if first:  # converge on the targets alone, then plant the feet where they are
                 solver.solve_frame(positions, orientations, valid, first=True)
@@ -190,7 +193,7 @@ class FrameRetargeter:
             holds = ContactHolds(
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )
-            q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds)
+            q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds, guide=guide)
             aimed = shifted
         self._measure_lag(aimed, valid)
         self.frame += 1

@@ -18,12 +18,19 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
-from ..metrics.fidelity import fidelity_warnings, trajectory_fidelity
+from ..metrics.fidelity import (
+    actor_joint_positions,
+    character_joint_positions,
+    fidelity_warnings,
+    segment_direction_errors,
+    trajectory_fidelity,
+)
 from ..motion import Motion
 from ..progress import Progress
 from ..spill import blocks, release, spill, spilled_copy, spilled_empty
 from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
+from .branches import plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
@@ -205,10 +212,41 @@ def retarget(
     traj.source_motion = motion  # as retargeted: cut and resampled
     traj.joint_indices = dict(joint_indices)
     traj.source_start = int(source_start)
+    if config.solver.arm_branches:
+        traj = _second_pass(traj, config, progress, labels)
     traj.fidelity = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
     for message in fidelity_warnings(traj.fidelity, source_start):
         warn(f"{motion.source}: {message}")
     return traj
+
+
+def _arm_errors(traj) -> dict[str, np.ndarray]:
+    """Per-frame direction errors (degrees) of the arm segments of ``traj`` against its actor."""
+    used = frozenset(j for side in ("left", "right") for j in (f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist"))
+    actor = actor_joint_positions(traj.source_motion, traj.joint_indices, used)
+    return segment_direction_errors(actor, character_joint_positions(traj, used))
+
+
+def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
+                 labels: dict[str, np.ndarray] | None) -> Trajectory:
+    """``traj`` retargeted again with its stuck arms guided onto the branch of their ranges
+    that reaches the actor (:mod:`.branches`), if there are any and it brings them closer;
+    else ``traj``."""
+    errors = _arm_errors(traj)
+    guides = plan_guides(traj, errors, config.solver.weights)
+    if not guides:
+        return traj
+    again = _track(traj.targets, traj.character, config.solver, traj.source, progress, labels, config.plant, guides)
+    for name in ("contacts", "source_motion", "joint_indices", "source_start"):
+        setattr(again, name, getattr(traj, name))
+    return again if _arms_off(_arm_errors(again)) < _arms_off(errors) else traj
+
+
+def _arms_off(errors: dict[str, np.ndarray]) -> tuple[int, float]:
+    """How far the arms are from the actor's: frames with an arm segment more than 45
+    degrees off, then the sum of the segments' errors (degrees)."""
+    e = np.nan_to_num(np.stack(list(errors.values()), axis=1), nan=0.0)
+    return int(np.count_nonzero(e.max(axis=1) > 45.0)), float(e.sum())
 
 
 def _stance_labels(motion: Motion, joint_indices: dict[str, int], config: RetargetConfig) -> dict[str, np.ndarray] | None:
@@ -370,10 +408,13 @@ def _track(
     progress: bool | None,
     labels: dict[str, np.ndarray] | None,
     plant: PlantOptions,
+    guides: dict | None = None,
 ) -> Trajectory:
     """Run the per-frame pipeline over (planned) targets, holding the contact points of
-    ``labels`` (None: track the targets as they are); the solver's per-frame figures are
+    ``labels`` (None: track the targets as they are), with ``guides`` (frame ->
+    :class:`~.branches.Guide`) on their frames; the solver's per-frame figures are
     kept in compact arrays (int32, int8 and float64 seconds per frame)."""
+    guides = guides or {}
     planted = labels is not None
     pipeline = FrameRetargeter(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False
@@ -386,7 +427,8 @@ def _track(
     with Progress(F, "retarget", enabled=progress) as bar:
         for t in range(F):
             frame_labels = {k: bool(v[t]) for k, v in labels.items()} if labels is not None else None
-            result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels)
+            result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels,
+                                    guides.get(t))
             qpos[t] = result.qpos
             iterations[t] = result.iterations
             relaxation[t] = result.relaxation

@@ -135,6 +135,10 @@ class SolverOptions:
             fps moves the wrist 15-20 cm a frame) otherwise lags its target by a
             hand's breadth for several frames.  Frames that converge, or track within it,
             are unchanged.
+        arm_branches: Offline only: where an arm is left far from the actor's on a branch
+            of its joint ranges that cannot reach it while another can, retarget again
+            with that arm guided onto the other (:mod:`physmocap.ik.branches`).  Streaming
+            retargeting cannot look ahead and ignores it.
     """
 
     max_iterations: int = 4
@@ -160,6 +164,7 @@ class SolverOptions:
     smoothness_cost: float = 0.5
     extrapolate_start: bool = False
     catch_up: float = 0.05
+    arm_branches: bool = True
 
     def __post_init__(self) -> None:
         check_fields(
@@ -248,6 +253,9 @@ class FrameSolver:
         self.posture.set_target(np.array(character.rest_qpos, dtype=float))
         #: pull towards the constant-velocity prediction from the two previous frames
         self.momentum = mink.PostureTask(model, cost=max(opt.smoothness_cost * (fps / SMOOTHNESS_RATE) ** 2, 1e-12))
+        #: a frame's posture pull towards a planned configuration (:mod:`physmocap.ik.branches`)
+        self.guide = mink.PostureTask(model, cost=0.0)
+        self._guided = False
         self._q_prev2: np.ndarray | None = None
         self._converged = (False, False)  # whether the two previous frames' iterations converged
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
@@ -329,10 +337,20 @@ class FrameSolver:
         self.floor_limit.swing_bodies = dict(holds.clearance_bodies)
 
     def _postures(self) -> tuple:
-        """The posture term, and the smoothness prior once two previous frames exist."""
+        """The posture term, the smoothness prior once two previous frames exist, and the
+        frame's guide if it has one."""
+        guide = (self.guide,) if self._guided else ()
         if self.options.smoothness_cost > 0 and self.q_prev is not None and self._q_prev2 is not None and not self._first:
-            return (self.posture, self.momentum)
-        return (self.posture,)
+            return (self.posture, self.momentum, *guide)
+        return (self.posture, *guide)
+
+    def _set_guide(self, guide) -> None:
+        """This frame's guide (:class:`~physmocap.ik.branches.Guide`: a target configuration
+        and a cost per dof), or None."""
+        self._guided = guide is not None
+        if guide is not None:
+            self.guide.set_target(guide.qpos)
+            self.guide.set_cost(guide.cost)
 
     def _predict(self) -> None:
         r"""Target of the smoothness prior: :math:`q_{t-1} \oplus (q_{t-1} \ominus q_{t-2})`."""
@@ -684,6 +702,7 @@ class FrameSolver:
         valid: np.ndarray,
         holds: ContactHolds | None = None,
         first: bool = False,
+        guide=None,
     ) -> tuple[np.ndarray, int, int]:
         """Solve one frame, warm-started from the previous one; returns
         ``(q, iterations, relaxation level)`` (``q`` a new array; the inputs are not modified).
@@ -695,12 +714,14 @@ class FrameSolver:
             holds: This frame's contact holds (:class:`ContactHolds`); none by default.
             first: Converge from the rest pose (``first_frame_iterations``)
                 instead of taking ``max_iterations`` from the previous frame.
+            guide: A posture pull for this frame (:class:`~physmocap.ik.branches.Guide`), or None.
 
         The relaxation level is the index in :data:`RELAXATION_LEVELS` of the
         strongest relaxation any iteration needed (0 = none).
         """
         self._set_targets(positions, orientations, valid)
         self._set_holds(holds or ContactHolds())
+        self._set_guide(guide)
         # converging from the rest pose is no motion: the limbs may pass each other on the way
         # (from the next frame on, a pair left overlapping is pushed apart)
         self._first = bool(first)

@@ -19,13 +19,15 @@ Also prints the streaming retargeter's latency on the CMU walk.
 ``--compare REF_DIR`` runs the same benchmark on another checkout (``REF_DIR``,
 e.g. the main branch) in a subprocess with ``PYTHONPATH=REF_DIR``, run by run
 alternating with this one, and prints both and the ratio (this / reference) of
-the median retarget CPU fps.
+the median retarget CPU fps.  With ``--fresh`` this checkout runs in fresh subprocesses
+too, each after ``--warmup`` untimed frames, so that both sides pay the same (the fair
+comparison; without it this checkout runs in the benchmark's own, warmed-up process).
 
 A character is a bundled name (``humanoid``, ``robot``) or an MJCF path (e.g.
 ``../shared/robots/unitree_g1/g1_mocap_29dof.xml``).
 
 Usage:  python scripts/bench_retarget.py [--runs 5] [--frames N] [--characters humanoid robot]
-        [--clips cmu_12_01_walk.bvh] [--no-plant] [--compare ../main] [--set second_order_correction=true]
+        [--clips cmu_12_01_walk.bvh] [--no-plant] [--compare ../main [--fresh]] [--set second_order_correction=true]
 """
 
 from __future__ import annotations
@@ -48,9 +50,11 @@ DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "da
 CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrack_hops_crouch.bvh"]
 
 
-def _measure(clip: str, character: str, frames: int | None, plant: bool, options: dict | None = None) -> dict[str, float]:
+def _measure(clip: str, character: str, frames: int | None, plant: bool, options: dict | None = None,
+             warmup: int = 0) -> dict[str, float]:
     """One run: retarget ``clip`` onto ``character`` (with flat retarget ``options``); CPU and
-    wall frames/s, IK latencies."""
+    wall frames/s, IK latencies.  ``warmup``: first retarget that many frames, untimed (the
+    lazy imports and caches a fresh process fills on its first frames)."""
     from physmocap.ik.config import RetargetConfig
     from physmocap.ik.contacts import detect_contacts
     from physmocap.ik.retarget import map_motion, retarget, solve_targets
@@ -62,8 +66,10 @@ def _measure(clip: str, character: str, frames: int | None, plant: bool, options
     if frames:
         motion = motion.slice_frames(0, min(frames, motion.num_frames))
     ch = load_character(character)
-    c0, w0 = time.process_time(), time.perf_counter()
     config = RetargetConfig().with_options(**(options or {}))
+    if warmup:
+        retarget(motion.slice_frames(0, min(warmup, motion.num_frames)), ch, config, progress=False, plant=plant)
+    c0, w0 = time.process_time(), time.perf_counter()
     retarget(motion, ch, config, progress=False, plant=plant)
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     idx = map_motion(motion)
@@ -85,18 +91,22 @@ def _measure(clip: str, character: str, frames: int | None, plant: bool, options
 
 
 def _worker() -> int:
-    """``--worker CLIP CHARACTER FRAMES PLANT``: one run, printed as JSON (for ``--compare``)."""
-    clip, character, frames, plant = sys.argv[2:6]
+    """``--worker CLIP CHARACTER FRAMES PLANT WARMUP [OPTIONS_JSON]``: one run, printed as JSON
+    (for ``--compare``)."""
+    clip, character, frames, plant, warmup = sys.argv[2:7]
+    options = json.loads(sys.argv[7]) if len(sys.argv) > 7 else None
     warnings.simplefilter("ignore")
-    print(json.dumps(_measure(clip, character, int(frames) or None, plant == "1")))
+    print(json.dumps(_measure(clip, character, int(frames) or None, plant == "1", options, int(warmup))))
     return 0
 
 
-def _subprocess_run(ref: Path, clip: str, character: str, frames: int | None, plant: bool) -> dict[str, float]:
-    """One run of this script's worker with ``PYTHONPATH=ref`` (the reference checkout)."""
+def _subprocess_run(ref: Path, clip: str, character: str, frames: int | None, plant: bool, warmup: int = 0,
+                    options: dict | None = None) -> dict[str, float]:
+    """One run of this script's worker in a fresh process with ``PYTHONPATH=ref`` (a checkout)."""
     env = dict(os.environ, PYTHONPATH=str(ref))
     out = subprocess.run(
-        [sys.executable, str(Path(__file__).resolve()), "--worker", clip, character, str(frames or 0), "1" if plant else "0"],
+        [sys.executable, str(Path(__file__).resolve()), "--worker", clip, character, str(frames or 0),
+         "1" if plant else "0", str(warmup), json.dumps(options or {})],
         env=env, check=True, capture_output=True, text=True,
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -118,6 +128,10 @@ def main() -> int:
     ap.add_argument("--compare", type=Path, default=None, metavar="REF_DIR",
                     help="also run the checkout REF_DIR (PYTHONPATH=REF_DIR), alternating runs, and print the ratio")
     ap.add_argument("--no-stream", action="store_true", help="skip the streaming latency")
+    ap.add_argument("--fresh", action="store_true",
+                    help="run this checkout in a fresh process per run too (as the reference is), "
+                         "each after a --warmup of 30 frames: the fair back-to-back comparison")
+    ap.add_argument("--warmup", type=int, default=30, help="untimed frames first in each --fresh run")
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                     help="flat retarget options for this checkout only (JSON values), e.g. second_order_correction=true")
     args = ap.parse_args()
@@ -135,9 +149,13 @@ def main() -> int:
     ref: dict = {k: [] for k in combos}
     for k in range(args.runs):  # interleaved: every combination once per round
         for clip, name in combos:
+            warmup = args.warmup if args.fresh else 0
             if args.compare is not None:
-                ref[(clip, name)].append(_subprocess_run(args.compare, clip, name, args.frames, plant))
-            ours[(clip, name)].append(_measure(clip, name, args.frames, plant, options))
+                ref[(clip, name)].append(_subprocess_run(args.compare, clip, name, args.frames, plant, warmup))
+            if args.fresh:
+                ours[(clip, name)].append(_subprocess_run(REPO, clip, name, args.frames, plant, warmup, options))
+            else:
+                ours[(clip, name)].append(_measure(clip, name, args.frames, plant, options))
             # progress on stderr: a whole benchmark takes minutes before its table
             print(f"run {k + 1}/{args.runs}: {clip} onto {_char_label(name)}: "
                   f"{ours[(clip, name)][-1]['cpu_fps']:.0f} frames/s CPU", file=sys.stderr, flush=True)

@@ -212,3 +212,44 @@ def test_floor_and_self_collision_rows_match_point_by_point(name, seed):
         else:
             np.testing.assert_allclose(con.G, G, rtol=0, atol=1e-12)
             np.testing.assert_allclose(con.h, h, rtol=0, atol=1e-15)
+
+
+def test_bounds_index_consecutive_dofs_by_slice():
+    """Consecutive dofs (every hinge of the bundled characters, the free root) are written
+    through slices, any other index set through fancy indexing: the same bounds either way."""
+    from physmocap.ik.qp import _span, _tighten
+
+    assert _span(np.arange(6, 50)) == slice(6, 50)
+    idx = np.array([1, 2, 4])
+    assert _span(idx) is not None and not isinstance(_span(idx), slice)
+    rng = np.random.default_rng(0)
+    lb0, ub0 = -rng.random(12), rng.random(12)
+    lo, hi = -rng.random(5), rng.random(5)
+    for dofs in (np.arange(3, 8), np.array([0, 2, 3, 7, 11])):
+        lb, ub = lb0.copy(), ub0.copy()
+        _tighten(lb, ub, _span(dofs), lo, hi)
+        lb_ref, ub_ref = lb0.copy(), ub0.copy()
+        lb_ref[dofs] = np.maximum(lb_ref[dofs], lo)
+        ub_ref[dofs] = np.minimum(ub_ref[dofs], hi)
+        np.testing.assert_array_equal(lb, lb_ref)
+        np.testing.assert_array_equal(ub, ub_ref)
+
+
+def test_frame_tasks_targets_and_costs_are_read_once_per_frame():
+    """The builder reads the frame tasks' targets, costs and gains at the first QP after
+    ``new_frame`` (the solver's ``_set_holds``), so a target that comes or goes between
+    frames changes the next frame's QP exactly as mink's own build does."""
+    solver = _setup("humanoid", 0)
+    conf = solver.configuration
+    solver._sync()
+    tasks = [*solver.tasks, *solver._extra_tasks]
+    before = solver._builder.objective(conf, tasks, 1e-4)[1].copy()
+    _, task, pc, oc = solver.frame_tasks[0]
+    task.set_position_cost(0.0)
+    task.set_orientation_cost(0.0)
+    solver._set_holds(ContactHolds(tuple(solver._extra_tasks), tuple(solver._constraints)))
+    H, c = solver._builder.objective(conf, tasks, 1e-4)
+    ref = mink.build_ik(conf, tasks, 1.0, damping=1e-4)
+    assert not np.array_equal(c, before)
+    np.testing.assert_allclose(H, ref.P, rtol=0, atol=1e-12 * np.abs(ref.P).max())
+    np.testing.assert_allclose(c, ref.q, rtol=0, atol=1e-12 * max(1.0, np.abs(ref.q).max()))

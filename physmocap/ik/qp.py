@@ -132,12 +132,14 @@ class QPBuilder:
         self._jacS = np.zeros((8, 3, nv))  # SitePositionTasks' site Jacobians
         self._task_plans: dict[tuple, tuple] = {}  # task ids -> runs, rows, spans
         self._site_plans: dict[tuple, tuple] = {}  # task ids -> rows' owners, axes, sites, targets (this frame)
+        self._frame_costs: dict[tuple, tuple] = {}  # frame tasks' ids -> their targets, costs, gains (this frame)
         self._dq = np.zeros(nv)
         self._dq2 = np.zeros(nv)
         self._Hdiag = np.einsum("ii->i", self.H)  # a writable view of H's diagonal
         self._postures: dict[int, tuple] = {}  # id(posture task) -> (task, its costs' bytes, weights)
         self._views: dict[tuple, tuple] = {}
         self._box: tuple | None = None  # (config limit, dofs, qpos addresses) of hinge/slide joints
+        self._spans: dict[int, tuple] = {}  # id(box limit's dofs) -> (the dofs, their _span)
 
     # -- objective ----------------------------------------------------------------
     def _rows(self, m: int) -> None:
@@ -159,21 +161,35 @@ class QPBuilder:
         to_se3, rminus = _native.xmat_xpos_to_wxyz_xyz, _native.se3_rminus
         logs, adjoints, errors = [], [], []
         frames, jacobians = self._frames(tasks, data)
-        for task, (jac, fid, xmat, xpos, Jp, Jr) in zip(tasks, frames):
+        targets, C, negC, negg = self._frame_weights(tasks)
+        for target, (jac, fid, xmat, xpos, Jp, Jr) in zip(targets, frames):
             frame = to_se3(xmat, xpos)
-            if task.transform_target_to_world is None:
-                raise mink.TargetNotSet(type(task).__name__)
-            target = task.transform_target_to_world.wxyz_xyz
             jac(model, data, Jp, Jr, fid)
             logs.append(jlog(inverse_multiply(target, frame)))
             adjoints.append(adjoint(xmat))
             errors.append(rminus(target, frame))
         M = np.matmul(np.array(logs), np.array(adjoints))
-        C = np.array([t.cost for t in tasks])
-        g = np.array([[t.gain] for t in tasks])
-        M *= -C[:, :, None]
+        M *= negC
         np.matmul(M, jacobians, out=W.reshape(n, 6, self.nv))
-        np.multiply(C, -g * np.array(errors), out=eps.reshape(n, 6))
+        np.multiply(C, negg * np.array(errors), out=eps.reshape(n, 6))
+
+    def _frame_weights(self, tasks: Sequence[mink.FrameTask]) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+        r"""``(targets, C, -C, -g)`` of a run of ``FrameTask`` s: their targets' ``wxyz_xyz``,
+        their costs ``(n, 6)`` (per metre, per radian), the negated costs shaped ``(n, 6, 1)``
+        and negated gains ``(n, 1)``, read at the first call after :meth:`new_frame` (the
+        solver sets targets and changes costs only between frames)."""
+        key = tuple(map(id, tasks))
+        w = self._frame_costs.get(key)
+        if w is None:
+            for t in tasks:
+                if t.transform_target_to_world is None:
+                    raise mink.TargetNotSet(type(t).__name__)
+            targets = [t.transform_target_to_world.wxyz_xyz for t in tasks]
+            C = np.array([t.cost for t in tasks])
+            g = np.array([[t.gain] for t in tasks])
+            # the tasks are kept so that their ids stay theirs until new_frame
+            w = self._frame_costs[key] = (tuple(tasks), targets, C, -C[:, :, None], -g)
+        return w[1], w[2], w[3], w[4]
 
     def _frames(self, tasks: Sequence[mink.FrameTask], data: mujoco.MjData) -> tuple[list[tuple], np.ndarray]:
         """Per task ``(Jacobian function, frame id, xmat row, xpos row, translation and rotation
@@ -211,9 +227,11 @@ class QPBuilder:
         np.multiply(task.cost, -task.gain * (data.site_xpos[task.site_ids] - task.targets).reshape(-1), out=eps)
 
     def new_frame(self) -> None:
-        """Forget the ``SitePositionTask`` s' targets, gains and costs read so far (see
-        :meth:`site_terms`): call it whenever they may have changed (a new frame's holds)."""
+        """Forget the targets, gains and costs of the ``SitePositionTask`` s and ``FrameTask`` s
+        read so far (see :meth:`site_terms`, :meth:`_frame_weights`): call
+        it whenever they may have changed (a new frame's targets and holds)."""
         self._site_plans.clear()
+        self._frame_costs.clear()
 
     def site_terms(self, tasks: Sequence[SitePositionTask], data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""``(J, e, w)`` of consecutive ``SitePositionTask`` s, one row per regulated axis in task
@@ -353,20 +371,28 @@ class QPBuilder:
             if self._box is None or self._box[0] is not config_limit:
                 idx = np.asarray(config_limit.indices, dtype=int)
                 qadr = self.model.jnt_qposadr[self.model.dof_jntid[idx]]
-                self._box = (config_limit, idx, qadr, config_limit.upper[qadr], config_limit.lower[qadr])
+                self._box = (config_limit, _span(idx), _span(qadr), config_limit.upper[qadr], config_limit.lower[qadr])
             _, idx, qadr, upper, lower = self._box
             # hinge and slide joints: q_max ⊖ q = q_max - q (what mj_differentiatePos computes)
             q, g = configuration.data.qpos[qadr], config_limit.gain
-            ub[idx] = np.minimum(ub[idx], g * (upper - q))
-            lb[idx] = np.maximum(lb[idx], -(g * (q - lower)))
+            _tighten(lb, ub, idx, -(g * (q - lower)), g * (upper - q))
         for box in boxes:
             spec = box.box(configuration)
             if spec is None:
                 continue
             dofs, lo, hi = spec
-            ub[dofs] = np.minimum(ub[dofs], hi)
-            lb[dofs] = np.maximum(lb[dofs], lo)
+            _tighten(lb, ub, self._dofs_span(dofs), lo, hi)
         return lb, ub
+
+    def _dofs_span(self, dofs: np.ndarray) -> slice | np.ndarray:
+        """:func:`_span` of a box limit's dof indices, kept per array (a limit returns the
+        same one every time)."""
+        kept = self._spans.get(id(dofs))
+        if kept is None or kept[0] is not dofs:
+            if len(self._spans) > 16:
+                self._spans.clear()
+            kept = self._spans[id(dofs)] = (dofs, _span(dofs))
+        return kept[1]
 
     def build(
         self,
@@ -452,6 +478,26 @@ def _runs(tasks: Sequence[mink.Task]) -> list[tuple[type | None, list[mink.Task]
             runs.append((kind, [t]))
         last = kind
     return runs
+
+
+def _span(idx: np.ndarray) -> slice | np.ndarray:
+    """``idx`` (ascending integers) as the equivalent slice when they are consecutive (a
+    slice indexes a view: no gather, no scatter), else unchanged."""
+    idx = np.asarray(idx, dtype=int)
+    if len(idx) and bool((np.diff(idx) == 1).all()):
+        return slice(int(idx[0]), int(idx[-1]) + 1)
+    return idx
+
+
+def _tighten(lb: np.ndarray, ub: np.ndarray, idx: slice | np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """``lb[idx] = max(lb[idx], lo)``, ``ub[idx] = min(ub[idx], hi)``, in place."""
+    if isinstance(idx, slice):
+        u, l = ub[idx], lb[idx]
+        np.minimum(u, hi, out=u)
+        np.maximum(l, lo, out=l)
+    else:
+        ub[idx] = np.minimum(ub[idx], hi)
+        lb[idx] = np.maximum(lb[idx], lo)
 
 
 def _resolve(model: mujoco.MjModel, name: str | int, kind: str) -> int:

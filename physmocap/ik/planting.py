@@ -88,7 +88,10 @@ class PlantOptions:
             :meth:`FootPlanter._anchor_for`.)
         clearance: Swing feet (contact sites neither labelled nor held) stay
             at least this high (metres), a hard inequality (0 disables): a foot
-            skimming the floor would otherwise slide within the stance band.
+            skimming the floor would otherwise slide within the stance band.  Under
+            a rigid foot (no toe joint) the geoms' clearance eases out over the whole
+            frames of ``onset_time`` once the foot lands, as its height pull eases in
+            (:meth:`FootPlanter.clearance_share`).
         max_descent_speed: Fastest a labelled site is pulled down (m/s).
         root_follow_time: Streaming only: time constant (s) with which the whole
             body follows the mean offset of its planted feet from the actor's
@@ -204,6 +207,12 @@ class FootPlanter:
         self.landed = np.zeros(n, dtype=bool)
         self.fps = float(fps)
         self.onset_frames = max(1, int(round(opt.onset_time * fps)))
+        #: whole frames within ``onset_time`` (none at 30 fps): a landing foot's clearance eases
+        #: out over them (:meth:`clearance_share`)
+        self.clearance_frames = int(opt.onset_time * fps + 1e-9)
+        #: per foot, frames since it landed from its last swing (0: swinging; a foot down from
+        #: the first frame counts as landed long ago)
+        self.landing = np.full(int(self.feet.max()) + 1 if n else 0, self.clearance_frames + 1, dtype=int)
         self.anchor = np.zeros((n, 3))
         #: sites whose hold is soft on this frame: a foot turning about another held site
         #: (:meth:`turn`; a hard hold turned with the plan could be out of the leg's reach)
@@ -261,6 +270,7 @@ class FootPlanter:
         self.locked[:] = False
         self.labelled[:] = False
         self.landed[:] = False
+        self.landing[:] = self.clearance_frames + 1
         self._prev_z = None
         self.age[:] = 0
 
@@ -350,8 +360,26 @@ class FootPlanter:
             mine = self.feet == f
             if self.free[mine].all():  # the foot swings: its sites land afresh
                 self.landed[mine] = False
+                self.landing[f] = 0
+            else:
+                self.landing[f] += 1
         self.turning[:] = False
         return soft, hard, engaged
+
+    def clearance_share(self, foot: int) -> float:
+        r"""How much of its swing clearance ``foot`` keeps on this frame, 1 -> 0: all of it
+        while the foot swings, then :math:`1 - \operatorname{smoothstep}(n / (N + 1))` on
+        the :math:`n`-th frame since one of its sites was labelled or held, :math:`N` the
+        whole frames within ``onset_time`` (:attr:`clearance_frames`: 3 at 120 fps, none at
+        30 fps): the clearance eases out as the height pull eases in, a handover rather than
+        a switch.
+
+        (A rigid foot's geoms held 12 mm up to the end of its swing while its targets came
+        down to the floor dropped in two frames at heel strike, and its ankle roll and knee
+        reversed at up to 1000 deg/s: the Unitree G1 on the PyMO walk.)
+        """
+        n = int(self.landing[foot])
+        return 1.0 - _smooth(n / (self.clearance_frames + 1)) if n else 1.0
 
 
 class FootAnchor:
@@ -506,6 +534,11 @@ class Planting:
         #: the side (left, right) of each site
         self._site_side = ["left" if s in character.contacts.get("left", ()) else "right" for s in self.sites]
         self._side_sites = {side: [k for k, v in enumerate(self._site_side) if v == side] for side in ("left", "right")}
+        #: per side, a rigid foot (its toe sites on the heel's body, role "pivot"): its geoms'
+        #: swing clearance eases out as it lands (:meth:`clearance_bodies`).  Measured without
+        #: the restriction, a foot with a toe joint met its toe joint's velocity cap instead
+        #: (CMU walk humanoid: right toe extension at its cap on 3 -> 6 frames).
+        self._rigid = {side: bool(any(self._pivot[k] for k in ks)) for side, ks in self._side_sites.items()}
         held = np.array([roles.get(site) == "hold" for site in self.sites], dtype=bool)
         has_release = {side: any(self._release[k] for k in ks) for side, ks in self._side_sites.items()}
         #: sites on a toe segment of a foot that also has sites on its own body
@@ -654,16 +687,24 @@ class Planting:
 
     def clearance_bodies(self) -> dict[int, float]:
         """Body id -> clearance height for the bodies of feet with no contact at all this
-        frame (after :meth:`step`): every collision geom of a swing foot clears the floor."""
+        frame (after :meth:`step`): every collision geom of a swing foot clears the floor;
+        under a rigid foot that has just landed the clearance eases out
+        (:meth:`FootPlanter.clearance_share`)."""
         c = self.options.clearance
         if not self.options.plant or c <= 0:
             return {}
         out: dict[int, float] = {}
         for side in ("left", "right"):
-            ks = [k for k, site in enumerate(self.sites) if site in self.character.contacts.get(side, ())]
-            if ks and all(self.locks.free[k] for k in ks):
+            ks = self._side_sites[side]
+            if not ks:
+                continue
+            if self._rigid[side]:  # eased out as the foot lands (FootPlanter.clearance_share)
+                share = self.locks.clearance_share(int(self.locks.feet[ks[0]]))
+            else:
+                share = 1.0 if all(self.locks.free[k] for k in ks) else 0.0
+            if share > 0.0:
                 for b in self._foot_bodies[side]:
-                    out[b] = c
+                    out[b] = c * share
         return out
 
     def clearance_sites(self) -> dict[int, float]:

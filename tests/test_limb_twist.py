@@ -25,8 +25,8 @@ def test_the_flexion_axis_is_signed_so_a_positive_turn_flexes(character):
     model = ch.model
     for side in ("left", "right"):
         axes = flexion_axis(ch, f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist")
-        assert axes is not None
-        h, u = axes
+        assert axes is not None and axes.signed and axes.twists
+        h, u = axes.h, axes.u
         assert abs(float(h @ u)) < 0.2  # across the upper arm, not along it
         data = ch.rest_data()
         site = {k: ch.tracked[k] for k in (f"{side}_shoulder", f"{side}_elbow", f"{side}_wrist")}
@@ -47,6 +47,34 @@ def test_the_flexion_axis_is_signed_so_a_positive_turn_flexes(character):
         upper = frame.T @ (pos(f"{side}_elbow") - pos(f"{side}_shoulder"))
         lower = frame.T @ (pos(f"{side}_wrist") - pos(f"{side}_elbow"))
         assert float(np.cross(upper, lower) @ h) > 0.0, (side, h)
+
+
+@pytest.mark.parametrize("limited", [True, False])
+def test_an_elbow_whose_range_does_not_tell_flexion_gets_the_same_targets(limited):
+    """Before: the flexion axis took its sign from the elbow's range, so an elbow written
+    the other way round with a symmetric range (or none: MJCF's default) turned the upper
+    arm's twist target by 180 degrees and its forearm 10 degrees off (median).  The sign is
+    now settled on the actor's bent elbow where the range does not tell."""
+    motion = load_motion("example")
+    ch = load_character("humanoid")
+    joints = retarget(motion, ch, progress=False, start=0, end=2).joint_indices
+    base = build_targets(motion, joints, ch)
+    other = load_character("humanoid")
+    model = other.model
+    for j in range(model.njnt):
+        if "elbow_flexion" in model.joint(j).name:
+            model.jnt_axis[j] *= -1.0
+            if limited:
+                model.jnt_range[j] = [-2.8, 2.8]
+            else:
+                model.jnt_limited[j] = 0
+    axes = flexion_axis(other, "left_shoulder", "left_elbow", "left_wrist")
+    assert not axes.signed
+    again = build_targets(motion, joints, other)
+    for side in ("left", "right"):
+        i = base.index(f"{side}_shoulder")
+        dots = np.abs(np.sum(again.orientations[:, i] * base.orientations[:, i], axis=-1))
+        assert dots.min() > 1.0 - 1e-9, side
 
 
 def _retwisted(motion, joint: int, degrees: float):
@@ -97,7 +125,7 @@ def test_the_upper_arm_target_does_not_depend_on_the_source_frame_twist():
             dots = np.abs(np.sum(other.orientations[:, i] * base.orientations[:, i], axis=-1))
             assert dots.min() > 1.0 - 1e-9, degrees
             # the predicted flexion axis lies in the actor's elbow plane
-            h = quat_apply(other.orientations[bent, i], axes[0])
+            h = quat_apply(other.orientations[bent, i], axes.h)
             n = np.cross(S[bent, e] - S[bent, i], S[bent, w] - S[bent, e])
             cos = np.sum(h * n, axis=-1) / np.linalg.norm(n, axis=-1)
             assert cos.min() > np.cos(np.radians(1.0))
@@ -121,3 +149,16 @@ def test_raised_arms_do_not_stay_on_a_branch_that_cannot_reach_the_actor(charact
     arms = ("left_upper_arm", "right_upper_arm", "left_forearm", "right_forearm")
     assert max(fid.segments[s].share_over_45 for s in arms) < 0.005, {s: fid.segments[s].share_over_45 for s in arms}
     assert fid.share_any_over_45 < 0.01
+
+
+@pytest.mark.parametrize("clip", ["cmu_12_01_walk.bvh", "bandai_punch.bvh"])
+def test_no_second_pass_where_every_arm_follows(clip):
+    """An arm that follows the actor (a walk; a boxing guard held all clip) is never taken
+    for a stuck one: no guide, the first pass's output stands."""
+    from conftest import retargeted
+
+    from physmocap.ik.branches import plan_guides
+    from physmocap.ik.retarget import _arm_errors
+
+    _, traj = retargeted(clip, "humanoid")
+    assert plan_guides(traj, _arm_errors(traj)) == {}

@@ -26,13 +26,18 @@ Offline the whole clip is known, so after the first pass:
    first pass's arm can pass over to it with the least change of pose (near a shoulder's
    gimbal lock the two branches are one pose: the way between them in joint space keeps
    the arm where it is); the guide passes over there, at :data:`PASS_SPEED` of the joints'
-   velocity limits.  Forward it runs to :data:`TAIL_TIME` after the run;
+   velocity limits.  Forward it runs through the run and :data:`TAIL_TIME` beyond, and the
+   arm stays on its new branch;
 4. **second pass**: the clip is retargeted again with a posture pull of
    :data:`GUIDE_COST` per radian towards the continued arm on those frames (a guide,
    :class:`~physmocap.ik.solver.FrameSolver`'s ``guide``): the IK takes the other
-   branch where the two meet, within its velocity bounds and every constraint.
+   branch where the two meet, within its velocity bounds and every constraint.  An arm
+   can stick on its new branch later; the same steps on the second pass's result make a
+   third (at most :data:`MAX_PASSES` in all).
 
-The second pass is kept only where it brings the guided arms closer to the actor.
+A pass is kept, for the whole clip, only if fewer frames have an arm segment more than
+:data:`STUCK_DEG` off the actor's than the best before it (then if the arm segments'
+errors sum lower), and the solver relaxed a hard constraint on no more frames.
 Streaming retargeting cannot look ahead and does not do this.  Radians, metres.
 """
 
@@ -45,7 +50,9 @@ import mujoco
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..rotations import Rotation
+from ..progress import Progress
+from ..rotations import xyzw_to_wxyz
+from ..sources.gaps import find_runs
 from .targets import weight_of
 
 __all__ = ["ArmChain", "arm_chains", "Guide", "plan_guides", "STUCK_DEG"]
@@ -56,12 +63,16 @@ STUCK_DEG = 30.0
 SEEDS = 24
 #: Degrees: the continued arm has met the first pass's when every joint is this close.
 MEET_DEG = 5.0
-#: Seconds: how far back the continuation looks for the point where it meets the first pass.
+#: Seconds: how far before a run the continuation looks for the point where it meets the
+#: first pass.
 REACH_TIME = 2.0
 #: Share of a joint's velocity limit at which the guide passes from one branch to the other.
 PASS_SPEED = 0.5
 #: Seconds the guide lasts after a run of stuck frames.
 TAIL_TIME = 0.1
+#: Passes at most (the first included): an arm guided onto another branch may stick on it
+#: later, and the next pass guides it off.
+MAX_PASSES = 3
 #: Posture cost per radian of the guide (the position tasks weigh 5 per metre).
 GUIDE_COST = 2.0
 #: Arm segments of the fidelity figures -> side.
@@ -78,13 +89,15 @@ class ArmChain:
 
     Attributes:
         side: ``"left"`` or ``"right"``.
-        qpos: ``(K,)`` qpos addresses of the arm's hinge and slide joints.
+        joints: ``(K,)`` ids of the arm's hinge and slide joints.
+        qpos: ``(K,)`` their qpos addresses.
         dofs: ``(K,)`` their dof addresses.
         lower, upper: ``(K,)`` their ranges (radians; infinite where unlimited).
         targets: ``(M,)`` target columns of the arm's canonical joints.
     """
 
     side: str
+    joints: np.ndarray
     qpos: np.ndarray
     dofs: np.ndarray
     lower: np.ndarray
@@ -118,6 +131,7 @@ def arm_chains(character, names: tuple[str, ...]) -> list[ArmChain]:
         limited = model.jnt_limited[joints].astype(bool)
         chains.append(ArmChain(
             side=side,
+            joints=np.array(joints, dtype=int),
             qpos=model.jnt_qposadr[joints].astype(int),
             dofs=model.jnt_dofadr[joints].astype(int),
             lower=np.where(limited, model.jnt_range[joints, 0], -np.inf),
@@ -125,11 +139,6 @@ def arm_chains(character, names: tuple[str, ...]) -> list[ArmChain]:
             targets=np.array([names.index(n) for n in tracked], dtype=int),
         ))
     return chains
-
-
-def _joints(model: mujoco.MjModel, chain: ArmChain) -> np.ndarray:
-    """Joint ids of an arm's coordinates."""
-    return np.array([int(np.flatnonzero(model.jnt_qposadr == a)[0]) for a in chain.qpos], dtype=int)
 
 
 @dataclass(frozen=True)
@@ -154,35 +163,27 @@ class _ArmFit:
         self.pos_w = np.array([p for p, _ in w])
         self.rot_w = np.array([o if targets.has_orientation[k] else 0.0 for (_, o), k in zip(w, chain.targets)])
 
-    def _pose(self, tf) -> tuple[np.ndarray, np.ndarray]:
-        d, m = self.data, self.model
-        if tf.kind == "site":
-            s = m.site(tf.name).id
-            return d.site_xpos[s], d.site_xmat[s]
-        b = m.body(tf.name).id
-        return d.xpos[b], d.xmat[b]
-
     def residual(self, x: np.ndarray, q: np.ndarray, t: int) -> np.ndarray:
         """Weighted position (metres) and orientation (radians) errors of the arm's targets
         on frame ``t`` with the arm's joints at ``x`` and the rest at ``q``."""
-        d = self.data
+        d, m = self.data, self.model
         d.qpos[:] = q
         d.qpos[self.chain.qpos] = x
-        mujoco.mj_kinematics(self.model, d)
+        mujoco.mj_kinematics(m, d)
         pos = self.targets.positions[t]
-        ori = self.targets.orientations[t]
+        goal = xyzw_to_wxyz(np.asarray(self.targets.orientations[t]))
         valid = self.targets.valid[t]
-        out = []
-        for tf, k, pw, ow in zip(self.frames, self.chain.targets, self.pos_w, self.rot_w):
+        out = np.zeros((len(self.frames), 6))
+        now = np.empty(4)
+        for r, (tf, k, pw, ow) in enumerate(zip(self.frames, self.chain.targets, self.pos_w, self.rot_w)):
             if not valid[k]:
-                out.append(np.zeros(6))
                 continue
-            p, mat = self._pose(tf)
-            r = np.zeros(3)
-            if ow > 0.0:
-                r = ow * (Rotation.from_matrix(mat.reshape(3, 3)).inv() * Rotation.from_quat(ori[k])).as_rotvec()
-            out.append(np.concatenate([pw * (p - pos[k]), r]))
-        return np.concatenate(out)
+            out[r, :3] = pw * (tf.position(m, d) - pos[k])
+            if ow > 0.0:  # the rotation from the frame to its target, as a rotation vector (radians)
+                mujoco.mju_mat2Quat(now, tf.rotation(m, d).reshape(-1))
+                mujoco.mju_subQuat(out[r, 3:], goal[k], now)
+                out[r, 3:] *= ow
+        return out.reshape(-1)
 
     def cost(self, x: np.ndarray, q: np.ndarray, t: int) -> float:
         r = self.residual(x, q, t)
@@ -196,53 +197,60 @@ class _ArmFit:
         return fit.x, float(fit.cost)
 
 
-def _runs(frames: np.ndarray, gap: int) -> list[tuple[int, int]]:
-    """Runs ``[start, end]`` of sorted frame numbers, joined across gaps of ``gap`` frames."""
-    if frames.size == 0:
-        return []
-    breaks = np.flatnonzero(np.diff(frames) > gap + 1)
-    starts = np.concatenate([[frames[0]], frames[breaks + 1]])
-    ends = np.concatenate([frames[breaks], [frames[-1]]])
-    return list(zip(starts.tolist(), ends.tolist()))
+def _runs(worst: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """Runs ``[start, end]`` of frames over :data:`STUCK_DEG`, joined across gaps of up to
+    ``gap`` frames."""
+    runs: list[tuple[int, int]] = []
+    for s, e in find_runs(worst > STUCK_DEG):
+        if runs and s - runs[-1][1] - 1 <= gap:
+            runs[-1] = (runs[-1][0], e)
+        else:
+            runs.append((s, e))
+    return runs
 
 
-def _continue_back(fit: _ArmFit, qpos: np.ndarray, x: np.ndarray, t: int, stop: int) -> tuple[dict[int, np.ndarray], int]:
-    """The arm solution ``x`` of frame ``t`` followed back frame by frame (each solve started
-    from the later frame's) down to ``stop``, and the frame where the first pass's arm
-    can pass over to it at the least cost (:func:`_crossing_cost`; the latest among
-    equals), or where the two meet.  Returns (frame -> arm joints, ``t`` excluded; that
-    frame)."""
+def _continue(fit: _ArmFit, qpos: np.ndarray, x: np.ndarray, frames: range, after: int) -> tuple[dict[int, np.ndarray], int | None]:
+    """The arm solution ``x`` followed over ``frames`` (in that order, each solve started from
+    the previous frame's), and the frame beyond ``after`` (past it in the direction of
+    travel) where it and the first pass's arm are nearest in pose: where they meet (every
+    joint within :data:`MEET_DEG`: the walk stops there) or the least
+    :func:`_crossing_cost` (the nearest to the start among equals); None if no frame is
+    beyond ``after``.  Returns (frame -> arm joints, that frame)."""
     meet = math.radians(MEET_DEG)
+    step = frames.step
     path: dict[int, np.ndarray] = {}
-    costs: list[tuple[float, int]] = []
-    for f in range(t - 1, stop - 1, -1):
-        x, _ = fit.solve(x, qpos[f], f)
-        path[f] = x
+    best: tuple[float, int] | None = None
+    for k, f in enumerate(frames):
+        x = path[f] = fit.solve(x, qpos[f], f)[0]
+        if (f - after) * step <= 0:
+            continue
         first = qpos[f, fit.chain.qpos]
         if float(np.abs(x - first).max()) < meet:
-            costs.append((0.0, -f))
-            break
-        costs.append((_crossing_cost(fit, first, x, qpos[f], f), -f))
-    return path, (-min(costs)[1] if costs else t)
+            return path, f
+        cost = _crossing_cost(fit, first, x, qpos[f], f)
+        if best is None or cost < best[0]:
+            best = (cost, f)
+    return path, None if best is None else best[1]
 
 
-def _pass_over(fit: _ArmFit, qpos: np.ndarray, path: dict[int, np.ndarray], cross: int, speed: np.ndarray,
-               fps: float) -> dict[int, np.ndarray]:
-    r"""The guide's arm per frame: the first pass's arm blended into ``path`` around frame
-    ``cross`` over as many frames as the largest joint change takes at ``speed`` (rad/s per
-    joint: :data:`PASS_SPEED` of the velocity limits), weight :math:`3s^2 - 2s^3`, then
-    ``path``."""
+def _blend(fit: _ArmFit, qpos: np.ndarray, path: dict[int, np.ndarray], cross: int, speed: np.ndarray,
+           fps: float, into: bool) -> dict[int, np.ndarray]:
+    r"""The guide's arm on the frames of ``path``: the first pass's arm blended into ``path``
+    around frame ``cross`` (``into``; out of it with ``into`` False) over as many frames as
+    the largest joint change takes at ``speed`` (rad/s per joint: :data:`PASS_SPEED` of the
+    velocity limits), weight :math:`3s^2 - 2s^3`; only ``path`` on its side of the blend,
+    nothing on the other."""
     c = fit.chain
     gap = np.abs(path[cross] - qpos[cross, c.qpos])
     n = max(1, int(math.ceil(float(np.max(gap / speed)) * fps)))
     first = cross - n // 2
     out = {}
     for f in sorted(path):
-        if f < first:
-            continue
-        s = min(1.0, (f - first + 1) / n)
+        s = min(1.0, max(0.0, (f - first + 1) / n))
         w = s * s * (3.0 - 2.0 * s)
-        out[f] = (1.0 - w) * qpos[f, c.qpos] + w * path[f]
+        w = w if into else 1.0 - w
+        if w > 0.0:
+            out[f] = (1.0 - w) * qpos[f, c.qpos] + w * path[f]
     return out
 
 
@@ -259,18 +267,39 @@ def _crossing_cost(fit: _ArmFit, a: np.ndarray, b: np.ndarray, q: np.ndarray, t:
     return max(fit.cost(a + w * (b - a), q, t) for w in _CROSSING) - ends
 
 
-def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | None = None) -> dict[int, Guide]:
-    """Second-pass guides for the arms the first pass left on a branch that cannot reach
+def _other_branch(fit: _ArmFit, qpos: np.ndarray, t: int) -> np.ndarray | None:
+    """The arm's joints on frame ``t`` from the best of the first pass's arm and
+    :data:`SEEDS` starts within the ranges (a generator seeded by ``t``), or None unless
+    they halve the first pass's cost (module docstring, step 2)."""
+    c = fit.chain
+    now = fit.cost(qpos[t, c.qpos], qpos[t], t)
+    rng = np.random.default_rng(t)
+    lo = np.where(np.isfinite(c.lower), c.lower, -math.pi)
+    hi = np.where(np.isfinite(c.upper), c.upper, math.pi)
+    best, best_cost = None, now
+    for x0 in [qpos[t, c.qpos]] + [rng.uniform(lo, hi) for _ in range(SEEDS)]:
+        x, cost = fit.solve(x0, qpos[t], t)
+        if cost < best_cost - 1e-12:
+            best, best_cost = x, cost
+    return best if best is not None and best_cost <= 0.5 * now else None
+
+
+def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | None = None,
+                progress: bool | None = None, previous: dict[int, Guide] | None = None) -> dict[int, Guide]:
+    """Guides for the next pass, for the arms ``traj`` left on a branch that cannot reach
     the actor (module docstring): frame -> :class:`Guide`; empty when none is stuck.
 
     Args:
-        traj: The first pass's :class:`~physmocap.trajectory.Trajectory` (its targets).
+        traj: The last pass's :class:`~physmocap.trajectory.Trajectory` (its targets).
         segment_errors: Segment name -> ``(F,)`` direction error in degrees
             (:func:`~physmocap.metrics.fidelity.segment_direction_errors`).
         weights: The solver's task weight overrides (``SolverOptions.weights``).
+        progress: Draw a progress bar over the stuck frames on stderr.
+        previous: The guides ``traj`` was retargeted with: kept where no new run is
+            guided (an arm guided off a branch stays guided), else replaced arm by arm.
     """
     targets = traj.targets
-    qpos = np.asarray(traj.qpos)
+    qpos = traj.qpos
     F = qpos.shape[0]
     model = traj.character.model
     reach = max(1, int(round(REACH_TIME * traj.fps)))
@@ -278,37 +307,37 @@ def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | Non
     guided: dict[int, dict[int, np.ndarray]] = {}  # frame -> chain index -> arm joints
     chains = arm_chains(traj.character, tuple(targets.names))
     limits = traj.character.velocity_limits
-    speed = [PASS_SPEED * np.array([limits.get(model.joint(int(j)).name, math.inf) for j in _joints(model, c)]) for c in chains]
+    work = []
     for ci, chain in enumerate(chains):
-        errs = [segment_errors.get(s) for s in ARM_SEGMENTS[chain.side]]
-        errs = [np.nan_to_num(e, nan=0.0) for e in errs if e is not None]
-        if not errs:
-            continue
-        worst = np.max(errs, axis=0)
-        fit = _ArmFit(traj.character, chain, targets, weights or {})
-        for s, e in _runs(np.flatnonzero(worst > STUCK_DEG), gap=max(1, int(0.1 * traj.fps))):
-            t = s + int(np.argmax(worst[s : e + 1]))
-            now = fit.cost(qpos[t, chain.qpos], qpos[t], t)
-            rng = np.random.default_rng(t)
-            lo = np.where(np.isfinite(chain.lower), chain.lower, -math.pi)
-            hi = np.where(np.isfinite(chain.upper), chain.upper, math.pi)
-            starts = [qpos[t, chain.qpos]] + [rng.uniform(lo, hi) for _ in range(SEEDS)]
-            best, best_cost = None, now
-            for x0 in starts:
-                x, c = fit.solve(x0, qpos[t], t)
-                if c < best_cost - 1e-12:
-                    best, best_cost = x, c
-            if best is None or best_cost > 0.5 * now:
-                continue  # no other branch reaches the actor better: a pose out of reach
-            path, cross = _continue_back(fit, qpos, best, t, max(0, s - reach))
-            path[t] = x = best
-            for f in range(t + 1, min(F - 1, e + tail) + 1):  # through the run (the arm stays there after)
-                path[f] = x = fit.solve(x, qpos[f], f)[0]
-            for f, x in _pass_over(fit, qpos, path, cross, speed[ci], traj.fps).items():
-                guided.setdefault(f, {})[ci] = x
+        errs = [np.nan_to_num(segment_errors[s], nan=0.0) for s in ARM_SEGMENTS[chain.side] if s in segment_errors]
+        if errs:
+            work += [(ci, s, e) for s, e in _runs(np.max(errs, axis=0), gap=max(1, int(0.1 * traj.fps)))]
+    if not work:
+        return {}
+    for f, g in (previous or {}).items():
+        for ci, chain in enumerate(chains):
+            if g.cost[chain.dofs].any():
+                guided.setdefault(f, {})[ci] = g.qpos[chain.qpos]
+    with Progress(sum(e - s + 1 for _, s, e in work), "arms", enabled=progress) as bar:
+        for ci, s, e in work:
+            chain = chains[ci]
+            fit = _ArmFit(traj.character, chain, targets, weights or {})
+            speed = PASS_SPEED * np.array([limits.get(model.joint(int(j)).name, math.inf) for j in chain.joints])
+            worst = max(np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0).max() for n in ARM_SEGMENTS[chain.side] if n in segment_errors)
+            t = s + int(np.argmax(np.max([np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0)
+                                          for n in ARM_SEGMENTS[chain.side] if n in segment_errors], axis=0)))
+            best = _other_branch(fit, qpos, t) if worst > STUCK_DEG else None
+            if best is not None:
+                back, into = _continue(fit, qpos, best, range(t - 1, max(0, s - reach) - 1, -1), t)
+                ahead, _ = _continue(fit, qpos, best, range(t + 1, min(F - 1, e + tail) + 1), F)
+                arm = _blend(fit, qpos, {**back, t: best}, into if into is not None else t, speed, traj.fps, into=True)
+                arm.update(ahead)  # the arm stays on that branch after the run: a later pass takes it off if it sticks
+                for f, x in arm.items():
+                    guided.setdefault(f, {})[ci] = x
+            bar.update(e - s + 1)
     guides = {}
     for f in sorted(guided):
-        q = qpos[f].copy()
+        q = np.array(qpos[f], dtype=float)
         cost = np.zeros(model.nv)
         for ci, x in guided[f].items():
             q[chains[ci].qpos] = x

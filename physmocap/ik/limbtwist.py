@@ -36,12 +36,14 @@ from __future__ import annotations
 
 import math
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 
-from ..rotations import Rotation, quat_apply
+from ..rotations import quat_apply
 
-__all__ = ["LIMB_CHAINS", "flexion_axis", "follow_bend", "twist_error", "twist_offset"]
+__all__ = ["LIMB_CHAINS", "FlexionAxis", "flexion_axis", "follow_bend", "twist_error", "twist_offset"]
 
 #: A limb's upper segment (its root's tracked frame) -> the middle joint and the end.
 LIMB_CHAINS = {"shoulder": ("elbow", "wrist"), "hip": ("knee", "ankle")}
@@ -53,26 +55,47 @@ FOLLOW_FROM, FOLLOW_BEND = math.radians(10.0), math.radians(25.0)
 
 
 def _frame(character, name: str, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, int]:
-    """World position, rotation matrix and body id of a tracked frame at rest."""
-    model = character.model
-    tf = character.tracked[name]
-    if tf.kind == "site":
-        sid = model.site(tf.name).id
-        return data.site_xpos[sid].copy(), data.site_xmat[sid].reshape(3, 3).copy(), int(model.site_bodyid[sid])
-    bid = model.body(tf.name).id
-    return data.xpos[bid].copy(), data.xmat[bid].reshape(3, 3).copy(), bid
+    """World position, rotation matrix and body id of a tracked frame (copies)."""
+    tf, model = character.tracked[name], character.model
+    return tf.position(model, data).copy(), tf.rotation(model, data).copy(), tf.body_id(model)
 
 
-def flexion_axis(character, root: str, middle: str, end: str) -> tuple[np.ndarray, np.ndarray] | None:
-    """The character's flexion axis at ``middle`` and its upper segment direction, both
-    in ``root``'s tracked frame at rest: ``(h, u)`` unit vectors, or None.
+@dataclass(frozen=True)
+class FlexionAxis:
+    """A limb's flexion axis, in its upper segment's tracked frame at rest.
+
+    Attributes:
+        h: ``(3,)`` the flexion axis (unit), signed so a positive turn flexes where
+            ``signed`` (else either way: see :func:`twist_offset`).
+        u: ``(3,)`` the upper segment's direction (unit).
+        signed: The sign of ``h`` is known from the joint's range (one side at least
+            twice the other); False for an unlimited or nearly symmetric hinge.
+        twists: The tracked frame turns with the segment's twist: no joint sits between
+            its body and the hinge's (a robot whose shoulder frame is its roll link, the
+            upper arm's yaw below it, has none; such a frame gets no twist target).
+    """
+
+    h: np.ndarray
+    u: np.ndarray
+    signed: bool
+    twists: bool
+
+    def flipped(self) -> "FlexionAxis":
+        """The same axis the other way round, its sign then known."""
+        return FlexionAxis(-self.h, self.u, True, self.twists)
+
+
+#: A hinge's range is one-sided (its flexion side known) when one side is this many times the other.
+ONE_SIDED = 2.0
+
+
+def flexion_axis(character, root: str, middle: str, end: str) -> FlexionAxis | None:
+    """The character's flexion axis at ``middle`` (:class:`FlexionAxis`), or None.
 
     The flexion joint is the hinge between ``root``'s body and ``end``'s that swings
-    ``end`` the most (a pronation or a wrist joint barely moves it), signed so that its
-    larger range side is positive (a flexion).  None where no hinge swings ``end`` by more
-    than half its lever, where a joint sits between ``root``'s body and the hinge's (the
-    tracked frame does not turn with the segment's twist: a robot whose shoulder frame is
-    its roll link, the upper arm's yaw below it), or the upper segment has no length.
+    ``end`` the most (a pronation or a wrist joint barely moves it): its lever arm about
+    the hinge is more than half the distance from the hinge to ``end``.  None where no
+    hinge does, or the upper segment has no length.
     """
     model = character.model
     data = character.rest_data()
@@ -82,7 +105,7 @@ def flexion_axis(character, root: str, middle: str, end: str) -> tuple[np.ndarra
     upper = p_mid - p_root
     if np.linalg.norm(upper) < 1e-6:
         return None
-    best, best_lever, best_body = None, 0.0, -1
+    best, best_lever, best_body, signed = None, 0.0, -1, False
     while b > 0 and b != b_root:
         for j in range(int(model.body_jntadr[b]), int(model.body_jntadr[b] + model.body_jntnum[b])):
             if model.jnt_type[j] != mujoco.mjtJoint.mjJNT_HINGE:
@@ -91,29 +114,31 @@ def flexion_axis(character, root: str, middle: str, end: str) -> tuple[np.ndarra
             arm = p_end - data.xanchor[j]
             lever = float(np.linalg.norm(np.cross(axis, arm)))
             if lever > best_lever and lever > 0.5 * float(np.linalg.norm(arm)):
-                sign = 1.0
+                sign, signed = 1.0, False
                 if model.jnt_limited[j]:
-                    lo, hi = model.jnt_range[j]
-                    sign = -1.0 if lo + hi < 0 else 1.0
+                    lo, hi = (float(v) for v in model.jnt_range[j])
+                    up, down = max(hi, 0.0), max(-lo, 0.0)
+                    signed = max(up, down) >= ONE_SIDED * min(up, down) and max(up, down) > 0.0
+                    sign = -1.0 if down > up else 1.0
                 best, best_lever, best_body = sign * axis, lever, b
         b = int(model.body_parentid[b])
     if best is None:
         return None
+    twists = True
     b = int(model.body_parentid[best_body])
     while b > 0 and b != b_root:
-        if model.body_jntnum[b] > 0:
-            return None  # a joint between (a robot's upper-arm yaw below its roll link): the frame has no twist
+        twists = twists and model.body_jntnum[b] == 0
         b = int(model.body_parentid[b])
-    return r_root.T @ (best / np.linalg.norm(best)), r_root.T @ (upper / np.linalg.norm(upper))
+    return FlexionAxis(r_root.T @ (best / np.linalg.norm(best)), r_root.T @ (upper / np.linalg.norm(upper)), signed, twists)
 
 
 def twist_error(
-    target: np.ndarray, axes: tuple[np.ndarray, np.ndarray], upper: np.ndarray, lower: np.ndarray
+    target: np.ndarray, axes: FlexionAxis, upper: np.ndarray, lower: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     r"""``(phi, bend)``, both ``(F,)`` radians: the twist error :math:`\varphi(t)` of the
     targets ``target`` (``(F, 4)``) against the actor's hinge normal (module docstring),
     and the actor's bend between ``upper`` and ``lower`` (``(F, 3)``, metres)."""
-    h, u = axes
+    h, u = axes.h, axes.u
     n = np.cross(upper, lower)
     bend = np.arctan2(np.linalg.norm(n, axis=-1), np.einsum("ij,ij->i", upper, lower))
     d = quat_apply(target, u)
@@ -126,34 +151,42 @@ def twist_error(
 
 def twist_offset(
     target: np.ndarray,
-    axes: tuple[np.ndarray, np.ndarray],
+    axes: FlexionAxis,
     upper: np.ndarray,
     lower: np.ndarray,
     ok: np.ndarray,
     min_bend: float = MIN_BEND,
-) -> np.ndarray | None:
+) -> tuple[np.ndarray | None, FlexionAxis]:
     r"""The calibration :math:`R(u, \bar\varphi)` (x-y-z-w) that turns the flexion axis
     of ``target`` onto the actor's hinge normal on average (module docstring), or None
-    where no frame is bent by ``min_bend``.
+    where no frame is bent by ``min_bend``; and the axis, its sign settled: an axis whose
+    sign the joint's range does not tell is turned round where that brings the mean twist
+    within 90 degrees of the rest-pose calibration's (which a skeleton's conventions put
+    that far off only by accident).
 
     Args:
         target: ``(F, 4)`` the upper segment's calibrated orientation targets.
-        axes: ``(h, u)`` from :func:`flexion_axis`.
+        axes: From :func:`flexion_axis`.
         upper, lower: ``(F, 3)`` the actor's upper and lower segments (metres).
         ok: ``(F,)`` frames where both are known.
     """
     phi, bend = twist_error(target, axes, upper, lower)
     use = ok & (bend > min_bend)
     if not use.any():
-        return None
+        return None, axes
     w = np.sin(bend[use]) ** 2
     mean = math.atan2(float(np.sum(w * np.sin(phi[use]))), float(np.sum(w * np.cos(phi[use]))))
-    return Rotation.from_rotvec(mean * axes[1]).as_quat()
+    if not axes.signed:
+        if abs(mean) > math.pi / 2:
+            axes, mean = axes.flipped(), mean - math.copysign(math.pi, mean)
+        else:
+            axes = FlexionAxis(axes.h, axes.u, True, axes.twists)
+    return _turn(axes.u, np.array([mean]))[0], axes
 
 
 def follow_bend(
     target: np.ndarray,
-    axes: tuple[np.ndarray, np.ndarray],
+    axes: FlexionAxis,
     upper: np.ndarray,
     lower: np.ndarray,
     ok: np.ndarray,
@@ -161,7 +194,19 @@ def follow_bend(
     r""":math:`R(u, b(t)\, \varphi(t))` per frame (``(F, 4)`` x-y-z-w) to apply after
     ``target``: its twist turned onto the actor's elbow plane where the limb is bent,
     :math:`b` rising linearly from 0 at :data:`FOLLOW_FROM` to 1 at :data:`FOLLOW_BEND`
-    (identity where ``ok`` is False)."""
+    (identity where ``ok`` is False).  The plane is a line through the segment: an angle
+    beyond 90 degrees either way is folded back (an actor's elbow bent backwards turns its
+    hinge normal round)."""
     phi, bend = twist_error(target, axes, upper, lower)
+    phi = (phi + math.pi / 2) % math.pi - math.pi / 2
     b = np.clip((bend - FOLLOW_FROM) / (FOLLOW_BEND - FOLLOW_FROM), 0.0, 1.0) * ok
-    return Rotation.from_rotvec((b * phi)[:, None] * axes[1]).as_quat()
+    return _turn(axes.u, b * phi)
+
+
+def _turn(u: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``(F, 4)`` x-y-z-w rotations by ``angle`` (``(F,)`` radians) about the unit axis ``u``."""
+    half = 0.5 * np.asarray(angle, dtype=float)
+    out = np.empty((half.shape[0], 4))
+    out[:, :3] = np.sin(half)[:, None] * u
+    out[:, 3] = np.cos(half)
+    return out

@@ -5,7 +5,10 @@ canonical set, detects contacts, builds targets that fit the character
 (:mod:`physmocap.ik.targets`), plans them over the whole clip
 (:mod:`physmocap.ik.footplan`) and runs the per-frame pipeline
 (:class:`~physmocap.ik.frame.FrameRetargeter`, the same one the streaming
-retargeter runs) over every frame.  It returns a
+retargeter runs) over every frame.  Where an arm is left far off the actor's on a
+branch of its joint ranges that cannot reach it, the clip is retargeted again with
+the arm guided onto one that can (:mod:`physmocap.ik.branches`; at most two more
+passes, ``SolverOptions.arm_branches``).  It returns a
 :class:`~physmocap.trajectory.Trajectory` that carries what it used, typed.
 """
 
@@ -30,7 +33,7 @@ from ..progress import Progress
 from ..spill import blocks, release, spill, spilled_copy, spilled_empty
 from ..trajectory import SolverStats, Trajectory
 from .body_contacts import release_kneeling_feet
-from .branches import plan_guides
+from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
@@ -214,6 +217,7 @@ def retarget(
     traj.source_start = int(source_start)
     if config.solver.arm_branches:
         traj = _second_pass(traj, config, progress, labels)
+    _warn_relaxations(traj)
     traj.fidelity = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
     for message in fidelity_warnings(traj.fidelity, source_start):
         warn(f"{motion.source}: {message}")
@@ -230,23 +234,37 @@ def _arm_errors(traj) -> dict[str, np.ndarray]:
 def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
                  labels: dict[str, np.ndarray] | None) -> Trajectory:
     """``traj`` retargeted again with its stuck arms guided onto the branch of their ranges
-    that reaches the actor (:mod:`.branches`), if there are any and it brings them closer;
-    else ``traj``."""
-    errors = _arm_errors(traj)
-    guides = plan_guides(traj, errors, config.solver.weights)
-    if not guides:
-        return traj
-    again = _track(traj.targets, traj.character, config.solver, traj.source, progress, labels, config.plant, guides)
-    for name in ("contacts", "source_motion", "joint_indices", "source_start"):
-        setattr(again, name, getattr(traj, name))
-    return again if _arms_off(_arm_errors(again)) < _arms_off(errors) else traj
+    that reaches the actor (:mod:`.branches`), again on that result while arms stick (at
+    most ``MAX_PASSES`` in all); the last pass whose arms came closer (:func:`_arms_off`)
+    without the solver giving up a hard constraint on more frames."""
+    best, errors = traj, _arm_errors(traj)
+    score = _arms_off(errors)
+    guides: dict = {}
+    for _ in range(MAX_PASSES - 1):
+        guides = plan_guides(best, errors, config.solver.weights, progress, previous=guides)
+        if not guides:
+            break
+        again = _track(best.targets, best.character, config.solver, best.source, progress, labels, config.plant,
+                       guides, label="retarget again, arms guided")
+        for name in ("contacts", "source_motion", "joint_indices", "source_start"):
+            setattr(again, name, getattr(traj, name))
+        after = _arm_errors(again)
+        if _relaxed(again) > _relaxed(best) or _arms_off(after) >= score:
+            break  # no closer, or a hard constraint given up on more frames
+        best, errors, score = again, after, _arms_off(after)
+    return best
+
+
+def _relaxed(traj: Trajectory) -> int:
+    """Frames on which the solver gave up more than the contact equalities' hardness."""
+    return int(np.count_nonzero(traj.solver.relaxation >= 2))
 
 
 def _arms_off(errors: dict[str, np.ndarray]) -> tuple[int, float]:
-    """How far the arms are from the actor's: frames with an arm segment more than 45
-    degrees off, then the sum of the segments' errors (degrees)."""
+    """How far the arms are from the actor's: frames with an arm segment more than
+    ``STUCK_DEG`` off, then the sum of the segments' errors (degrees)."""
     e = np.nan_to_num(np.stack(list(errors.values()), axis=1), nan=0.0)
-    return int(np.count_nonzero(e.max(axis=1) > 45.0)), float(e.sum())
+    return int(np.count_nonzero(e.max(axis=1) > STUCK_DEG)), float(e.sum())
 
 
 def _stance_labels(motion: Motion, joint_indices: dict[str, int], config: RetargetConfig) -> dict[str, np.ndarray] | None:
@@ -393,7 +411,9 @@ def solve_targets(
         targets = plan_targets(targets, character, labels, plant, options.floor_height, body_labels)
     else:
         labels = None
-    return _track(targets, character, options, source, progress, labels, plant)
+    traj = _track(targets, character, options, source, progress, labels, plant)
+    _warn_relaxations(traj)
+    return traj
 
 
 #: Frames :func:`_track` goes through between two releases of its spilled arrays' pages.
@@ -409,11 +429,13 @@ def _track(
     labels: dict[str, np.ndarray] | None,
     plant: PlantOptions,
     guides: dict | None = None,
+    label: str = "retarget",
 ) -> Trajectory:
     """Run the per-frame pipeline over (planned) targets, holding the contact points of
     ``labels`` (None: track the targets as they are), with ``guides`` (frame ->
     :class:`~.branches.Guide`) on their frames; the solver's per-frame figures are
-    kept in compact arrays (int32, int8 and float64 seconds per frame)."""
+    kept in compact arrays (int32, int8 and float64 seconds per frame).  ``label`` names
+    the progress bar (``batch`` follows the ``"retarget"`` one)."""
     guides = guides or {}
     planted = labels is not None
     pipeline = FrameRetargeter(
@@ -424,7 +446,7 @@ def _track(
     iterations = np.zeros(F, dtype=np.int32)
     relaxation = np.zeros(F, dtype=np.int8)
     latency = np.zeros(F)
-    with Progress(F, "retarget", enabled=progress) as bar:
+    with Progress(F, label, enabled=progress) as bar:
         for t in range(F):
             frame_labels = {k: bool(v[t]) for k, v in labels.items()} if labels is not None else None
             result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels,
@@ -437,11 +459,6 @@ def _track(
             if (t + 1) % RELEASE_FRAMES == 0:  # spilled arrays: the frames done leave the memory
                 for array in (targets.positions, targets.orientations, qpos):
                     release(array)
-    for level in range(1, len(RELAXATION_LEVELS)):
-        frames = np.flatnonzero(relaxation == level)
-        if frames.size:
-            shown = ", ".join(str(f) for f in frames[:10]) + (" ..." if frames.size > 10 else "")
-            warn(f"{source}: {RELAXATION_LEVELS[level]} on {frames.size} frame(s): {shown}")
     return Trajectory(
         character=character,
         qpos=qpos,
@@ -450,3 +467,13 @@ def _track(
         targets=targets,
         solver=SolverStats(iterations=iterations, relaxation=relaxation, latency=latency),
     )
+
+
+def _warn_relaxations(traj: Trajectory) -> None:
+    """One warning per relaxation the solver needed, naming the frames (the first ten)."""
+    relaxation = traj.solver.relaxation
+    for level in range(1, len(RELAXATION_LEVELS)):
+        frames = np.flatnonzero(relaxation == level)
+        if frames.size:
+            shown = ", ".join(str(f) for f in frames[:10]) + (" ..." if frames.size > 10 else "")
+            warn(f"{traj.source}: {RELAXATION_LEVELS[level]} on {frames.size} frame(s): {shown}")

@@ -49,7 +49,7 @@ from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
-from .limbtwist import LIMB_CHAINS, flexion_axis, follow_bend, twist_offset
+from .limbtwist import LIMB_CHAINS, FlexionAxis, flexion_axis, follow_bend, twist_offset
 from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -250,16 +250,7 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
     data = character.rest_data()
     out = {}
     for canon, tf in character.tracked.items():
-        if tf.kind == "site":
-            sid = model.site(tf.name).id
-            pos = data.site_xpos[sid].copy()
-            mat = data.site_xmat[sid].reshape(3, 3)
-        else:
-            bid = model.body(tf.name).id
-            pos = data.xpos[bid].copy()
-            mat = data.xmat[bid].reshape(3, 3)
-        quat = Rotation.from_matrix(mat).as_quat()
-        out[canon] = (pos, quat)
+        out[canon] = (tf.position(model, data).copy(), Rotation.from_matrix(tf.rotation(model, data)).as_quat())
     return out
 
 
@@ -392,10 +383,10 @@ def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     return quat_mul(rest, quat_mul(hinge, M1))
 
 
-def _limb_chain(character, c: str, present: set, axes: dict) -> tuple[str, str, tuple] | None:
-    """``(middle, end, (h, u))`` of a limb's upper segment ``c`` whose middle joint is a
-    hinge on the character (:mod:`physmocap.ik.limbtwist`), else None; the axes are
-    found once and kept in ``axes`` (the calibration's)."""
+def _limb_chain(character, c: str, present: set, axes: dict) -> tuple[str, str, FlexionAxis] | None:
+    """``(middle, end, axis)`` of a limb's upper segment ``c`` whose middle joint is a
+    hinge on the character (:mod:`physmocap.ik.limbtwist`), else None; the axis is
+    found once and kept in ``axes`` (the calibration's, its sign settled there)."""
     side, _, stem = c.partition("_")
     chain = LIMB_CHAINS.get(stem)
     if not side or chain is None:
@@ -773,7 +764,7 @@ def build_targets(
         if motion.is_rotational and rot_all is not None:
             R_a = rot_all[joint_indices[c]]  # rest world rotation is identity for BVH
             limb = _limb_chain(character, c, pset, limb_axes)
-            if limb is None and c.partition("_")[2] in LIMB_CHAINS:
+            if limb is not None and not limb[2].twists:
                 continue  # a limb's upper segment whose twist the character's frame cannot show
             if limb is not None:  # the upper segment's twist from the actor's bent elbow or knee
                 middle, end, axes = limb
@@ -782,9 +773,11 @@ def build_targets(
             if c not in offsets:
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
-                turn = None if limb is None else twist_offset(quat_mul(R_a, offsets[c]), axes, *segs, ok)
-                if turn is not None:
-                    offsets[c] = quat_mul(offsets[c], turn)
+                if limb is not None:
+                    turn, limb_axes[c] = twist_offset(quat_mul(R_a, offsets[c]), axes, *segs, ok)
+                    axes = limb_axes[c]
+                    if turn is not None:
+                        offsets[c] = quat_mul(offsets[c], turn)
             Q[i] = quat_mul(R_a, offsets[c])
             if limb is not None:
                 Q[i] = quat_mul(Q[i], follow_bend(Q[i], axes, *segs, ok))

@@ -75,7 +75,7 @@ class TrackedFrame:
     """A canonical joint's frame on the character: a site or a body, by name.
 
     The one place that knows how to find it in a model: :meth:`object_id`,
-    :meth:`body_id`, :meth:`position`.
+    :meth:`body_id`, :meth:`position`, :meth:`rotation`.
     """
 
     kind: str  # "site" or "body"
@@ -93,6 +93,11 @@ class TrackedFrame:
         """``(3,)`` its world position in ``data`` after kinematics (metres; a view: copy to keep)."""
         i = self.object_id(model)
         return data.site_xpos[i] if self.kind == "site" else data.xpos[i]
+
+    def rotation(self, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+        """``(3, 3)`` its world rotation matrix in ``data`` after kinematics (a view: copy to keep)."""
+        i = self.object_id(model)
+        return (data.site_xmat[i] if self.kind == "site" else data.xmat[i]).reshape(3, 3)
 
 
 @dataclass

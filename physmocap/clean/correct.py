@@ -18,8 +18,9 @@ positional glitch (bone stretch, gap, a held position) is bridged by the joint's
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked),
 then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
-from the parent and the child (:func:`_on_bones`); a left/right swap by trading the two
-joints' positions back over the span.
+from the parent and the child (:func:`_on_bones`); a stretched bone whose joint keeps moving
+on continuously is instead put back at its length along its own direction (:func:`_along_bone`);
+a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
 through the hard-limited IK on an actor-fitted humanoid (:mod:`.resolve`, "re-solved").
@@ -516,6 +517,40 @@ def _on_bones(P: np.ndarray, est: np.ndarray, j: int, parent: int, child: int, s
     return np.where((size > 1e-9) & (d > 1e-9), moved, est)
 
 
+def _along_bone(
+    P: np.ndarray, est: np.ndarray, j: int, parent: int, s: int, e: int, how: str, noise: float
+) -> tuple[np.ndarray, str]:
+    """A stretched bone put back at its length: joint ``j``'s own positions on frames
+    ``s..e`` of ``P (F, J, 3)`` moved along their direction from the parent to the bone's
+    length (its median over the clip), the nearest positions at that length (the smallest
+    change that makes the bone whole: a joint centre slid along its bone comes back exactly,
+    where an interpolation over a long span loses its motion).  Used only where the joint so
+    placed moves on continuously: no step from the good frame before the span to the good
+    frame after it is more than ``noise`` metres (a marker-based joint centre's soft-tissue
+    noise, ``stretch_distance``) beyond the joint's largest step over as many good frames
+    next to the span -- a joint thrown off its bone's direction too (a mislabelled marker)
+    says nothing of where the bone points, and keeps ``est`` (the interpolation, ``how``), as
+    does a span with a lost sample or a joint on its parent.  Returns the positions and how
+    ("along its bone" where it was used)."""
+    F, n = len(P), e - s + 1
+    if s < 1 or e + 1 >= F:
+        return est, how
+    with np.errstate(invalid="ignore"):
+        length = float(np.nanmedian(np.linalg.norm(P[:, j] - P[:, parent], axis=-1)))
+    d = P[s : e + 1, j] - P[s : e + 1, parent]
+    size = np.linalg.norm(d, axis=-1, keepdims=True)
+    if not (np.isfinite(size).all() and (size > 1e-9).all() and np.isfinite(length) and length > 0.0):
+        return est, how
+    moved = P[s : e + 1, parent] + d * (length / size)
+    track = np.concatenate([P[s - 1 : s, j], moved, P[e + 1 : e + 2, j]])
+    own = [P[max(0, s - 1 - n) : s, j], P[e + 1 : min(F, e + 2 + n), j]]
+    with np.errstate(invalid="ignore"):
+        usual = max((float(np.nanmax(np.linalg.norm(np.diff(x, axis=0), axis=-1))) for x in own if len(x) > 1), default=0.0)
+    if not np.linalg.norm(np.diff(track, axis=0), axis=-1).max() <= usual + noise:  # NaN: a lost end
+        return est, how
+    return moved, "along its bone"
+
+
 def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) -> tuple[np.ndarray, str]:
     """Joint ``j``'s positions over frames ``s..e`` of ``P (F, J, 3)`` rebuilt from its good
     samples just outside (the nearest one held at the clip's ends), and how.
@@ -597,7 +632,8 @@ def correct_glitches(
     "matched" or "mirrored" (:class:`_Matcher`; ", on contact" where :func:`_on_contact`
     then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
-    or "linear" (a position, :func:`_repair_position`; ", on bones" where it was then put at its
+    or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
+    back at its length, :func:`_along_bone`; ", on bones" where either was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
 
@@ -656,6 +692,8 @@ def correct_glitches(
         parents = np.asarray(motion.skeleton.parents)
         parent = int(parents[j]) if parents[j] >= 0 else None
         est, how = _repair_position(arr, j, parent, g.start, g.end)
+        if g.kind == "bone_stretch" and parent is not None:
+            est, how = _along_bone(arr, est, j, parent, g.start, g.end, how, opt.stretch_distance)
         child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
         if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():
             est, how = _on_bones(arr, est, j, parent, child, g.start, g.end), f"{how}, on bones"

@@ -134,14 +134,17 @@ def test_a_joint_thrown_across_its_bone_is_interpolated_instead(walk, bench):
     from the hip jumps at the span's ends, says nothing of the thigh's, and is not used."""
     _, _, _, report, _ = _stretched_knee(walk, bench, 0.15)
     (g,) = [g for g in report.glitches if g.joint == "LeftLeg"]
-    assert g.corrected == "parent-relative, on bones"
+    assert g.kind == "bone_stretch" and not g.corrected.startswith("along its bone")
 
 
 def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     """A knee position held for 0.4 s of the walk: rebuilt at the thigh's length from the hip
     and the shank's from the ankle (both tracked), the bend taken from the parent-relative
     estimate; riding on the hip alone it missed the real knee by up to 10.6 cm (the shank
-    stretched 9 cm), now by 4 cm."""
+    stretched 9 cm), put on its bones by 4 cm.  Riding on the plane of the hip, the ankle and
+    the pelvis rebuilds the knee's motion next to the span about as well (within
+    ``blend_ratio``), so the two are averaged: 5.3 cm here (a loss of 1.3 cm the benchmark's
+    lost and held joints repay, :func:`test_a_lost_knee_rides_on_the_plane_of_its_neighbours`)."""
     import dataclasses
 
     pos = bench.positional_version(walk)
@@ -151,13 +154,13 @@ def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     P[200:248, knee] = P[199, knee]
     fixed, report = clean(dataclasses.replace(pos, positions=P))
     assert [(g.kind, g.joint, g.start, g.end, g.corrected) for g in report.glitches] == [
-        ("frozen", "LeftLeg", 200, 247, "parent-relative, on bones")
+        ("frozen", "LeftLeg", 200, 247, "among its neighbours, on bones")
     ]
     F = np.asarray(fixed.positions)
     for x, y in ((hip, knee), (knee, ankle)):
         bone = np.median(np.linalg.norm(P0[:, x] - P0[:, y], axis=-1))
         np.testing.assert_allclose(np.linalg.norm(F[200:248, x] - F[200:248, y], axis=-1), bone, atol=1e-9)
-    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.05
+    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.055
     untouched = np.ones(P.shape[:2], bool)
     untouched[200:248, knee] = False
     np.testing.assert_array_equal(F[untouched], P[untouched])
@@ -236,3 +239,25 @@ def test_a_swap_on_the_calibration_frame_does_not_twist_the_whole_clip(walk, ben
     outside = [g for g in report.glitches if g.kind == "anatomical" and (g.end < s or g.start > e)]
     assert outside == [], [(g.joint, g.movement, g.start, g.end) for g in outside]
     np.testing.assert_array_equal(np.asarray(fixed.positions), np.asarray(pos.positions))
+
+
+def test_a_lost_knee_rides_on_the_plane_of_its_neighbours(bench):
+    """The PyMO walk's left knee lost for 0.42 s mid-stride (seed 3 of the benchmark): riding
+    on the hip alone, its offset turning steadily, it missed the swinging knee by up to 18 cm;
+    in the plane of the hip, the ankle and the pelvis (which rebuilds the knee's motion next
+    to the span better) by under 4 cm."""
+    import dataclasses
+
+    from conftest import shared_file
+
+    pos = bench.positional_version(load_motion(shared_file("pymo_walk.bvh")))
+    j = pos.skeleton.names.index("LeftLeg")
+    P = np.array(pos.positions, copy=True)
+    C = np.ones(P.shape[:2])
+    P[533:583, j] = np.nan
+    C[533:583, j] = 0.0
+    fixed, report = clean(dataclasses.replace(pos, positions=P, confidence=C))
+    (g,) = [g for g in report.glitches if g.joint == "LeftLeg"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("gap", 533, 582, "among its neighbours, on bones")
+    err = np.linalg.norm(np.asarray(fixed.positions)[533:583, j] - pos.positions[533:583, j], axis=-1)
+    assert err.max() < 0.04

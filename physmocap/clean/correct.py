@@ -19,7 +19,9 @@ from its parent turning steadily from its value before to its value after, ridin
 parent's own motion (linear interpolation of the position where the parent is not tracked),
 then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
 from the parent and the child (:func:`_on_bones`); a stretched bone whose joint keeps moving
-on continuously is instead put back at its length along its own direction (:func:`_along_bone`);
+on continuously is instead put back at its length along its own direction (:func:`_along_bone`),
+and a joint whose offset in the plane of its parent, child and grandparent rebuilds its own
+motion next to the span better rides on that plane (:func:`_ridden_if_better`);
 a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
@@ -481,6 +483,90 @@ def _slerp_vectors(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     return d * length
 
 
+def _neighbour_frames(
+    P: np.ndarray, parent: int, child: int, anchor: int, frames: np.ndarray, min_deg: float
+) -> np.ndarray | None:
+    """``(n, 3, 3)`` orthonormal frames (columns) on ``frames`` of ``P (F, J, 3)``: the first
+    axis from joint ``parent`` to ``child``, the third across the plane they make with
+    ``anchor`` (the parent's own parent); None where that plane is ill-defined on some frame
+    (the two directions from the parent within ``min_deg`` degrees of a line, or a joint
+    lost)."""
+    o = P[frames, parent]
+    x = P[frames, child] - o
+    z = np.cross(x, P[frames, anchor] - o)
+    lx, lz = np.linalg.norm(x, axis=-1, keepdims=True), np.linalg.norm(z, axis=-1, keepdims=True)
+    sine = np.sin(np.radians(min_deg))
+    with np.errstate(invalid="ignore"):
+        span = sine * lx * np.linalg.norm(P[frames, anchor] - o, axis=-1, keepdims=True)
+        if not (np.isfinite(lz).all() and (lz > 0.0).all() and (lz >= span).all()):
+            return None
+    x, z = x / lx, z / lz
+    return np.stack([x, np.cross(z, x), z], axis=-1)
+
+
+def _among_neighbours(
+    P: np.ndarray, j: int, parent: int, child: int, anchor: int, s: int, e: int, min_deg: float
+) -> np.ndarray | None:
+    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` riding on its tracked
+    neighbours: its offset from ``parent`` in the frame the parent, ``child`` and ``anchor``
+    (the parent's parent) make (:func:`_neighbour_frames`), interpolated linearly from the
+    good frame before the span to the good frame after, so the joint turns with the limb
+    around it (a frozen ankle swings with its knee and toe instead of following the knee
+    alone); None where the frames are ill-defined (``min_deg``, :func:`_neighbour_frames`)."""
+    if s < 1 or e + 1 >= len(P):
+        return None
+    frames = np.arange(s - 1, e + 2)
+    B = _neighbour_frames(P, parent, child, anchor, frames, min_deg)
+    if B is None:
+        return None
+    ends = np.einsum("fji,fj->fi", B[[0, -1]], P[[s - 1, e + 1], j] - P[[s - 1, e + 1], parent])
+    if not np.isfinite(ends).all():
+        return None
+    w = (np.arange(1, e - s + 2) / (e - s + 2))[:, None]
+    local = (1 - w) * ends[0] + w * ends[1]
+    return P[s : e + 1, parent] + np.einsum("fij,fj->fi", B[1:-1], local)
+
+
+def _ridden_if_better(
+    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int, anchor: int, s: int, e: int,
+    opt: CleanOptions,
+) -> np.ndarray | None:
+    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` riding on its neighbours
+    (:func:`_among_neighbours`) where that rebuilds the joint's own good motion next to the
+    span better than riding on its parent alone (:func:`_repair_position`), both put at their
+    bone lengths (:func:`_on_bones`): the two are tried on the pseudo-gaps
+    (:func:`_pseudo_gaps`) where the four joints are tracked and unglitched (``bad (F, J)``),
+    as the rotational bridges are judged, and used only where the joint so placed moves on
+    continuously (:func:`_moves_on`, ``stretch_distance``); where the parent's error there is
+    within ``blend_ratio`` times the plane's, the two are averaged, weighted by the inverse of
+    their errors, as the bridges are.  None where riding on the parent wins or no pseudo-gap
+    can tell."""
+    F, n = len(P), e - s + 1
+    joints = [j, parent, child, anchor]
+    if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, [parent, child, anchor]].any():
+        return None
+    err = np.zeros(2)
+    for a in _pseudo_gaps(s, e, F):
+        b = a + n - 1
+        if bad[a - 1 : b + 2, joints].any() or not np.isfinite(P[a - 1 : b + 2, joints]).all():
+            continue
+        ridden = _among_neighbours(P, j, parent, child, anchor, a, b, opt.plane_min_deg)
+        if ridden is None:
+            return None
+        plain = _repair_position(P, j, parent, a, b)[0]
+        for i, est in enumerate((plain, ridden)):
+            err[i] += np.sum((_on_bones(P, est, j, parent, child, a, b) - P[a : b + 1, j]) ** 2)
+    if not err[1] < err[0]:
+        return None
+    ridden = _among_neighbours(P, j, parent, child, anchor, s, e, opt.plane_min_deg)
+    if ridden is None or not _moves_on(P, ridden, j, s, e, opt.stretch_distance):
+        return None
+    if err[0] > opt.blend_ratio * err[1]:
+        return ridden
+    w = 1.0 / np.maximum(err, 1e-12)  # the test cannot tell them apart: their mean, as the bridges'
+    return (w[0] * _repair_position(P, j, parent, s, e)[0] + w[1] * ridden) / w.sum()
+
+
 def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
     """The child of joint ``j`` of ``P (F, J, 3)`` tracked and unglitched (``bad (F, J)``) on
     frames ``s - 1 .. e + 1`` with the longest bone (median over the clip), or None."""
@@ -542,13 +628,22 @@ def _along_bone(
     if not (np.isfinite(size).all() and (size > 1e-9).all() and np.isfinite(length) and length > 0.0):
         return est, how
     moved = P[s : e + 1, parent] + d * (length / size)
-    track = np.concatenate([P[s - 1 : s, j], moved, P[e + 1 : e + 2, j]])
+    return (moved, "along its bone") if _moves_on(P, moved, j, s, e, noise) else (est, how)
+
+
+def _moves_on(P: np.ndarray, est: np.ndarray, j: int, s: int, e: int, noise: float) -> bool:
+    """Whether joint ``j`` of ``P (F, J, 3)`` placed at ``est (n, 3)`` on frames ``s..e``
+    moves on continuously: no step from the good frame before the span to the good frame
+    after it is more than ``noise`` metres beyond the joint's largest step over as many good
+    frames next to the span (False where an end is lost)."""
+    F, n = len(P), e - s + 1
+    if s < 1 or e + 1 >= F:
+        return False
+    track = np.concatenate([P[s - 1 : s, j], est, P[e + 1 : e + 2, j]])
     own = [P[max(0, s - 1 - n) : s, j], P[e + 1 : min(F, e + 2 + n), j]]
     with np.errstate(invalid="ignore"):
         usual = max((float(np.nanmax(np.linalg.norm(np.diff(x, axis=0), axis=-1))) for x in own if len(x) > 1), default=0.0)
-    if not np.linalg.norm(np.diff(track, axis=0), axis=-1).max() <= usual + noise:  # NaN: a lost end
-        return est, how
-    return moved, "along its bone"
+    return bool(np.linalg.norm(np.diff(track, axis=0), axis=-1).max() <= usual + noise)  # NaN: a lost end
 
 
 def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) -> tuple[np.ndarray, str]:
@@ -633,7 +728,8 @@ def correct_glitches(
     then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
-    back at its length, :func:`_along_bone`; ", on bones" where either was then put at its
+    back at its length, :func:`_along_bone`), "among its neighbours" (riding on the plane of
+    its parent, child and grandparent, :func:`_ridden_if_better`; ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
 
@@ -695,6 +791,11 @@ def correct_glitches(
         if g.kind == "bone_stretch" and parent is not None:
             est, how = _along_bone(arr, est, j, parent, g.start, g.end, how, opt.stretch_distance)
         child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
+        anchor = int(parents[parent]) if child is not None and parents[parent] >= 0 else None
+        if anchor is not None and how == "parent-relative":
+            ridden = _ridden_if_better(arr, bad, j, parent, child, anchor, g.start, g.end, opt)
+            if ridden is not None:
+                est, how = ridden, "among its neighbours"
         if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():
             est, how = _on_bones(arr, est, j, parent, child, g.start, g.end), f"{how}, on bones"
         arr[g.start : g.end + 1, j] = est

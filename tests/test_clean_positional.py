@@ -141,10 +141,11 @@ def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     """A knee position held for 0.4 s of the walk: rebuilt at the thigh's length from the hip
     and the shank's from the ankle (both tracked), the bend taken from the parent-relative
     estimate; riding on the hip alone it missed the real knee by up to 10.6 cm (the shank
-    stretched 9 cm), put on its bones by 4 cm.  Riding on the plane of the hip, the ankle and
-    the pelvis rebuilds the knee's motion next to the span about as well (within
-    ``blend_ratio``), so the two are averaged: 5.3 cm here (a loss of 1.3 cm the benchmark's
-    lost and held joints repay, :func:`test_a_lost_knee_rides_on_the_plane_of_its_neighbours`)."""
+    stretched 9 cm), put on its bones by 4 cm.  Riding on the ankle or on the plane of the hip,
+    the ankle and the pelvis rebuilds the knee's motion next to the span about as well (within
+    ``blend_ratio``), so they are averaged: 5.8 cm here (a loss of 1.8 cm the benchmark's lost
+    and held joints repay, :func:`test_a_lost_knee_rides_on_the_plane_of_its_neighbours`,
+    :func:`test_a_held_ankle_rides_on_its_toe`)."""
     import dataclasses
 
     pos = bench.positional_version(walk)
@@ -160,7 +161,7 @@ def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     for x, y in ((hip, knee), (knee, ankle)):
         bone = np.median(np.linalg.norm(P0[:, x] - P0[:, y], axis=-1))
         np.testing.assert_allclose(np.linalg.norm(F[200:248, x] - F[200:248, y], axis=-1), bone, atol=1e-9)
-    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.055
+    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.06
     untouched = np.ones(P.shape[:2], bool)
     untouched[200:248, knee] = False
     np.testing.assert_array_equal(F[untouched], P[untouched])
@@ -261,3 +262,21 @@ def test_a_lost_knee_rides_on_the_plane_of_its_neighbours(bench):
     assert (g.kind, g.start, g.end, g.corrected) == ("gap", 533, 582, "among its neighbours, on bones")
     err = np.linalg.norm(np.asarray(fixed.positions)[533:583, j] - pos.positions[533:583, j], axis=-1)
     assert err.max() < 0.04
+
+
+def test_a_held_ankle_rides_on_its_toe(walk, bench):
+    """The walk's left ankle held for 0.4 s of a swing (seed 3 of the benchmark): riding on the
+    knee, its offset turning steadily, then put at its two bone lengths, it landed on the wrong
+    side of the small circle the shank and the foot allow (21.6 cm off); riding on the toe,
+    which rebuilds the ankle's motion next to the span better, it is within 2 cm."""
+    import dataclasses
+
+    pos = bench.positional_version(walk)
+    P0 = np.asarray(pos.positions)
+    P = np.array(P0, copy=True)
+    ankle = walk.skeleton.names.index("LeftFoot")
+    P[341:389, ankle] = P[340, ankle]
+    fixed, report = clean(dataclasses.replace(pos, positions=P))
+    (g,) = [g for g in report.glitches if g.joint == "LeftFoot"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("frozen", 341, 388, "child-relative, on bones")
+    assert np.linalg.norm(np.asarray(fixed.positions)[341:389, ankle] - P0[341:389, ankle], axis=-1).max() < 0.02

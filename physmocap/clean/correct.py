@@ -20,8 +20,9 @@ parent's own motion (linear interpolation of the position where the parent is no
 then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
 from the parent and the child (:func:`_on_bones`); a stretched bone whose joint keeps moving
 on continuously is instead put back at its length along its own direction (:func:`_along_bone`),
-and a joint whose offset in the plane of its parent, child and grandparent rebuilds its own
-motion next to the span better rides on that plane (:func:`_ridden_if_better`);
+and a joint with a tracked child rides on whichever of its parent, its child and the plane of
+its parent, child and grandparent rebuilds its own motion next to the span best
+(:func:`_judged_position`);
 a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
@@ -527,44 +528,57 @@ def _among_neighbours(
     return P[s : e + 1, parent] + np.einsum("fij,fj->fi", B[1:-1], local)
 
 
-def _ridden_if_better(
-    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int, anchor: int, s: int, e: int,
+def _position_estimates(
+    P: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int, min_deg: float
+) -> dict[str, np.ndarray]:
+    """Estimates of joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)``, by name:
+    riding on its parent (its offset from the parent turning steadily, :func:`_repair_position`),
+    riding on its child the same way, and riding on the plane of parent, child and ``anchor``
+    (the parent's parent, :func:`_among_neighbours`, where that plane is well defined)."""
+    out = {"parent-relative": _repair_position(P, j, parent, s, e)[0],
+           "child-relative": _repair_position(P, j, child, s, e)[0]}  # fmt: skip
+    ridden = None if anchor is None else _among_neighbours(P, j, parent, child, anchor, s, e, min_deg)
+    if ridden is not None:
+        out["among its neighbours"] = ridden
+    return out
+
+
+def _judged_position(
+    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int,
     opt: CleanOptions,
-) -> np.ndarray | None:
-    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` riding on its neighbours
-    (:func:`_among_neighbours`) where that rebuilds the joint's own good motion next to the
-    span better than riding on its parent alone (:func:`_repair_position`), both put at their
-    bone lengths (:func:`_on_bones`): the two are tried on the pseudo-gaps
-    (:func:`_pseudo_gaps`) where the four joints are tracked and unglitched (``bad (F, J)``),
-    as the rotational bridges are judged, and used only where the joint so placed moves on
-    continuously (:func:`_moves_on`, ``stretch_distance``); where the parent's error there is
-    within ``blend_ratio`` times the plane's, the two are averaged, weighted by the inverse of
-    their errors, as the bridges are.  None where riding on the parent wins or no pseudo-gap
-    can tell."""
+) -> tuple[np.ndarray, str] | None:
+    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` from the estimate of
+    :func:`_position_estimates` that rebuilds the joint's own good motion next to the span
+    best, all put at their bone lengths (:func:`_on_bones`): each is tried on the pseudo-gaps
+    (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
+    (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
+    the best one's error are averaged, weighted by the inverse of their errors.  One that does
+    not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
+    turning over) is left out.  Returns the positions and the best one's name, or None where
+    riding on the parent wins or no pseudo-gap can tell."""
     F, n = len(P), e - s + 1
-    joints = [j, parent, child, anchor]
-    if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, [parent, child, anchor]].any():
+    joints = [j, parent, child] + ([anchor] if anchor is not None else [])
+    if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, joints[1:]].any():
         return None
-    err = np.zeros(2)
+    found = _position_estimates(P, j, parent, child, anchor, s, e, opt.plane_min_deg)
+    names = [k for k, est in found.items() if k == "parent-relative" or _moves_on(P, est, j, s, e, opt.stretch_distance)]
+    err = np.zeros(len(names))
+    tested = False
     for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
         if bad[a - 1 : b + 2, joints].any() or not np.isfinite(P[a - 1 : b + 2, joints]).all():
             continue
-        ridden = _among_neighbours(P, j, parent, child, anchor, a, b, opt.plane_min_deg)
-        if ridden is None:
-            return None
-        plain = _repair_position(P, j, parent, a, b)[0]
-        for i, est in enumerate((plain, ridden)):
-            err[i] += np.sum((_on_bones(P, est, j, parent, child, a, b) - P[a : b + 1, j]) ** 2)
-    if not err[1] < err[0]:
+        trial = _position_estimates(P, j, parent, child, anchor, a, b, opt.plane_min_deg)
+        for i, k in enumerate(names):
+            est = trial.get(k)
+            err[i] = np.inf if est is None else err[i] + np.sum((_on_bones(P, est, j, parent, child, a, b) - P[a : b + 1, j]) ** 2)
+        tested = True
+    best = int(np.argmin(err))
+    if not tested or names[best] == "parent-relative":
         return None
-    ridden = _among_neighbours(P, j, parent, child, anchor, s, e, opt.plane_min_deg)
-    if ridden is None or not _moves_on(P, ridden, j, s, e, opt.stretch_distance):
-        return None
-    if err[0] > opt.blend_ratio * err[1]:
-        return ridden
-    w = 1.0 / np.maximum(err, 1e-12)  # the test cannot tell them apart: their mean, as the bridges'
-    return (w[0] * _repair_position(P, j, parent, s, e)[0] + w[1] * ridden) / w.sum()
+    near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
+    w = 1.0 / np.maximum(err[near], 1e-12)
+    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), names[best]
 
 
 def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
@@ -728,8 +742,9 @@ def correct_glitches(
     then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
-    back at its length, :func:`_along_bone`), "among its neighbours" (riding on the plane of
-    its parent, child and grandparent, :func:`_ridden_if_better`; ", on bones" where any was then put at its
+    back at its length, :func:`_along_bone`), "child-relative" or "among its neighbours" (riding
+    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`;
+    ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
 
@@ -792,10 +807,10 @@ def correct_glitches(
             est, how = _along_bone(arr, est, j, parent, g.start, g.end, how, opt.stretch_distance)
         child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
         anchor = int(parents[parent]) if child is not None and parents[parent] >= 0 else None
-        if anchor is not None and how == "parent-relative":
-            ridden = _ridden_if_better(arr, bad, j, parent, child, anchor, g.start, g.end, opt)
-            if ridden is not None:
-                est, how = ridden, "among its neighbours"
+        if child is not None and how == "parent-relative":
+            judged = _judged_position(arr, bad, j, parent, child, anchor, g.start, g.end, opt)
+            if judged is not None:
+                est, how = judged
         if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():
             est, how = _on_bones(arr, est, j, parent, child, g.start, g.end), f"{how}, on bones"
         arr[g.start : g.end + 1, j] = est

@@ -85,7 +85,7 @@ def test_clean_reads_a_source_map_and_finds_the_positional_glitches(walk, tmp_pa
 
 def test_a_displaced_joint_is_reported_on_itself_not_on_its_children(walk, bench):
     """The knee moved 10 cm along the thigh lengthens the thigh and changes the shank: one
-    glitch, on the knee; repaired riding on the hip, the error mostly gone."""
+    glitch, on the knee; put back at the thigh's length along its direction, the error mostly gone."""
     pos = bench.positional_version(walk)
     P = np.array(pos.positions, copy=True)
     hip, knee = (walk.skeleton.names.index(n) for n in ("LeftUpLeg", "LeftLeg"))
@@ -95,18 +95,57 @@ def test_a_displaced_joint_is_reported_on_itself_not_on_its_children(walk, bench
 
     fixed, report = clean(dataclasses.replace(pos, positions=P))
     assert [(g.kind, g.joint, g.start, g.end, g.corrected) for g in report.glitches] == [
-        ("bone_stretch", "LeftLeg", 150, 159, "parent-relative, on bones")
+        ("bone_stretch", "LeftLeg", 150, 159, "along its bone, on bones")
     ]
     before = np.linalg.norm(P[150:160, knee] - pos.positions[150:160, knee], axis=-1)
     after = np.linalg.norm(fixed.positions[150:160, knee] - pos.positions[150:160, knee], axis=-1)
     assert after.max() < 0.2 * before.max()
 
 
+def _stretched_knee(walk, bench, sideways: float):
+    """The walk's positions, its left knee moved 40 % of the thigh along it (and ``sideways``
+    metres across it) on frames 200-247 (0.4 s), the cleaned result and the knee's index."""
+    import dataclasses
+
+    pos = bench.positional_version(walk)
+    P = np.array(pos.positions, copy=True)
+    hip, knee = (walk.skeleton.names.index(n) for n in ("LeftUpLeg", "LeftLeg"))
+    d = P[200:248, knee] - P[200:248, hip]
+    P[200:248, knee] += 0.4 * d
+    across = np.cross(d, [0.0, 0.0, 1.0])
+    P[200:248, knee] += sideways * across / np.linalg.norm(across, axis=-1, keepdims=True)
+    fixed, report = clean(dataclasses.replace(pos, positions=P))
+    return pos, P, fixed, report, knee
+
+
+def test_a_stretched_bone_is_put_back_at_its_length_along_its_direction(walk, bench):
+    """A knee slid 40 % along the thigh for 0.4 s of the walk: the interpolation between the
+    good ends lost the knee's swing (up to 9 cm off, seed 2 of the benchmark: 12 frames more
+    than 1 cm worse); moved back along the thigh to its length it is where it was."""
+    pos, P, fixed, report, knee = _stretched_knee(walk, bench, 0.0)
+    (g,) = [g for g in report.glitches if g.joint == "LeftLeg"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("bone_stretch", 200, 247, "along its bone, on bones")
+    err = np.linalg.norm(np.asarray(fixed.positions)[200:248, knee] - pos.positions[200:248, knee], axis=-1)
+    assert err.max() < 0.01
+
+
+def test_a_joint_thrown_across_its_bone_is_interpolated_instead(walk, bench):
+    """The same knee also thrown 15 cm across the thigh (a mislabelled marker): its direction
+    from the hip jumps at the span's ends, says nothing of the thigh's, and is not used."""
+    _, _, _, report, _ = _stretched_knee(walk, bench, 0.15)
+    (g,) = [g for g in report.glitches if g.joint == "LeftLeg"]
+    assert g.kind == "bone_stretch" and not g.corrected.startswith("along its bone")
+
+
 def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     """A knee position held for 0.4 s of the walk: rebuilt at the thigh's length from the hip
     and the shank's from the ankle (both tracked), the bend taken from the parent-relative
     estimate; riding on the hip alone it missed the real knee by up to 10.6 cm (the shank
-    stretched 9 cm), now by 4 cm."""
+    stretched 9 cm), put on its bones by 4 cm.  Riding on the ankle or on the plane of the hip,
+    the ankle and the pelvis rebuilds the knee's motion next to the span about as well (within
+    ``blend_ratio``), so they are averaged: 5.8 cm here (a loss of 1.8 cm the benchmark's lost
+    and held joints repay, :func:`test_a_lost_knee_rides_on_the_plane_of_its_neighbours`,
+    :func:`test_a_held_ankle_rides_on_its_toe`)."""
     import dataclasses
 
     pos = bench.positional_version(walk)
@@ -116,13 +155,13 @@ def test_a_frozen_knee_is_rebuilt_between_the_hip_and_the_ankle(walk, bench):
     P[200:248, knee] = P[199, knee]
     fixed, report = clean(dataclasses.replace(pos, positions=P))
     assert [(g.kind, g.joint, g.start, g.end, g.corrected) for g in report.glitches] == [
-        ("frozen", "LeftLeg", 200, 247, "parent-relative, on bones")
+        ("frozen", "LeftLeg", 200, 247, "among its neighbours, on bones")
     ]
     F = np.asarray(fixed.positions)
     for x, y in ((hip, knee), (knee, ankle)):
         bone = np.median(np.linalg.norm(P0[:, x] - P0[:, y], axis=-1))
         np.testing.assert_allclose(np.linalg.norm(F[200:248, x] - F[200:248, y], axis=-1), bone, atol=1e-9)
-    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.05
+    assert np.linalg.norm(F[200:248, knee] - P0[200:248, knee], axis=-1).max() < 0.06
     untouched = np.ones(P.shape[:2], bool)
     untouched[200:248, knee] = False
     np.testing.assert_array_equal(F[untouched], P[untouched])
@@ -175,3 +214,69 @@ def test_shortened_positional_benchmark_on_the_bundled_walk(walk, bench):
         assert np.isfinite(after).all(), kind
         if kind != "gap":
             assert np.sqrt(np.mean(after**2)) < 0.5 * np.sqrt(np.mean(before**2)), kind
+
+
+def test_a_swap_on_the_calibration_frame_does_not_twist_the_whole_clip(walk, bench):
+    """The trunk angles of the whole clip are measured from one upright frame; the shoulders
+    swapped there made every frame read as a trunk rotation of about 105 degrees (the CMU
+    markers, seed 2 of the benchmark: swap precision 0.49).  The calibration frame is taken
+    outside the other glitches' spans."""
+    import dataclasses
+
+    from physmocap.clean.anatomy import motion_angles
+    from physmocap.clean.detect import canonical_joints
+    from physmocap.ik.calibration import calibration_pose
+
+    pos = bench.positional_version(walk).slice_frames(200, None)  # past the T-pose: upright mid-stride
+    ji = canonical_joints(pos)
+    t = calibration_pose({}, motion_angles(pos, ji)[1]).frame
+    s, e = max(1, t - 10), t + 10
+    P = np.array(pos.positions, copy=True)
+    left, right = ji["left_shoulder"], ji["right_shoulder"]
+    P[s : e + 1, [left, right]] = P[s : e + 1, [right, left]]
+    fixed, report = clean(dataclasses.replace(pos, positions=P))
+    swaps = [g for g in report.glitches if g.kind == "lr_swap"]
+    assert swaps and all(g.start <= t <= g.end for g in swaps)
+    outside = [g for g in report.glitches if g.kind == "anatomical" and (g.end < s or g.start > e)]
+    assert outside == [], [(g.joint, g.movement, g.start, g.end) for g in outside]
+    np.testing.assert_array_equal(np.asarray(fixed.positions), np.asarray(pos.positions))
+
+
+def test_a_lost_knee_rides_on_the_plane_of_its_neighbours(bench):
+    """The PyMO walk's left knee lost for 0.42 s mid-stride (seed 3 of the benchmark): riding
+    on the hip alone, its offset turning steadily, it missed the swinging knee by up to 18 cm;
+    in the plane of the hip, the ankle and the pelvis (which rebuilds the knee's motion next
+    to the span better) by under 4 cm."""
+    import dataclasses
+
+    from conftest import shared_file
+
+    pos = bench.positional_version(load_motion(shared_file("pymo_walk.bvh")))
+    j = pos.skeleton.names.index("LeftLeg")
+    P = np.array(pos.positions, copy=True)
+    C = np.ones(P.shape[:2])
+    P[533:583, j] = np.nan
+    C[533:583, j] = 0.0
+    fixed, report = clean(dataclasses.replace(pos, positions=P, confidence=C))
+    (g,) = [g for g in report.glitches if g.joint == "LeftLeg"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("gap", 533, 582, "among its neighbours, on bones")
+    err = np.linalg.norm(np.asarray(fixed.positions)[533:583, j] - pos.positions[533:583, j], axis=-1)
+    assert err.max() < 0.04
+
+
+def test_a_held_ankle_rides_on_its_toe(walk, bench):
+    """The walk's left ankle held for 0.4 s of a swing (seed 3 of the benchmark): riding on the
+    knee, its offset turning steadily, then put at its two bone lengths, it landed on the wrong
+    side of the small circle the shank and the foot allow (21.6 cm off); riding on the toe,
+    which rebuilds the ankle's motion next to the span better, it is within 2 cm."""
+    import dataclasses
+
+    pos = bench.positional_version(walk)
+    P0 = np.asarray(pos.positions)
+    P = np.array(P0, copy=True)
+    ankle = walk.skeleton.names.index("LeftFoot")
+    P[341:389, ankle] = P[340, ankle]
+    fixed, report = clean(dataclasses.replace(pos, positions=P))
+    (g,) = [g for g in report.glitches if g.joint == "LeftFoot"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("frozen", 341, 388, "child-relative, on bones")
+    assert np.linalg.norm(np.asarray(fixed.positions)[341:389, ankle] - P0[341:389, ankle], axis=-1).max() < 0.02

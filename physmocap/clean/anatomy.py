@@ -249,10 +249,17 @@ ANCHORS: dict[str, tuple[str, ...]] = {
 ROTATED_SEGMENTS = ("pelvis", "left_hip", "right_hip", "left_shoulder", "right_shoulder")
 
 
-def motion_angles(motion, joint_indices: dict[str, int]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+def motion_angles(
+    motion, joint_indices: dict[str, int], unreliable: np.ndarray | None = None
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """``(angles, positions)`` of a :class:`~physmocap.motion.Motion`: movement key ->
     ``(F,)`` degrees (:func:`anatomical_angles`, calibrated on the clip's most upright
-    frame), and canonical joint -> ``(F, 3)`` world positions."""
+    frame), and canonical joint -> ``(F, 3)`` world positions.
+
+    ``unreliable (F,)``: frames not to calibrate on (another glitch moves the joints there:
+    the trunk angles of the whole clip are measured from the calibration frame, so one
+    taken inside a left/right swap of the shoulders reads every frame as twisted 105
+    degrees); every frame is a candidate again where all are unreliable."""
     from scipy.spatial.transform import Rotation
 
     from ..ik.calibration import calibration_pose
@@ -265,7 +272,10 @@ def motion_angles(motion, joint_indices: dict[str, int]) -> tuple[dict[str, np.n
         rot = {k: Rotation.from_quat(Q[:, joint_indices[k]]).as_matrix() for k in ROTATED_SEGMENTS if k in joint_indices}
     if not P:
         return {}, P
-    return anatomical_angles(P, rot, calibration_pose({}, P).frame), P
+    usable = P
+    if unreliable is not None and unreliable.any() and not unreliable.all():
+        usable = {k: np.where(unreliable[:, None], np.nan, v) for k, v in P.items()}
+    return anatomical_angles(P, rot, calibration_pose({}, usable).frame), P
 
 
 def bend_past_range(motion, joint: str, frames, excess: float) -> tuple[int, np.ndarray] | None:

@@ -18,8 +18,12 @@ positional glitch (bone stretch, gap, a held position) is bridged by the joint's
 from its parent turning steadily from its value before to its value after, riding on the
 parent's own motion (linear interpolation of the position where the parent is not tracked),
 then, where a child of the joint is tracked, moved onto the circle at its two bone lengths
-from the parent and the child (:func:`_on_bones`); a left/right swap by trading the two
-joints' positions back over the span.
+from the parent and the child (:func:`_on_bones`); a stretched bone whose joint keeps moving
+on continuously is instead put back at its length along its own direction (:func:`_along_bone`),
+and a joint with a tracked child rides on whichever of its parent, its child and the plane of
+its parent, child and grandparent rebuilds its own motion next to the span best
+(:func:`_judged_position`);
+a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
 through the hard-limited IK on an actor-fitted humanoid (:mod:`.resolve`, "re-solved").
@@ -480,6 +484,103 @@ def _slerp_vectors(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     return d * length
 
 
+def _neighbour_frames(
+    P: np.ndarray, parent: int, child: int, anchor: int, frames: np.ndarray, min_deg: float
+) -> np.ndarray | None:
+    """``(n, 3, 3)`` orthonormal frames (columns) on ``frames`` of ``P (F, J, 3)``: the first
+    axis from joint ``parent`` to ``child``, the third across the plane they make with
+    ``anchor`` (the parent's own parent); None where that plane is ill-defined on some frame
+    (the two directions from the parent within ``min_deg`` degrees of a line, or a joint
+    lost)."""
+    o = P[frames, parent]
+    x = P[frames, child] - o
+    z = np.cross(x, P[frames, anchor] - o)
+    lx, lz = np.linalg.norm(x, axis=-1, keepdims=True), np.linalg.norm(z, axis=-1, keepdims=True)
+    sine = np.sin(np.radians(min_deg))
+    with np.errstate(invalid="ignore"):
+        span = sine * lx * np.linalg.norm(P[frames, anchor] - o, axis=-1, keepdims=True)
+        if not (np.isfinite(lz).all() and (lz > 0.0).all() and (lz >= span).all()):
+            return None
+    x, z = x / lx, z / lz
+    return np.stack([x, np.cross(z, x), z], axis=-1)
+
+
+def _among_neighbours(
+    P: np.ndarray, j: int, parent: int, child: int, anchor: int, s: int, e: int, min_deg: float
+) -> np.ndarray | None:
+    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` riding on its tracked
+    neighbours: its offset from ``parent`` in the frame the parent, ``child`` and ``anchor``
+    (the parent's parent) make (:func:`_neighbour_frames`), interpolated linearly from the
+    good frame before the span to the good frame after, so the joint turns with the limb
+    around it (a frozen ankle swings with its knee and toe instead of following the knee
+    alone); None where the frames are ill-defined (``min_deg``, :func:`_neighbour_frames`)."""
+    if s < 1 or e + 1 >= len(P):
+        return None
+    frames = np.arange(s - 1, e + 2)
+    B = _neighbour_frames(P, parent, child, anchor, frames, min_deg)
+    if B is None:
+        return None
+    ends = np.einsum("fji,fj->fi", B[[0, -1]], P[[s - 1, e + 1], j] - P[[s - 1, e + 1], parent])
+    if not np.isfinite(ends).all():
+        return None
+    w = (np.arange(1, e - s + 2) / (e - s + 2))[:, None]
+    local = (1 - w) * ends[0] + w * ends[1]
+    return P[s : e + 1, parent] + np.einsum("fij,fj->fi", B[1:-1], local)
+
+
+def _position_estimates(
+    P: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int, min_deg: float
+) -> dict[str, np.ndarray]:
+    """Estimates of joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)``, by name:
+    riding on its parent (its offset from the parent turning steadily, :func:`_repair_position`),
+    riding on its child the same way, and riding on the plane of parent, child and ``anchor``
+    (the parent's parent, :func:`_among_neighbours`, where that plane is well defined)."""
+    out = {"parent-relative": _repair_position(P, j, parent, s, e)[0],
+           "child-relative": _repair_position(P, j, child, s, e)[0]}  # fmt: skip
+    ridden = None if anchor is None else _among_neighbours(P, j, parent, child, anchor, s, e, min_deg)
+    if ridden is not None:
+        out["among its neighbours"] = ridden
+    return out
+
+
+def _judged_position(
+    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int,
+    opt: CleanOptions,
+) -> tuple[np.ndarray, str] | None:
+    """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` from the estimate of
+    :func:`_position_estimates` that rebuilds the joint's own good motion next to the span
+    best, all put at their bone lengths (:func:`_on_bones`): each is tried on the pseudo-gaps
+    (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
+    (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
+    the best one's error are averaged, weighted by the inverse of their errors.  One that does
+    not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
+    turning over) is left out.  Returns the positions and the best one's name, or None where
+    riding on the parent wins or no pseudo-gap can tell."""
+    F, n = len(P), e - s + 1
+    joints = [j, parent, child] + ([anchor] if anchor is not None else [])
+    if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, joints[1:]].any():
+        return None
+    found = _position_estimates(P, j, parent, child, anchor, s, e, opt.plane_min_deg)
+    names = [k for k, est in found.items() if k == "parent-relative" or _moves_on(P, est, j, s, e, opt.stretch_distance)]
+    err = np.zeros(len(names))
+    tested = False
+    for a in _pseudo_gaps(s, e, F):
+        b = a + n - 1
+        if bad[a - 1 : b + 2, joints].any() or not np.isfinite(P[a - 1 : b + 2, joints]).all():
+            continue
+        trial = _position_estimates(P, j, parent, child, anchor, a, b, opt.plane_min_deg)
+        for i, k in enumerate(names):
+            est = trial.get(k)
+            err[i] = np.inf if est is None else err[i] + np.sum((_on_bones(P, est, j, parent, child, a, b) - P[a : b + 1, j]) ** 2)
+        tested = True
+    best = int(np.argmin(err))
+    if not tested or names[best] == "parent-relative":
+        return None
+    near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
+    w = 1.0 / np.maximum(err[near], 1e-12)
+    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), names[best]
+
+
 def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
     """The child of joint ``j`` of ``P (F, J, 3)`` tracked and unglitched (``bad (F, J)``) on
     frames ``s - 1 .. e + 1`` with the longest bone (median over the clip), or None."""
@@ -514,6 +615,49 @@ def _on_bones(P: np.ndarray, est: np.ndarray, j: int, parent: int, child: int, s
     size = np.linalg.norm(off, axis=-1, keepdims=True)
     moved = centre + radius * off / np.maximum(size, 1e-9)
     return np.where((size > 1e-9) & (d > 1e-9), moved, est)
+
+
+def _along_bone(
+    P: np.ndarray, est: np.ndarray, j: int, parent: int, s: int, e: int, how: str, noise: float
+) -> tuple[np.ndarray, str]:
+    """A stretched bone put back at its length: joint ``j``'s own positions on frames
+    ``s..e`` of ``P (F, J, 3)`` moved along their direction from the parent to the bone's
+    length (its median over the clip), the nearest positions at that length (the smallest
+    change that makes the bone whole: a joint centre slid along its bone comes back exactly,
+    where an interpolation over a long span loses its motion).  Used only where the joint so
+    placed moves on continuously: no step from the good frame before the span to the good
+    frame after it is more than ``noise`` metres (a marker-based joint centre's soft-tissue
+    noise, ``stretch_distance``) beyond the joint's largest step over as many good frames
+    next to the span -- a joint thrown off its bone's direction too (a mislabelled marker)
+    says nothing of where the bone points, and keeps ``est`` (the interpolation, ``how``), as
+    does a span with a lost sample or a joint on its parent.  Returns the positions and how
+    ("along its bone" where it was used)."""
+    F, n = len(P), e - s + 1
+    if s < 1 or e + 1 >= F:
+        return est, how
+    with np.errstate(invalid="ignore"):
+        length = float(np.nanmedian(np.linalg.norm(P[:, j] - P[:, parent], axis=-1)))
+    d = P[s : e + 1, j] - P[s : e + 1, parent]
+    size = np.linalg.norm(d, axis=-1, keepdims=True)
+    if not (np.isfinite(size).all() and (size > 1e-9).all() and np.isfinite(length) and length > 0.0):
+        return est, how
+    moved = P[s : e + 1, parent] + d * (length / size)
+    return (moved, "along its bone") if _moves_on(P, moved, j, s, e, noise) else (est, how)
+
+
+def _moves_on(P: np.ndarray, est: np.ndarray, j: int, s: int, e: int, noise: float) -> bool:
+    """Whether joint ``j`` of ``P (F, J, 3)`` placed at ``est (n, 3)`` on frames ``s..e``
+    moves on continuously: no step from the good frame before the span to the good frame
+    after it is more than ``noise`` metres beyond the joint's largest step over as many good
+    frames next to the span (False where an end is lost)."""
+    F, n = len(P), e - s + 1
+    if s < 1 or e + 1 >= F:
+        return False
+    track = np.concatenate([P[s - 1 : s, j], est, P[e + 1 : e + 2, j]])
+    own = [P[max(0, s - 1 - n) : s, j], P[e + 1 : min(F, e + 2 + n), j]]
+    with np.errstate(invalid="ignore"):
+        usual = max((float(np.nanmax(np.linalg.norm(np.diff(x, axis=0), axis=-1))) for x in own if len(x) > 1), default=0.0)
+    return bool(np.linalg.norm(np.diff(track, axis=0), axis=-1).max() <= usual + noise)  # NaN: a lost end
 
 
 def _repair_position(P: np.ndarray, j: int, parent: int | None, s: int, e: int) -> tuple[np.ndarray, str]:
@@ -597,7 +741,10 @@ def correct_glitches(
     "matched" or "mirrored" (:class:`_Matcher`; ", on contact" where :func:`_on_contact`
     then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
-    or "linear" (a position, :func:`_repair_position`; ", on bones" where it was then put at its
+    or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
+    back at its length, :func:`_along_bone`), "child-relative" or "among its neighbours" (riding
+    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`;
+    ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
 
@@ -656,7 +803,14 @@ def correct_glitches(
         parents = np.asarray(motion.skeleton.parents)
         parent = int(parents[j]) if parents[j] >= 0 else None
         est, how = _repair_position(arr, j, parent, g.start, g.end)
+        if g.kind == "bone_stretch" and parent is not None:
+            est, how = _along_bone(arr, est, j, parent, g.start, g.end, how, opt.stretch_distance)
         child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
+        anchor = int(parents[parent]) if child is not None and parents[parent] >= 0 else None
+        if child is not None and how == "parent-relative":
+            judged = _judged_position(arr, bad, j, parent, child, anchor, g.start, g.end, opt)
+            if judged is not None:
+                est, how = judged
         if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():
             est, how = _on_bones(arr, est, j, parent, child, g.start, g.end), f"{how}, on bones"
         arr[g.start : g.end + 1, j] = est

@@ -459,7 +459,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
         from .positional import positional_glitches
 
         glitches += positional_glitches(motion, opt, ji)
-    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji), motion, ji)
+    glitches = _merge_anatomical(glitches, anatomical_glitches(motion, opt, ji, glitches), motion, ji)
     glitches = _drop_boundary_jumps(glitches)
     return sorted(glitches, key=lambda g: (g.start, g.joint, g.kind))
 
@@ -574,10 +574,13 @@ def _merge_anatomical(
 
 
 def anatomical_glitches(
-    motion: Motion, options: CleanOptions | None = None, ji: dict[str, int] | None = None
+    motion: Motion, options: CleanOptions | None = None, ji: dict[str, int] | None = None,
+    others: list[Glitch] | None = None,
 ) -> list[Glitch]:
     """Spans where an anatomical angle (:mod:`.anatomy`) leaves its range of motion
-    (``ji``: the :func:`canonical_joints` of ``motion`` if the caller has them).
+    (``ji``: the :func:`canonical_joints` of ``motion`` if the caller has them; ``others``:
+    the glitches the other detectors found, whose frames the angles are not calibrated on,
+    :func:`.anatomy.motion_angles`).
 
     A skeleton whose limbs cannot be mapped to the canonical joints gets one warning
     naming the joints whose ranges cannot be checked; the other detectors still run."""
@@ -586,7 +589,10 @@ def anatomical_glitches(
 
     opt = options or CleanOptions()
     ji = canonical_joints(motion) if ji is None else ji
-    angles, _ = motion_angles(motion, ji)
+    unreliable = np.zeros(motion.num_frames, dtype=bool)
+    for g in others or []:
+        unreliable[g.start : g.end + 1] = True
+    angles, _ = motion_angles(motion, ji, unreliable)
     unchecked = sorted({m.joint for m in MOVEMENTS if m.key not in angles})
     if unchecked:
         warn(f"{motion.source}: cannot check ranges of motion for joints {', '.join(unchecked)} (not mapped)")

@@ -125,6 +125,11 @@ class CleanOptions:
             reach it: its distance from the joint within this many metres of the limb's own.
         contact_ramp: The turn that keeps the point standing eases out over this many
             seconds after the stance.
+        plane_min_deg: A lost or held joint position rides on the plane of its parent, its
+            child and its parent's parent (positional sources) only where the two bones
+            from the parent make at least this many degrees with a straight line on every
+            frame: nearer a line the plane's normal follows each millimetre of noise (an
+            ankle between a straight knee and the toe).
     """
 
     jump_deg: float = _opt(10.0, "deg")
@@ -157,6 +162,7 @@ class CleanOptions:
     contact_lever: float = _opt(0.25, "ratio")
     contact_reach: float = _opt(0.02, "m")
     contact_ramp: float = _opt(0.1, "s")
+    plane_min_deg: float = _opt(30.0, "deg")
 
     def __post_init__(self) -> None:
         from ..options import check_fields

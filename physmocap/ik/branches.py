@@ -143,11 +143,24 @@ def arm_chains(character, names: tuple[str, ...]) -> list[ArmChain]:
 
 @dataclass(frozen=True)
 class Guide:
-    """A posture pull for one frame of the second pass: ``(nq,)`` target configuration and
-    ``(nv,)`` cost per radian (0 off the guided arms)."""
+    """A posture pull on some hinge and slide joints for one frame of a later pass.
+
+    Attributes:
+        qpos: ``(K,)`` the joints' qpos addresses.
+        dofs: ``(K,)`` their dof addresses.
+        values: ``(K,)`` where they are pulled (radians or metres).
+        cost: Cost per radian (metre) of the pull.
+    """
 
     qpos: np.ndarray
-    cost: np.ndarray
+    dofs: np.ndarray
+    values: np.ndarray
+    cost: float = GUIDE_COST
+
+    def arm(self, chain: ArmChain) -> np.ndarray | None:
+        """The values this guide pulls ``chain``'s joints to, or None if it does not pull them."""
+        hit = np.flatnonzero(np.isin(self.qpos, chain.qpos))
+        return self.values[hit] if hit.size == chain.qpos.size else None
 
 
 class _ArmFit:
@@ -316,17 +329,18 @@ def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | Non
         return {}
     for f, g in (previous or {}).items():
         for ci, chain in enumerate(chains):
-            if g.cost[chain.dofs].any():
-                guided.setdefault(f, {})[ci] = g.qpos[chain.qpos]
+            x = g.arm(chain)
+            if x is not None:
+                guided.setdefault(f, {})[ci] = x
     with Progress(sum(e - s + 1 for _, s, e in work), "arms", enabled=progress) as bar:
         for ci, s, e in work:
             chain = chains[ci]
             fit = _ArmFit(traj.character, chain, targets, weights or {})
             speed = PASS_SPEED * np.array([limits.get(model.joint(int(j)).name, math.inf) for j in chain.joints])
-            worst = max(np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0).max() for n in ARM_SEGMENTS[chain.side] if n in segment_errors)
-            t = s + int(np.argmax(np.max([np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0)
-                                          for n in ARM_SEGMENTS[chain.side] if n in segment_errors], axis=0)))
-            best = _other_branch(fit, qpos, t) if worst > STUCK_DEG else None
+            worst = np.max([np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0)
+                            for n in ARM_SEGMENTS[chain.side] if n in segment_errors], axis=0)
+            t = s + int(np.argmax(worst))
+            best = _other_branch(fit, qpos, t)
             if best is not None:
                 back, into = _continue(fit, qpos, best, range(t - 1, max(0, s - reach) - 1, -1), t)
                 ahead, _ = _continue(fit, qpos, best, range(t + 1, min(F - 1, e + tail) + 1), F)
@@ -337,10 +351,9 @@ def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | Non
             bar.update(e - s + 1)
     guides = {}
     for f in sorted(guided):
-        q = np.array(qpos[f], dtype=float)
-        cost = np.zeros(model.nv)
-        for ci, x in guided[f].items():
-            q[chains[ci].qpos] = x
-            cost[chains[ci].dofs] = GUIDE_COST
-        guides[f] = Guide(q, cost)
+        arms = [(chains[ci], x) for ci, x in sorted(guided[f].items())]
+        guides[f] = Guide(
+            np.concatenate([c.qpos for c, _ in arms]), np.concatenate([c.dofs for c, _ in arms]),
+            np.concatenate([x for _, x in arms]),
+        )
     return guides

@@ -345,12 +345,16 @@ class FrameSolver:
         return (self.posture, *guide)
 
     def _set_guide(self, guide) -> None:
-        """This frame's guide (:class:`~physmocap.ik.branches.Guide`: a target configuration
-        and a cost per dof), or None."""
+        """This frame's guide (:class:`~physmocap.ik.branches.Guide`: some joints pulled to
+        given values), or None."""
         self._guided = guide is not None
         if guide is not None:
-            self.guide.set_target(guide.qpos)
-            self.guide.set_cost(guide.cost)
+            target = self.configuration.data.qpos.copy()
+            target[guide.qpos] = guide.values
+            cost = np.zeros(self.model.nv)
+            cost[guide.dofs] = guide.cost
+            self.guide.set_target(target)
+            self.guide.set_cost(cost)
 
     def _predict(self) -> None:
         r"""Target of the smoothness prior: :math:`q_{t-1} \oplus (q_{t-1} \ominus q_{t-2})`."""

@@ -128,6 +128,8 @@ def _inputs(source: str, outdir: Path) -> tuple[list[ManifestEntry], Path]:
             raise InputError("the manifest lists no input", path=p)
         root = Path(os.path.commonpath([str(e.input.parent) for e in entries])) if entries else p.parent
         return entries, root
+    if not p.exists():
+        raise InputError("not found: expected a folder, a glob pattern or a manifest", path=p)
     raise InputError(
         "expected a folder, a glob pattern or a manifest (.txt: one input a line; .csv or .jsonl: "
         "input, output and per-file options)",

@@ -77,9 +77,10 @@ def render_preview(
         else:
             shown, rate = video_frames(traj.num_frames, traj.fps, fps)
             write_video(scene, shown, out, rate, inp.first, progress)
-    from ..fileio import announce
+    if not quiet:
+        from ..fileio import announce
 
-    announce(f"wrote {out}")
+        announce(f"wrote {out}")
 
 
 def _load(args: argparse.Namespace):

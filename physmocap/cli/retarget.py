@@ -112,6 +112,13 @@ def config_from_args(args: argparse.Namespace):
     fps = getattr(args, "fps", None)
     if fps is not None and not (math.isfinite(fps) and 0 < fps <= MAX_FPS):
         raise OptionError(f"--fps: the frame rate must be a number in (0, {MAX_FPS:g}] frames/s, got {fps:g}")
+    if getattr(args, "units", None) is not None:  # the BVH writer's unit, refused before the solve
+        from ..sources.bvh import resolve_units
+
+        try:
+            resolve_units(args.units)
+        except OptionError as exc:
+            raise OptionError(f"--units: {exc}") from None
     options = {}
     if args.max_iterations is not None:
         if args.max_iterations < 1:
@@ -171,6 +178,8 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
             from ..export.robot import write_robot_csv
 
             write_robot_csv(traj, out)
+            if not quiet:
+                announce(f"wrote {out.with_name(out.stem + '.joints.txt')}")
         elif layout == "robot-npz":
             from ..export.robot import write_robot_npz
 

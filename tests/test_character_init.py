@@ -379,6 +379,18 @@ def test_cli_bad_models_one_line(tmp_path, capsys, xml, message):
     assert err.startswith(f"physmocap: error: {mjcf}: ") and message in err and err.count("\n") == 1, err
 
 
+def test_retarget_onto_a_model_without_legs_says_why(tmp_path, capsys):
+    """Before: retargeting onto a model with no legs and no mapping file listed eleven
+    unmapped joints and not why none could be proposed (``character init`` said it)."""
+    mjcf = tmp_path / "nolegs.xml"
+    mjcf.write_text('<mujoco><worldbody><body name="a"><freejoint/><geom size="0.1"/><body name="b" pos="0 0 0.3">'
+                    '<joint/><geom size="0.05"/></body></body></worldbody></mujoco>')
+    assert main(["retarget", "example", "--character", str(mjcf), "-o", str(tmp_path / "x.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "no recognisable legs" in err and err.count("\n") == 1, err
+    assert not (tmp_path / "x.npz").exists()
+
+
 def test_missing_file_and_armless_robot(tmp_path):
     with pytest.raises(InputError, match="not found"):
         propose_mapping(tmp_path / "nope.xml")

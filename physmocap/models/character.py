@@ -264,16 +264,16 @@ def _up_forward_rotation(up: str, forward: str) -> np.ndarray:
 
 def _proposed_mapping(mjcf: Path):
     """The mapping :func:`~physmocap.models.propose.propose_mapping` proposes for a model
-    that has no mapping file, said in one warning; None if it proposes none (the caller
-    then reports what is missing)."""
+    that has no mapping file, said in one warning; else why it proposes none (a string:
+    the caller reports it with what is missing)."""
     from ..errors import InputError, warn
     from .mapping import mapping_from_text
     from .propose import propose_mapping
 
     try:
         proposal = propose_mapping(mjcf)
-    except (MappingError, InputError):
-        return None
+    except (MappingError, InputError) as exc:
+        return getattr(exc, "message", None) or str(exc)
     warn(
         f"{mjcf}: no mapping file found: using the mapping `physmocap character init` proposes "
         f"({len(proposal.joints)} joints; run `physmocap character init {mjcf.name} -o "
@@ -315,18 +315,22 @@ def load_character(
     else:
         model = _load_model(mjcf)
         mp = implicit_mapping(model)
-        if any(j not in _resolve_frames(mp, model) for j in CHARACTER_REQUIRED):
-            proposed = _proposed_mapping(mjcf)
-            if proposed is not None:
-                mp = proposed
-                model = _load_model(mjcf, mp)
+    why = None  # why no mapping could be proposed
+    if mp_file is None and any(j not in _resolve_frames(mp, model) for j in CHARACTER_REQUIRED):
+        proposed = _proposed_mapping(mjcf)
+        if isinstance(proposed, str):
+            why = proposed
+        else:
+            mp = proposed
+            model = _load_model(mjcf, mp)
     where = mp_file if mp_file is not None else mjcf
     tracked = _resolve_frames(mp, model)
     missing = [j for j in CHARACTER_REQUIRED if j not in tracked]
     if missing:
         hint = "[joints]" if mp_file is not None else "no mapping file found (give --map or write <stem>.map.toml);"
+        reason = f" (no mapping could be proposed: {why})" if why else ""
         raise MappingError(
-            f"{hint} required canonical joint(s) not mapped: {', '.join(missing)}", path=where
+            f"{hint} required canonical joint(s) not mapped: {', '.join(missing)}{reason}", path=where
         )
     for side, sites in mp.contacts.items():
         for s in sites:

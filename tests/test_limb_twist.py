@@ -162,3 +162,11 @@ def test_no_second_pass_where_every_arm_follows(clip):
 
     _, traj = retargeted(clip, "humanoid")
     assert plan_guides(traj, _arm_errors(traj)) == {}
+
+
+def test_the_second_pass_can_be_turned_off_from_the_command_line():
+    from physmocap.cli.retarget import config_from_args, retarget_option_parser
+
+    p = retarget_option_parser()
+    assert config_from_args(p.parse_args([])).solver.arm_branches is True
+    assert config_from_args(p.parse_args(["--no-arm-branches"])).solver.arm_branches is False

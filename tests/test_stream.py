@@ -149,3 +149,22 @@ def test_the_stream_follows_the_actor_on_a_second_vendor():
     # three IK iterations a frame without the smoothness prior left the thighs 11.3 degrees off
     # (STREAMING_DEFAULTS: eight with the prior, 7.1)
     assert fid.worst_segment_median_deg < 9.0
+
+
+def test_a_streamed_toe_lets_go_when_the_actor_s_toe_moves_off(walk):
+    """Before: a causal toe label ends 50-70 ms after the foot has left the floor, and the
+    stream held the toe where it had rested all that time while the actor's foot swung on:
+    its target was 20-35 cm behind the actor's at release, the body followed the held feet,
+    and the CMU walk's right thigh was 11.4 degrees off (median; offline 4.2).  Now a toe
+    held alone lets go once the actor's toe moves off faster than the contact detector's
+    own exit speed (PlantOptions.toe_release_speed)."""
+    from physmocap.ik.retarget import map_motion
+    from physmocap.ik.stream import stream_motion
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+
+    traj = stream_motion(walk, load_character())
+    traj.source_motion, traj.joint_indices = walk, map_motion(walk)
+    fid = trajectory_fidelity(traj, floor_contact=False)
+    assert fid.worst_segment_median_deg < 8.0, fid.worst_segment_median_deg
+    assert fid.facing_p95_deg < 3.0

@@ -71,6 +71,10 @@ class PlantOptions:
             has lifted clear of ``engage_height + release_margin`` (False: let go with
             the label).  Offline the labels are final and sites are held exactly
             while labelled.
+        toe_release_speed: Streaming only: a toe held alone (heel up) lets go, until its
+            label ends, once the actor's toe moves faster than this (m/s; the contact
+            detector's ``toe_speed_exit``, without its ``min_gap`` wait): a causal label ends
+            50-70 ms after the foot has left the floor (:class:`Planting._toes_moving`).
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -134,6 +138,7 @@ class PlantOptions:
     ease_time: float = 0.1
     pivot_cost: float = 40.0
     pivot_threshold: float = 0.035
+    toe_release_speed: float = 0.8
 
     def __post_init__(self) -> None:
         check_fields(self, "planting")
@@ -561,6 +566,9 @@ class Planting:
         self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
         #: horizontal offset of the whole body from the actor's (scaled) path, metres
         self.root_offset = np.zeros(2)
+        #: per side, a causal toe hold let go early (:meth:`_toes_moving`), until its label ends
+        self._toe_gone = {"left": False, "right": False}
+        self._toe_prev: dict[str, np.ndarray] = {}
         #: per side, the planned foot heading on the previous frame (radians; offline)
         self._heading: dict[str, float] = {}
         #: per side, the planned turn since the foot was last held at two points, and the
@@ -681,6 +689,29 @@ class Planting:
             )
         return out
 
+    def _toes_moving(self, positions: np.ndarray, labels: Mapping[str, bool]) -> Mapping[str, bool]:
+        """``labels`` with the toe of a causally anchored foot let go once the actor's toe
+        (its target) moves faster than ``PlantOptions.toe_release_speed`` while only the toes
+        are labelled: a causal label ends some 50-70 ms after the foot has left the floor
+        (:class:`~physmocap.ik.contacts.ContactStream`), and a toe held that long behind a
+        foot already swinging stores up a 20-35 cm offset that the body follows.  Let go
+        until the toe's label ends."""
+        out = dict(labels)
+        limit = self.options.toe_release_speed / self.locks.fps
+        for side, foot in self.feet.items():
+            toe = np.asarray(positions[foot[1], :2], dtype=float)
+            prev = self._toe_prev.get(side)
+            self._toe_prev[side] = toe.copy()
+            key = f"{side}_toe"
+            if not labels.get(key, False):
+                self._toe_gone[side] = False
+                continue
+            if not self._toe_gone[side] and prev is not None and not labels.get(f"{side}_heel", False):
+                self._toe_gone[side] = float(np.linalg.norm(toe - prev)) > limit
+            if self._toe_gone[side]:
+                out[key] = False
+        return out
+
     def leg_lengths(self) -> dict[str, tuple[float, float]]:
         """Side -> (thigh, shank) length of the character (metres)."""
         return {side: (v[3], v[4]) for side, v in self.lengths.items()}
@@ -760,6 +791,8 @@ class Planting:
         offsets = np.zeros((2, 2))
         if not self.options.plant:
             return out, [], [], offsets
+        if self.anchored:
+            labels = self._toes_moving(positions, labels)
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
         toe = np.array([bool(labels.get(f"{side}_toe", False)) for side in self._site_side], dtype=bool)
         heel = np.array([bool(labels.get(f"{side}_heel", False)) for side in self._site_side], dtype=bool)

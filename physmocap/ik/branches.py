@@ -233,7 +233,7 @@ def _continue(fit: _ArmFit, qpos: np.ndarray, x: np.ndarray, frames: range, afte
     step = frames.step
     path: dict[int, np.ndarray] = {}
     best: tuple[float, int] | None = None
-    for k, f in enumerate(frames):
+    for f in frames:
         x = path[f] = fit.solve(x, qpos[f], f)[0]
         if (f - after) * step <= 0:
             continue

@@ -6,12 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import RETARGET_DIAGNOSTICS
 from physmocap.ik.limbtwist import flexion_axis, twist_error
 from physmocap.ik.retarget import retarget
 from physmocap.ik.targets import build_targets
 from physmocap.models import load_character
 from physmocap.rotations import Rotation, quat_apply
 from physmocap.sources import load_motion
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 
 @pytest.mark.parametrize("character", ["humanoid", "robot"])
@@ -139,7 +142,7 @@ def test_raised_arms_do_not_stay_on_a_branch_that_cannot_reach_the_actor(charact
     the robot's arms went overhead by roll and stayed at the roll and yaw limits (23.3 % of
     the frames), although within every range a pose matched the actor's to millimetres.
     A second pass guides them onto the branch that reaches (physmocap.ik.branches)."""
-    from conftest import retargeted, shared_file
+    from conftest import retargeted, shared_file  # noqa: F811
 
     from physmocap.metrics.fidelity import trajectory_fidelity
 

@@ -142,7 +142,7 @@ def test_raised_arms_do_not_stay_on_a_branch_that_cannot_reach_the_actor(charact
     the robot's arms went overhead by roll and stayed at the roll and yaw limits (23.3 % of
     the frames), although within every range a pose matched the actor's to millimetres.
     A second pass guides them onto the branch that reaches (physmocap.ik.branches)."""
-    from conftest import retargeted, shared_file  # noqa: F811
+    from conftest import retargeted, shared_file
 
     from physmocap.metrics.fidelity import trajectory_fidelity
 

@@ -173,3 +173,17 @@ def test_the_second_pass_can_be_turned_off_from_the_command_line():
     p = retarget_option_parser()
     assert config_from_args(p.parse_args([])).solver.arm_branches is True
     assert config_from_args(p.parse_args(["--no-arm-branches"])).solver.arm_branches is False
+
+
+def test_an_orientation_asked_of_a_frame_that_cannot_twist_is_said_to_be_dropped():
+    """The G1's hip frames are its roll links, the thigh's yaw below them: asked for (the
+    default asks for none), their orientation targets are dropped with one warning each,
+    not silently."""
+    from conftest import shared_file
+
+    from physmocap.ik.targets import ORIENTED
+
+    g1 = shared_file("../robots/unitree_g1/g1_mocap_29dof.xml")
+    ch = load_character(g1)
+    with pytest.warns(UserWarning, match=r"no orientation target for (left|right)_hip"):
+        retarget(load_motion("example"), ch, progress=False, end=10, oriented=ORIENTED + ("left_hip", "right_hip"))

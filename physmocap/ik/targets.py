@@ -765,7 +765,11 @@ def build_targets(
             R_a = rot_all[joint_indices[c]]  # rest world rotation is identity for BVH
             limb = _limb_chain(character, c, pset, limb_axes)
             if limb is not None and not limb[2].twists:
-                continue  # a limb's upper segment whose twist the character's frame cannot show
+                # a limb's upper segment whose twist the character's frame cannot show
+                if c not in ORIENTED and cal is None:
+                    warn(f"{character.name}: no orientation target for {c}: its frame does not turn with the "
+                         "segment's twist (a joint sits between it and the next hinge)")
+                continue
             if limb is not None:  # the upper segment's twist from the actor's bent elbow or knee
                 middle, end, axes = limb
                 segs = (S[:, col[middle]] - S[:, i], S[:, col[end]] - S[:, col[middle]])

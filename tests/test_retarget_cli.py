@@ -182,3 +182,11 @@ def test_fps_is_bounded(tmp_path, capsys):
     assert main(["retarget", "example", "-o", str(tmp_path / "x.bvh"), "--fps", "1e9"]) == 2
     assert "frame rate" in _error(capsys)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_bvh_output_options_without_a_bvh_output_are_said_to_be_ignored(tmp_path, capsys):
+    """Before: ``--units cm`` with ``-o x.npz`` was silently ignored."""
+    from physmocap.cli import main
+
+    with pytest.warns(UserWarning, match="--units applies to BVH outputs only"):
+        assert main(["retarget", "example", "--start", "1", "--end", "12", "-o", str(tmp_path / "x.npz"), "--units", "cm"]) == 0

@@ -80,8 +80,8 @@ def add_marker_read_options(p: argparse.ArgumentParser) -> None:
 
 def add_bvh_output_options(p: argparse.ArgumentParser) -> None:
     """The options that say how a BVH output is written (shared by ``retarget`` and ``batch``)."""
-    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default="Y", help="BVH output up axis (default Y)")
-    p.add_argument("--units", default="m", help="BVH output length unit (default m)")
+    p.add_argument("--up", choices=["Y", "Z", "y", "z"], default=None, help="BVH output up axis (default Y)")
+    p.add_argument("--units", default=None, help="BVH output length unit (default m)")
 
 
 class _RaisingParser(argparse.ArgumentParser):
@@ -178,6 +178,12 @@ def write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bo
 
 
 def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: bool) -> None:
+    given = [f"--{name}" for name in ("up", "units") if getattr(args, name, None) is not None]
+    if given and not any(out.suffix.lower() == ".bvh" for out in outputs):
+        from ..errors import warn
+
+        verb = "applies" if len(given) == 1 else "apply"
+        warn(f"{' and '.join(given)} {verb} to BVH outputs only: ignored for {', '.join(str(o) for o in outputs)}")
     for k, out in enumerate(outputs):
         suffix = out.suffix.lower()
         layout = getattr(args, "format", "auto") if k == 0 else "auto"
@@ -194,7 +200,7 @@ def _write_outputs(traj, outputs: list[Path], args: argparse.Namespace, quiet: b
         elif suffix == ".bvh":
             from ..export.character_bvh import write_character_bvh
 
-            write_character_bvh(traj, out, up=args.up.upper(), units=args.units)
+            write_character_bvh(traj, out, up=(args.up or "Y").upper(), units=args.units or "m")
         elif suffix == ".npz":
             from ..export.trajectory import write_trajectory_npz
 

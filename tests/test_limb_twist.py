@@ -187,3 +187,24 @@ def test_an_orientation_asked_of_a_frame_that_cannot_twist_is_said_to_be_dropped
     ch = load_character(g1)
     with pytest.warns(UserWarning, match=r"no orientation target for (left|right)_hip"):
         retarget(load_motion("example"), ch, progress=False, end=10, oriented=ORIENTED + ("left_hip", "right_hip"))
+
+
+def test_a_stream_learns_the_twist_as_it_goes():
+    """Before: a stream calibrated the upper arm's twist on its first frame alone; with the
+    elbow straight there (a T-pose, or the Bandai walk's 14.5 degrees) it kept the rest
+    poses' twist, 30 degrees off CMU's elbow plane (32.5 on the Bandai walk), for good.  Now
+    the calibration keeps learning from every bent frame the stream sees
+    (limbtwist.TwistCalibration): the same targets as offline once the elbow has bent."""
+    from physmocap.ik.retarget import map_motion
+
+    motion = load_motion("example").slice_frames(0, 241)  # frame 0: CMU's T-pose, elbows straight
+    ch = load_character("humanoid")
+    joints = map_motion(motion)
+    offline = build_targets(motion, joints, ch)
+    cal = build_targets(motion.slice_frames(0, 1), joints, ch).calibration
+    frames = [build_targets(motion.slice_frames(t, t + 1), joints, ch, calibration=cal) for t in range(motion.num_frames)]
+    for side in ("left", "right"):
+        i = offline.index(f"{side}_shoulder")
+        streamed = np.array([f.orientations[0, i] for f in frames])
+        dots = np.abs(np.sum(streamed[120:] * offline.orientations[120:, i], axis=-1))
+        assert dots.min() > np.cos(np.radians(0.5) / 2), side  # within half a degree

@@ -19,7 +19,7 @@ segment's tracked frame, signed so a positive angle flexes).  Their angle
 :math:`\varphi(t)` about the target's segment direction :math:`Q(t)\, u` is the twist
 error of frame :math:`t`.  Two corrections follow from it:
 
-* **calibration** (:func:`twist_offset`): the circular mean of :math:`\varphi` over the
+* **calibration** (:class:`TwistCalibration`): the circular mean of :math:`\varphi` over the
   bent frames, weighted by :math:`\sin^2` of the bend (a nearly straight limb has no
   plane), applied once: :math:`Q'(t) = Q(t)\, R(u, \bar\varphi)`.  On a source whose
   elbow is a hinge (CMU) this is the whole error, a constant;
@@ -41,9 +41,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..rotations import quat_apply
+from ..rotations import quat_apply, quat_mul
 
-__all__ = ["LIMB_CHAINS", "FlexionAxis", "flexion_axis", "follow_bend", "twist_error", "twist_offset"]
+__all__ = ["LIMB_CHAINS", "FlexionAxis", "TwistCalibration", "flexion_axis", "follow_bend", "twist_error"]
 
 #: A limb's upper segment (its root's tracked frame) -> the middle joint and the end.
 LIMB_CHAINS = {"shoulder": ("elbow", "wrist"), "hip": ("knee", "ankle")}
@@ -66,7 +66,7 @@ class FlexionAxis:
 
     Attributes:
         h: ``(3,)`` the flexion axis (unit), signed so a positive turn flexes where
-            ``signed`` (else either way: see :func:`twist_offset`).
+            ``signed`` (else either way: see :class:`TwistCalibration`).
         u: ``(3,)`` the upper segment's direction (unit).
         signed: The sign of ``h`` is known from the joint's range (one side at least
             twice the other); False for an unlimited or nearly symmetric hinge.
@@ -149,39 +149,52 @@ def twist_error(
     return phi, bend
 
 
-def twist_offset(
-    target: np.ndarray,
-    axes: FlexionAxis,
-    upper: np.ndarray,
-    lower: np.ndarray,
-    ok: np.ndarray,
-    min_bend: float = MIN_BEND,
-) -> tuple[np.ndarray | None, FlexionAxis]:
-    r"""The calibration :math:`R(u, \bar\varphi)` (x-y-z-w) that turns the flexion axis
-    of ``target`` onto the actor's hinge normal on average (module docstring), or None
-    where no frame is bent by ``min_bend``; and the axis, its sign settled: an axis whose
-    sign the joint's range does not tell is turned round where that brings the mean twist
-    within 90 degrees of the rest-pose calibration's (which a skeleton's conventions put
-    that far off only by accident).
+@dataclass
+class TwistCalibration:
+    r"""The calibration of one upper segment's twist, kept as running sums so that a stream
+    can go on learning it (:meth:`update`) as offline retargeting learns it from the whole
+    clip at once.
 
-    Args:
-        target: ``(F, 4)`` the upper segment's calibrated orientation targets.
-        axes: From :func:`flexion_axis`.
-        upper, lower: ``(F, 3)`` the actor's upper and lower segments (metres).
-        ok: ``(F,)`` frames where both are known.
+    The segment's offset is :math:`O = B\, R(u, \bar\varphi)`: ``base`` (the rest-pose
+    calibration) turned by the weighted circular mean :math:`\bar\varphi =
+    \operatorname{atan2}(\sum w \sin\varphi, \sum w \cos\varphi)` of the twist errors
+    :math:`\varphi` of :math:`R_a B` on the frames bent by :data:`MIN_BEND` or more, weights
+    :math:`w = \sin^2` of the bend.
+
+    Attributes:
+        base: ``(4,)`` x-y-z-w, the offset before the twist.
+        axes: The :class:`FlexionAxis`; an unsigned one is turned round, once, where that
+            brings :math:`\bar\varphi` within 90 degrees of the rest-pose calibration's
+            (which a skeleton's conventions put that far off only by accident).
+        sin, cos: The running sums.
     """
-    phi, bend = twist_error(target, axes, upper, lower)
-    use = ok & (bend > min_bend)
-    if not use.any():
-        return None, axes
-    w = np.sin(bend[use]) ** 2
-    mean = math.atan2(float(np.sum(w * np.sin(phi[use]))), float(np.sum(w * np.cos(phi[use]))))
-    if not axes.signed:
-        if abs(mean) > math.pi / 2:
-            axes, mean = axes.flipped(), mean - math.copysign(math.pi, mean)
-        else:
-            axes = FlexionAxis(axes.h, axes.u, True, axes.twists)
-    return _turn(axes.u, np.array([mean]))[0], axes
+
+    base: np.ndarray
+    axes: FlexionAxis
+    sin: float = 0.0
+    cos: float = 0.0
+
+    def update(self, rotations: np.ndarray, upper: np.ndarray, lower: np.ndarray, ok: np.ndarray) -> None:
+        """Add frames: ``rotations`` ``(F, 4)`` the actor's world rotations of the segment,
+        ``upper`` and ``lower`` ``(F, 3)`` its segments (metres), ``ok`` ``(F,)`` known."""
+        phi, bend = twist_error(quat_mul(rotations, self.base), self.axes, upper, lower)
+        use = ok & (bend > MIN_BEND)
+        if not use.any():
+            return
+        w = np.sin(bend[use]) ** 2
+        self.sin += float(np.sum(w * np.sin(phi[use])))
+        self.cos += float(np.sum(w * np.cos(phi[use])))
+        if not self.axes.signed:
+            if abs(math.atan2(self.sin, self.cos)) > math.pi / 2:
+                self.axes, self.sin, self.cos = self.axes.flipped(), -self.sin, -self.cos
+            else:
+                self.axes = FlexionAxis(self.axes.h, self.axes.u, True, self.axes.twists)
+
+    def offset(self) -> np.ndarray:
+        """``(4,)`` x-y-z-w: :math:`O`, the base alone before any bent frame."""
+        if self.sin == 0.0 and self.cos == 0.0:
+            return self.base
+        return quat_mul(self.base, _turn(self.axes.u, np.array([math.atan2(self.sin, self.cos)]))[0])
 
 
 def follow_bend(

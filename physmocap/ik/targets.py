@@ -49,7 +49,7 @@ from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
-from .limbtwist import LIMB_CHAINS, FlexionAxis, flexion_axis, follow_bend, twist_offset
+from .limbtwist import LIMB_CHAINS, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -155,7 +155,8 @@ class Calibration:
     level_centre: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     foot_tips: dict = field(default_factory=dict)  # side -> toe-tip direction in the foot's frame (rigidfoot)
-    limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> (flexion axis, segment) or None (limbtwist)
+    limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> its FlexionAxis or None (limbtwist)
+    limb_twists: dict = field(default_factory=dict)  # limb's upper segment -> its TwistCalibration (limbtwist)
 
 
 @dataclass(eq=False)
@@ -752,6 +753,7 @@ def build_targets(
         movable = {c: _has_dofs_between(character, c, canonical_parent(c, pset)) for c in present}
     offsets = {} if cal is None else cal.orientation_offsets
     limb_axes = {} if cal is None else cal.limb_axes
+    twists = {} if cal is None else cal.limb_twists
     foot_tips = {} if cal is None else cal.foot_tips
     toe_turn: dict[str, np.ndarray] = {}  # side -> (F, 4) a rigid foot's toe-line correction
     if not motion.is_rotational and source_orientations is None:
@@ -778,13 +780,13 @@ def build_targets(
                 aligned = quat_mul(quat_mul(_rest_alignment(c, pset, calib_pts, char_pts, yaw), yaw), q_c0)
                 offsets[c] = _relative_to_pose(pose_rot, c, aligned)
                 if limb is not None:
-                    turn, limb_axes[c] = twist_offset(quat_mul(R_a, offsets[c]), axes, *segs, ok)
-                    axes = limb_axes[c]
-                    if turn is not None:
-                        offsets[c] = quat_mul(offsets[c], turn)
+                    twists[c] = TwistCalibration(offsets[c], axes)
+            if limb is not None:  # learnt from these frames (a stream goes on learning it)
+                twists[c].update(R_a, *segs, ok)
+                offsets[c] = twists[c].offset()
             Q[i] = quat_mul(R_a, offsets[c])
             if limb is not None:
-                Q[i] = quat_mul(Q[i], follow_bend(Q[i], axes, *segs, ok))
+                Q[i] = quat_mul(Q[i], follow_bend(Q[i], twists[c].axes, *segs, ok))
             has_q[i] = True
             side = c.split("_", 1)[0]
             if c.endswith("_ankle") and side in tips:
@@ -924,6 +926,7 @@ def build_targets(
             info=level_info,
             foot_tips=foot_tips,
             limb_axes=limb_axes,
+            limb_twists=twists,
         )
     release(S)
     del delta  # let go before the orientations and positions are laid out frame by frame

@@ -202,6 +202,7 @@ def test_a_stream_learns_the_twist_as_it_goes():
     joints = map_motion(motion)
     offline = build_targets(motion, joints, ch)
     cal = build_targets(motion.slice_frames(0, 1), joints, ch).calibration
+    cal.restart_twists()  # as a stream does: the first frame is given again below
     frames = [build_targets(motion.slice_frames(t, t + 1), joints, ch, calibration=cal) for t in range(motion.num_frames)]
     for side in ("left", "right"):
         i = offline.index(f"{side}_shoulder")

@@ -270,3 +270,29 @@ def test_the_ball_stays_where_it_rests_while_the_foot_rolls_over_its_toes(clip):
         speeds.append(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)[both] * traj.fps * 100.0)
     speeds = np.concatenate(speeds)
     assert speeds.size > 10 and speeds.mean() < 3.5, (speeds.size, speeds.mean())
+
+
+def test_a_lost_toe_target_does_not_let_a_streamed_toe_go():
+    """A stream's toe target lost for a few frames comes back from its stand-in position in
+    one jump (23 m/s on a CMU walk stream): that is no motion of the actor's toe, and the
+    toe held alone must not be let go for it (Planting._toes_moving)."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character()
+    names = tuple(ch.tracked)
+    planting = Planting(ch, names, 120.0, anchored=True)
+    toe = names.index("left_toe")
+    labels = {"left_heel": False, "left_toe": True}
+    positions = np.zeros((len(names), 3))
+    valid = np.ones(len(names), dtype=bool)
+    assert planting._toes_moving(positions, labels, valid)["left_toe"]
+    lost = valid.copy()
+    lost[toe] = False
+    moved = positions.copy()
+    moved[toe, :2] = [0.15, 0.13]  # the stand-in, then the toe found again: a jump
+    assert planting._toes_moving(moved, labels, lost)["left_toe"]
+    assert planting._toes_moving(positions, labels, valid)["left_toe"]
+    faster = positions.copy()
+    faster[toe, 0] += 0.02  # 2.4 m/s between two tracked frames: the actor's toe is off
+    assert not planting._toes_moving(faster, labels, valid)["left_toe"]

@@ -189,7 +189,7 @@ class FrameRetargeter:
             if first:  # converge on the targets alone, then plant the feet where they are
                 solver.solve_frame(positions, orientations, valid, first=True)
                 solver.forget_previous()
-            shifted, tasks, hard, _ = self.planting.step(positions, labels, solver.configuration.data)
+            shifted, tasks, hard, _ = self.planting.step(positions, labels, solver.configuration.data, valid=valid)
             holds = ContactHolds(
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )

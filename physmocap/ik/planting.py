@@ -72,9 +72,10 @@ class PlantOptions:
             the label).  Offline the labels are final and sites are held exactly
             while labelled.
         toe_release_speed: Streaming only: a toe held alone (heel up) lets go, until its
-            label ends, once the actor's toe moves faster than this (m/s; the contact
-            detector's ``toe_speed_exit``, without its ``min_gap`` wait): a causal label ends
-            50-70 ms after the foot has left the floor (:class:`Planting._toes_moving`).
+            label ends, once its target moves horizontally faster than this (m/s; the value of
+            the contact detector's default ``toe_speed_exit``, here acted on at once where the
+            detector waits ``min_gap``): a causal label ends 50-70 ms after the foot has left
+            the floor (:meth:`Planting._toes_moving`).
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -689,16 +690,23 @@ class Planting:
             )
         return out
 
-    def _toes_moving(self, positions: np.ndarray, labels: Mapping[str, bool]) -> Mapping[str, bool]:
-        """``labels`` with the toe of a causally anchored foot let go once the actor's toe
-        (its target) moves faster than ``PlantOptions.toe_release_speed`` while only the toes
-        are labelled: a causal label ends some 50-70 ms after the foot has left the floor
+    def _toes_moving(self, positions: np.ndarray, labels: Mapping[str, bool],
+                     valid: np.ndarray | None = None) -> Mapping[str, bool]:
+        """``labels`` with the toe of a causally anchored foot let go once its toe target moves
+        faster than ``PlantOptions.toe_release_speed`` (horizontally, between two frames on
+        which it is tracked: ``valid``) while only the toes are labelled: a causal label ends
+        some 50-70 ms after the foot has left the floor
         (:class:`~physmocap.ik.contacts.ContactStream`), and a toe held that long behind a
         foot already swinging stores up a 20-35 cm offset that the body follows.  Let go
-        until the toe's label ends."""
+        until the toe's label ends.  A foot without a toe target is left alone."""
         out = dict(labels)
         limit = self.options.toe_release_speed / self.locks.fps
         for side, foot in self.feet.items():
+            if foot[1] == foot[0]:
+                continue  # no toe target: the ankle's speed is not the toe's
+            if valid is not None and not bool(valid[foot[1]]):
+                self._toe_prev.pop(side, None)  # lost: its stand-in position is no motion
+                continue
             toe = np.asarray(positions[foot[1], :2], dtype=float)
             prev = self._toe_prev.get(side)
             self._toe_prev[side] = toe.copy()
@@ -783,16 +791,18 @@ class Planting:
         return (data.site_xpos[i] if kind == "site" else data.xpos[i])[:2].copy()
 
     def step(
-        self, positions: np.ndarray, labels: Mapping[str, bool], data: mujoco.MjData, first: bool = False
+        self, positions: np.ndarray, labels: Mapping[str, bool], data: mujoco.MjData, first: bool = False,
+        valid: np.ndarray | None = None,
     ) -> tuple[np.ndarray, list[SitePositionTask], list[SitePositionTask], np.ndarray]:
         """Shifted targets ``(N, 3)``, soft tasks, equality constraints, and the
-        foot offsets ``(2, 2)`` (left, right)."""
+        foot offsets ``(2, 2)`` (left, right); ``valid`` ``(N,)``: which targets are tracked
+        on this frame (None: all)."""
         out = np.array(positions, dtype=float, copy=True)
         offsets = np.zeros((2, 2))
         if not self.options.plant:
             return out, [], [], offsets
         if self.anchored:
-            labels = self._toes_moving(positions, labels)
+            labels = self._toes_moving(positions, labels, valid)
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
         toe = np.array([bool(labels.get(f"{side}_toe", False)) for side in self._site_side], dtype=bool)
         heel = np.array([bool(labels.get(f"{side}_heel", False)) for side in self._site_side], dtype=bool)

@@ -172,6 +172,7 @@ class StreamingRetargeter:
         self.points = contact_points(self.joint_indices)
         targets = build_targets(motion, self.joint_indices, self.character, self.config.targets)
         self.calibration = targets.calibration
+        self.calibration.restart_twists()  # step() gives this frame again: learnt once
         floor = self.calibration.floor
         world = motion.world_positions()[0]
         # stance level of each point above the floor: its first-frame height, the

@@ -135,8 +135,18 @@ class Calibration:
 
     A streaming retargeter calibrates on its first frame(s) and then builds
     each frame's targets with the same values, so offline and streaming
-    targets follow the same maths.  All metres / quaternions x-y-z-w.
+    targets follow the same maths; the upper arms' twist calibrations
+    (``limb_twists``, :class:`~physmocap.ik.limbtwist.TwistCalibration`) go on
+    learning from the frames of every call, and their ``orientation_offsets``
+    with them.  All metres / quaternions x-y-z-w.
     """
+
+    def restart_twists(self) -> None:
+        """Forget what the twist calibrations learnt (their frames are to be given again):
+        their sums to zero, their offsets back to the rest-pose calibration."""
+        for c, twist in self.limb_twists.items():
+            twist.sin = twist.cos = 0.0
+            self.orientation_offsets[c] = twist.base
 
     rest: dict
     present: tuple[str, ...]
@@ -647,7 +657,7 @@ def build_targets(
             None estimates a level floor (``Motion.floor_height``).
         calibration: Reuse the calibration of an earlier call (streaming: the
             first frames calibrate, later frames reuse it); ``floor`` is then
-            ignored.
+            ignored.  Its twist calibrations learn from this call's frames (in place).
         kinematics: ``motion.forward_kinematics()`` if the caller has it already.
 
     Returns:

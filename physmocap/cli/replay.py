@@ -151,7 +151,7 @@ def write_results(traj, out: Path | None, stats: dict, stats_path: str | None) -
         if out is not None:
             from .retarget import write_outputs
 
-            write_outputs(traj, [out], argparse.Namespace(up="Y", units="m"))
+            write_outputs(traj, [out], argparse.Namespace(up=None, units=None))
         if stats_path:
             with atomic_open(stats_path, "w") as fh:
                 json.dump(stats, fh, indent=2, sort_keys=True)

@@ -123,7 +123,10 @@ def run(args: argparse.Namespace) -> int:
         if traj is not None:
             from .retarget import write_outputs
 
-            write_outputs(traj, [out], args, quiet=args.quiet)
+            # --up and --units are the actor BVH's: the character's output takes them if a BVH
+            bvh = Path(out).suffix.lower() == ".bvh"
+            write_outputs(traj, [out], args if bvh else argparse.Namespace(**{**vars(args), "up": None, "units": None}),
+                          quiet=args.quiet)
         if args.report:
             with atomic_open(args.report) as fh:
                 json.dump(rep, fh, indent=1)

@@ -207,3 +207,16 @@ def test_a_failed_file_is_named_once(folder, capsys):
     broken = str(folder / "in" / "broken.bvh")
     line = next(x for x in err.splitlines() if x.startswith("failed:"))
     assert line.count(broken) == 1, line
+
+
+def test_bvh_options_for_a_batch_of_npz_are_said_to_be_ignored(tmp_path):
+    """Before: ``batch ... --up Z`` writing NPZ files ran silently (each file's warning is not
+    shown); it is said once for the batch."""
+    import pytest
+
+    from conftest import example_clip_folder
+    from physmocap.cli import main
+
+    src = example_clip_folder(tmp_path)
+    with pytest.warns(UserWarning, match="--up applies to BVH outputs only"):
+        assert main(["batch", str(src), "-o", str(tmp_path / "out"), "--up", "Z", "--jobs", "1", "--end", "8", "--quiet"]) == 0

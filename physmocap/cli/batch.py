@@ -52,6 +52,13 @@ def run(args: argparse.Namespace) -> int:
     config_from_args(args)  # a bad option is one error now, not one per file
     _check_character(args)
     options = {k: v for k, v in sorted(vars(args).items()) if k not in OWN}
+    given = [f"--{name}" for name in ("up", "units") if options.get(name) is not None]
+    if given and args.format != "bvh":  # said once here: the files' own warnings are not shown
+        from ..errors import warn
+
+        verb = "applies" if len(given) == 1 else "apply"
+        warn(f"{' and '.join(given)} {verb} to BVH outputs only: ignored for --format {args.format} "
+             "(a manifest's per-file outputs ending in .bvh take them)")
     jobs = plan(args.source, args.output, "." + args.format, options)
     results = run_batch(
         jobs, args.output, options, workers=args.jobs, force=args.force, ray=args.ray,

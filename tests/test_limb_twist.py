@@ -209,3 +209,15 @@ def test_a_stream_learns_the_twist_as_it_goes():
         streamed = np.array([f.orientations[0, i] for f in frames])
         dots = np.abs(np.sum(streamed[120:] * offline.orientations[120:, i], axis=-1))
         assert dots.min() > np.cos(np.radians(0.5) / 2), side  # within half a degree
+
+
+def test_a_source_without_arms_retargets_in_one_pass():
+    """Before: with no arm on the source (a legs-and-trunk skeleton), looking for stuck arms
+    stacked an empty list of arm errors and failed."""
+    from physmocap.ik.retarget import map_motion
+
+    motion = load_motion("example").slice_frames(1, 31)
+    joints = {c: j for c, j in map_motion(motion).items()
+              if not any(k in c for k in ("clavicle", "shoulder", "elbow", "wrist", "hand"))}
+    traj = retarget(motion, load_character("humanoid"), progress=False, joint_indices=joints)
+    assert np.isfinite(traj.qpos).all()

@@ -238,6 +238,8 @@ def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None
     most ``MAX_PASSES`` in all); the last pass whose arms came closer (:func:`_arms_off`)
     without the solver giving up a hard constraint on more frames."""
     best, errors = traj, _arm_errors(traj)
+    if not errors:
+        return traj  # no arm on the actor or the character
     score = _arms_off(errors)
     guides: dict = {}
     for _ in range(MAX_PASSES - 1):

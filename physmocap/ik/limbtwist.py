@@ -48,7 +48,8 @@ __all__ = ["LIMB_CHAINS", "FlexionAxis", "TwistCalibration", "flexion_axis", "fo
 #: A limb's upper segment (its root's tracked frame) -> the middle joint and the end.
 LIMB_CHAINS = {"shoulder": ("elbow", "wrist"), "hip": ("knee", "ankle")}
 
-#: Least bend (radians) of the actor's middle joint for its plane to count.
+#: Least bend (radians) of the actor's middle joint for its plane to count (here, and for a
+#: hand without finger joints: ``targets._limb_alignment``); straighter, the plane is noise.
 MIN_BEND = math.radians(20.0)
 #: Bends (radians) over which the target's twist comes to follow the actor's plane in full.
 FOLLOW_FROM, FOLLOW_BEND = math.radians(10.0), math.radians(25.0)

@@ -49,7 +49,7 @@ from ..motion import Motion
 from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
 from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
-from .limbtwist import LIMB_CHAINS, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
+from .limbtwist import LIMB_CHAINS, MIN_BEND, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
@@ -352,11 +352,6 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     return _min_rotation(d_c, d_a)
 
 
-#: Least bend (radians) of an actor's limb at the calibration for its hinge plane to set the
-#: twist of the limb's end (:func:`_limb_alignment`); straighter, the plane is noise.
-HINGE_MIN_ANGLE = math.radians(20.0)
-
-
 def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
     r"""The rotation that takes the character's rest limb ending at ``c`` onto the actor's,
     x-y-z-w, following the chain: the upper segment (grandparent to parent, the upper arm)
@@ -366,9 +361,10 @@ def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
 
     The twist about the lower segment then comes from the actor's bent elbow, not from the
     smallest rotation between two nearly opposite directions (a character's forearm hanging
-    at rest, an actor's raised), which is arbitrary about them.  A straight actor's limb
-    (no hinge plane) or a limb without its upper segment falls back to the smallest rotation
-    of the lower segment.
+    at rest, an actor's raised), which is arbitrary about them.  A limb bent less than
+    :data:`~physmocap.ik.limbtwist.MIN_BEND` (no hinge plane: the one threshold of the
+    upper arm's twist calibration too) or without its upper segment falls back to the
+    smallest rotation of the lower segment.
     """
     p = canonical_parent(c, present)
     a2, c2 = actor_pts[c] - actor_pts[p], quat_apply(yaw, char_pts[c] - char_pts[p])
@@ -383,7 +379,7 @@ def _limb_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     M1 = _min_rotation(c1, a1)
     b2 = quat_apply(M1, c2)
     n = np.cross(a1, a2)
-    if np.linalg.norm(n) < np.sin(HINGE_MIN_ANGLE) * np.linalg.norm(a1) * np.linalg.norm(a2):
+    if np.linalg.norm(n) < np.sin(MIN_BEND) * np.linalg.norm(a1) * np.linalg.norm(a2):
         return quat_mul(_min_rotation(b2, a2), M1)  # a nearly straight limb: no hinge plane
     n = n / np.linalg.norm(n)
     b, a = b2 - np.dot(b2, n) * n, a2 - np.dot(a2, n) * n

@@ -52,6 +52,8 @@ def test_flags_build_the_options_and_unset_ones_keep_the_defaults():
         (["--match-windows", "0"], "--match-windows must be > 0, got 0"),
         (["--rom-soft-margin", "-5"], "--rom-soft-margin must be >= 0, got -5.0"),
         (["--match-windows", "1.5"], "--match-windows: invalid int value"),
+        (["--plane-min-deg", "200"], "--plane-min-deg must be in (0, 90) degrees"),  # sin() folds back past 90
+        (["--blend-ratio", "0.5"], "--blend-ratio must be at least 1"),
     ],
 )
 def test_a_bad_value_is_refused_naming_its_flag_before_the_file_is_read(tmp_path, capsys, argv, message):

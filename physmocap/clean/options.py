@@ -8,6 +8,8 @@ import inspect
 import re
 from dataclasses import dataclass, field, fields
 
+from ..errors import OptionError
+
 __all__ = ["CleanOptions", "UNITS", "option_docs", "option_unit"]
 
 #: The units an option may carry, and how a reader says them.
@@ -173,6 +175,11 @@ class CleanOptions:
             counts=[f.name for f in fields(self) if option_unit(f.name) == "count"],
             positive=[f.name for f in fields(self) if f.name != "rom_soft_margin"],
         )
+        if not self.plane_min_deg < 90.0:
+            raise OptionError(f"clean option plane_min_deg must be in (0, 90) degrees, got {self.plane_min_deg!r}")
+        if not self.blend_ratio >= 1.0:
+            raise OptionError(f"clean option blend_ratio must be at least 1 (the best estimate's error times it), "
+                              f"got {self.blend_ratio!r}")
 
 
 def option_unit(name: str) -> str:

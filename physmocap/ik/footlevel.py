@@ -110,8 +110,8 @@ def level_feet(
     """Targets with each foot levelled on its flat-stance frames (see the module docstring).
 
     Args:
-        positions: ``(F, N, 3)`` target positions (metres; not modified).
-        orientations: ``(F, N, 4)`` target orientations x-y-z-w (not modified).
+        positions: ``(F, N, 3)`` target positions (metres; not modified unless ``in_place``).
+        orientations: ``(F, N, 4)`` target orientations x-y-z-w (the same).
         has_orientation: ``(N,)`` which targets have an orientation.
         names: Canonical joint of each target column.
         labels: ``left_heel``, ``left_toe``, ``right_heel``, ``right_toe`` -> ``(F,)`` bool.

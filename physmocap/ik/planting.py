@@ -376,7 +376,7 @@ class FootPlanter:
         r"""How much of its swing clearance ``foot`` keeps on this frame, 1 -> 0: all of it
         while the foot swings, then :math:`1 - \operatorname{smoothstep}(n / (N + 1))` on
         the :math:`n`-th frame since one of its sites was labelled or held, :math:`N` the
-        whole frames within ``onset_time`` (:attr:`clearance_frames`: 3 at 120 fps, none at
+        whole frames within ``onset_time`` (:attr:`clearance_frames`; with the default ``onset_time``: 3 at 120 fps, none at
         30 fps): the clearance eases out as the height pull eases in, a handover rather than
         a switch.
 

@@ -404,16 +404,16 @@ def test_frozen_thigh_gets_the_other_legs_motion_mirrored(walk):
     across the body's midplane, shows its swing better than the left leg's other strides."""
     from physmocap.clean import CleanOptions
     from physmocap.clean.correct import _matcher, _mirror, correct_glitches
-    from physmocap.clean.detect import Glitch
+    from physmocap.clean.detect import Glitch, canonical_joints
 
-    twin, reflect = _mirror(walk)
+    twin, reflect = _mirror(walk, canonical_joints(walk))
     names = walk.skeleton.names
     assert names[twin[_joint(walk, "LeftUpLeg")]] == "RightUpLeg" and twin[_joint(walk, "Spine")] == _joint(walk, "Spine")
     assert abs(reflect[0, 0] + 1.0) < 0.01  # the skeleton's left-right axis is x
     j, frames = _joint(walk, "LeftUpLeg"), list(range(300, 348))
     bad = _with(walk, j, frames, hold=True)
     glitch = [Glitch("frozen", "LeftUpLeg", 300, 347, 1.0)]
-    matcher = _matcher(bad, glitch, CleanOptions())
+    matcher = _matcher(bad, glitch, CleanOptions(), canonical_joints(bad))
     errors = {}
     for mirrored in (False, True):
         R = np.array(bad.rotations, copy=True)
@@ -432,11 +432,11 @@ def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
     ``blend_ratio=1`` keeps the best one alone."""
     from physmocap.clean import CleanOptions
     from physmocap.clean.correct import _bridge, _hermite, _matcher
-    from physmocap.clean.detect import Glitch, _angle
+    from physmocap.clean.detect import Glitch, _angle, canonical_joints
 
     j, frames = _joint(walk, "LeftForeArm"), list(range(200, 248))
     bad = _with(walk, j, frames, hold=True)
-    matcher = _matcher(bad, [Glitch("frozen", "LeftForeArm", 200, 247, 1.0)], CleanOptions())
+    matcher = _matcher(bad, [Glitch("frozen", "LeftForeArm", 200, 247, 1.0)], CleanOptions(), canonical_joints(bad))
     R = np.asarray(bad.rotations)
     found = [_hermite(R[:, j], 199, 248), matcher.bridge(j, 200, 247), matcher.bridge(j, 200, 247, None, True)]
     alone, name = _bridge(R, j, 200, 247, matcher, 1.0)
@@ -591,3 +591,22 @@ def test_a_glitch_near_the_clip_start_is_judged_on_two_pseudo_gaps():
     assert _pseudo_gaps(480, 489, 500) == [468, 457]  # none after: two before
     assert _pseudo_gaps(10, 19, 35) == [22]  # room for one only
     assert _pseudo_gaps(2, 30, 40) == []
+
+
+def test_the_mirror_knows_sides_the_mapping_knows(walk):
+    """Before: the mirrored bridge paired left and right joints by name alone, so a skeleton
+    named ``mixamorig:LeftUpLeg`` (or ``thigh.L``) got no mirrored estimate; the sides now
+    come from the name mapping too (positional.twin_pairs), and CMU's names pair as before."""
+    from physmocap.clean.correct import _mirror
+    from physmocap.clean.detect import canonical_joints
+
+    sk = walk.skeleton
+    names = tuple("mixamorig:" + n for n in sk.names)
+    renamed = dataclasses.replace(walk, skeleton=type(sk)(names=names, parents=sk.parents, offsets=sk.offsets,
+                                                          end_site=sk.end_site))
+    twin, _ = _mirror(renamed, canonical_joints(renamed))
+    assert names[twin[names.index("mixamorig:LeftUpLeg")]] == "mixamorig:RightUpLeg"
+    assert names[twin[names.index("mixamorig:RightArm")]] == "mixamorig:LeftArm"
+    plain, _ = _mirror(walk, canonical_joints(walk))
+    by_name, _ = _mirror(walk, {})
+    np.testing.assert_array_equal(plain, by_name)

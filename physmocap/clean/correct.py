@@ -38,8 +38,8 @@ import numpy as np
 from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import Rotation
-from .detect import CleanOptions, Glitch, _angle, animated_joints
-from .positional import twin as positional_twin
+from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
+from .positional import twin as positional_twin, twin_pairs
 
 __all__ = ["correct_glitches"]
 
@@ -192,33 +192,31 @@ def _glitched(motion: Motion, glitches: list[Glitch]) -> np.ndarray:
     return bad
 
 
-def _mirror(motion: Motion) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(twin (J,), reflection (3, 3))``: each joint's other side (by name,
-    :func:`.positional.twin`; itself on the midline) and the reflection across the body's
-    midplane, its normal the mean left-to-right direction of the twin joints' rest positions;
-    None without twins."""
-    names = {n: j for j, n in enumerate(motion.skeleton.names)}
-    twin = np.arange(len(names))
-    for n, j in names.items():
-        t = positional_twin(n, names)
-        if t is not None:
-            twin[j] = t
-    pairs = [(j, int(t)) for j, t in enumerate(twin) if t > j]
+def _mirror(motion: Motion, ji: dict[str, int]) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(twin (J,), reflection (3, 3))``: each joint's other side (:func:`.positional.twin_pairs`:
+    the mapping ``ji``'s ``left_*`` / ``right_*`` joints, and joints named as each other's
+    other side; itself on the midline) and the reflection across the body's midplane, its
+    normal the mean left-to-right direction of the twin joints' rest positions; None
+    without twins."""
+    pairs = twin_pairs(motion, ji)
     if not pairs:
         return None
+    twin = np.arange(motion.skeleton.num_joints)
+    for a, b in pairs:
+        twin[a], twin[b] = b, a
     rest = np.asarray(motion.skeleton.rest_positions(), dtype=float)
     d = np.stack([rest[a] - rest[b] for a, b in pairs])
-    w, v = np.linalg.eigh(d.T @ d)
-    normal = v[:, -1]
+    normal = np.linalg.eigh(d.T @ d)[1][:, -1]
     return twin, np.eye(3) - 2.0 * np.outer(normal, normal)
 
 
-def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions) -> _Matcher:
-    """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out."""
+def _matcher(motion: Motion, glitches: list[Glitch], opt: CleanOptions, ji: dict[str, int]) -> _Matcher:
+    """A :class:`_Matcher` over ``motion``'s animated joints, every glitch's frames left out
+    (``ji``: its canonical joints, for the left and right sides)."""
     R = np.asarray(motion.rotations, dtype=float)
     bad = _glitched(motion, glitches)
     return _Matcher(R, animated_joints(motion), bad, opt.match_context, opt.match_own_weight, opt.match_windows,
-                    _mirror(motion))
+                    _mirror(motion, ji))
 
 
 def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
@@ -632,7 +630,7 @@ def _along_bone(
     says nothing of where the bone points, and keeps ``est`` (the interpolation, ``how``), as
     does a span with a lost sample or a joint on its parent.  Returns the positions and how
     ("along its bone" where it was used)."""
-    F, n = len(P), e - s + 1
+    F = len(P)
     if s < 1 or e + 1 >= F:
         return est, how
     with np.errstate(invalid="ignore"):
@@ -788,7 +786,7 @@ def correct_glitches(
         j = names[g.joint]
         if how == "rotation":
             if 0 <= a and b < F:
-                matcher = matcher or _matcher(motion, glitches, opt)
+                matcher = matcher or _matcher(motion, glitches, opt, canonical_joints(motion, mapping))
             fixed_q, curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
             if curve in ("cubic", "matched", "mirrored"):
                 if world is None:

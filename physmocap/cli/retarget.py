@@ -59,6 +59,11 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="one pass only: do not retarget again an arm stuck on a branch of its joint ranges that cannot reach the actor",
     )
+    p.add_argument(
+        "--no-smooth-transitions",
+        action="store_true",
+        help="one pass fewer: do not retarget again with the joints pulled towards their own low-pass around contact changes",
+    )
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true",
@@ -135,6 +140,8 @@ def config_from_args(args: argparse.Namespace):
         options["velocity_limits"] = False
     if getattr(args, "no_arm_branches", False):
         options["arm_branches"] = False
+    if getattr(args, "no_smooth_transitions", False):
+        options["smooth_transitions"] = False
     if getattr(args, "no_self_collision", False):
         options["self_collision"] = False
     if args.no_plant:

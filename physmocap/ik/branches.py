@@ -78,7 +78,7 @@ GUIDE_COST = 2.0
 #: Arm segments of the fidelity figures -> side.
 ARM_SEGMENTS = {"left": ("left_upper_arm", "left_forearm"), "right": ("right_upper_arm", "right_forearm")}
 #: Joint types an arm's own solve moves (a hinge or a slide: one coordinate each).
-_MOVING = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+MOVING_TYPES = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 #: Canonical joints whose targets the arm's own solve follows.
 ARM_JOINTS = ("clavicle", "shoulder", "elbow", "wrist", "hand_end")
 
@@ -123,7 +123,7 @@ def arm_chains(character, names: tuple[str, ...]) -> list[ArmChain]:
         joints = []
         while b > 0 and b != top:
             joints += [j for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b])
-                       if int(model.jnt_type[j]) in _MOVING]
+                       if int(model.jnt_type[j]) in MOVING_TYPES]
             b = int(model.body_parentid[b])
         if b != top or not joints:
             continue  # the arm does not hang from the torso's body
@@ -149,13 +149,13 @@ class Guide:
         qpos: ``(K,)`` the joints' qpos addresses.
         dofs: ``(K,)`` their dof addresses.
         values: ``(K,)`` where they are pulled (radians or metres).
-        cost: Cost per radian (metre) of the pull.
+        cost: Cost per radian (metre) of the pull, one for all or ``(K,)`` joint by joint.
     """
 
     qpos: np.ndarray
     dofs: np.ndarray
     values: np.ndarray
-    cost: float = GUIDE_COST
+    cost: float | np.ndarray = GUIDE_COST
 
     def arm(self, chain: ArmChain) -> np.ndarray | None:
         """The values this guide pulls ``chain``'s joints to, or None if it does not pull them."""

@@ -122,6 +122,18 @@ class PlantOptions:
             the same (heels swivel more about the ball: the PyMO walk's geom slip 1.3 ->
             2.1 cm/s); against 0 it keeps the walks' heels from swivelling with every
             degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).
+        smooth_transitions: Offline only: retarget once more with the joints pulled towards
+            their own low-pass around every contact change (:mod:`physmocap.ik.transitions`),
+            so that what a hold kept back does not catch up in one frame when it lets go.
+        transition_window: Offline only: seconds either side of a contact change over which
+            the last pass pulls.
+        transition_sigma: Offline only: standard deviation (seconds) of the Gaussian
+            low-pass the last pass pulls towards (2 frames at 120 Hz).
+        transition_cost: Offline only: cost per radian (metre) of that pull (the arm
+            passes' guide weighs the same; the position tasks 5 per metre).
+        transition_tolerance: Offline only: metres; a joint is not pulled on a frame where
+            the low-pass moves a target it carries by more than this (the actor's own fast
+            motion, which the pull would lag).
     """
 
     plant: bool = True
@@ -140,6 +152,11 @@ class PlantOptions:
     pivot_cost: float = 40.0
     pivot_threshold: float = 0.035
     toe_release_speed: float = 0.8
+    smooth_transitions: bool = True
+    transition_window: float = 0.1
+    transition_sigma: float = 0.0167
+    transition_cost: float = 2.0
+    transition_tolerance: float = 0.01
 
     def __post_init__(self) -> None:
         check_fields(self, "planting")
@@ -170,11 +187,16 @@ class PlanHints:
         lifting: The site is held horizontally while it stays down but not pulled
             down: the ball of a foot rolling over its toes, which rests where it is
             while the heel rises and lifts as the toes bend (None: no such site).
+        pivoting: The site is the front edge of a rigid foot rolling over it, held while
+            labelled whatever its height (pulled down only softly, it may rise: let go
+            2 cm up while its label still held the foot, the PyMO walk's robot foot slid
+            3.3 cm in one frame).  None: no such site.
     """
 
     rolling: np.ndarray
     holdable: np.ndarray
     lifting: np.ndarray | None = None
+    pivoting: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -327,7 +349,8 @@ class FootPlanter:
             # hysteresis: a held site stays held until it is clearly above the band
             band = opt.engage_height + (opt.release_margin if self.locked[k] else 0.0)
             rolling = hints is not None and bool(hints.rolling[k])
-            low = min(z[k], z[k] + 2.0 * vz[k]) < band or (rolling and self.locked[k])
+            pivoting = hints is not None and hints.pivoting is not None and bool(hints.pivoting[k])
+            low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
             partner = self.locked & (self.feet == self.feet[k]) & (np.arange(n) != k)
             if partner.any() and not rolling:  # a foot already held: its further holds, without look-ahead
                 rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
@@ -818,7 +841,8 @@ class Planting:
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
             waiting = toe & heel & self._toe_segment
-            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release)
+            hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
+                              pivoting=toes_only & self._pivot)
             self._turn_with_plan(positions)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only

@@ -37,12 +37,13 @@ from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
-from .footplan import plant_body_contacts, planted_positions
+from .footplan import BODY_PART_JOINTS, plant_body_contacts, planted_positions
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .solver import RELAXATION_LEVELS, SolverOptions
 from .targets import Targets, build_targets, character_rest_frames
 from .toetips import extend_toe_tips
+from .transitions import TransitionGuides, carried_targets, moving_joints
 
 __all__ = ["retarget", "solve_targets", "map_motion", "RetargetConfig"]
 
@@ -215,8 +216,11 @@ def retarget(
     traj.source_motion = motion  # as retargeted: cut and resampled
     traj.joint_indices = dict(joint_indices)
     traj.source_start = int(source_start)
+    guides: dict = {}
     if config.solver.arm_branches:
-        traj = _second_pass(traj, config, progress, labels)
+        traj, guides = _second_pass(traj, config, progress, labels)
+    if labels is not None and config.plant.smooth_transitions:
+        traj = _transition_pass(traj, config, progress, labels, found.body_labels or {}, guides)
     _warn_relaxations(traj)
     traj.fidelity = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
     for message in fidelity_warnings(traj.fidelity, source_start):
@@ -232,29 +236,60 @@ def _arm_errors(traj) -> dict[str, np.ndarray]:
 
 
 def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
-                 labels: dict[str, np.ndarray] | None) -> Trajectory:
+                 labels: dict[str, np.ndarray] | None) -> tuple[Trajectory, dict]:
     """``traj`` retargeted again with its stuck arms guided onto the branch of their ranges
     that reaches the actor (:mod:`.branches`), again on that result while arms stick (at
     most ``MAX_PASSES`` in all); the last pass whose arms came closer (:func:`_arms_off`)
-    without the solver giving up a hard constraint on more frames."""
+    without the solver giving up a hard constraint on more frames, and the guides it was
+    retargeted with (empty for ``traj`` itself)."""
     best, errors = traj, _arm_errors(traj)
     if not errors:
-        return traj  # no arm on the actor or the character
+        return traj, {}  # no arm on the actor or the character
     score = _arms_off(errors)
     guides: dict = {}
+    best_guides: dict = {}
     for _ in range(MAX_PASSES - 1):
         guides = plan_guides(best, errors, config.solver.weights, progress, previous=guides)
         if not guides:
             break
-        again = _track(best.targets, best.character, config.solver, best.source, progress, labels, config.plant,
-                       guides, label="retarget again, arms guided")
-        for name in ("contacts", "source_motion", "joint_indices", "source_start"):
-            setattr(again, name, getattr(traj, name))
+        again = _retrack(best, traj, config, progress, labels, guides, "retarget again, arms guided")
         after = _arm_errors(again)
         if _relaxed(again) > _relaxed(best) or _arms_off(after) >= score:
             break  # no closer, or a hard constraint given up on more frames
-        best, errors, score = again, after, _arms_off(after)
-    return best
+        best, errors, score, best_guides = again, after, _arms_off(after), guides
+    return best, best_guides
+
+
+def _retrack(last: Trajectory, first: Trajectory, config: RetargetConfig, progress: bool | None,
+             labels: dict[str, np.ndarray] | None, guides: dict, label: str) -> Trajectory:
+    """``last``'s targets retargeted again with ``guides``, carrying ``first``'s contacts,
+    source motion and source frames."""
+    again = _track(last.targets, last.character, config.solver, last.source, progress, labels, config.plant,
+                   guides, label=label)
+    for name in ("contacts", "source_motion", "joint_indices", "source_start"):
+        setattr(again, name, getattr(first, name))
+    return again
+
+
+def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
+                     labels: dict[str, np.ndarray], body_labels: dict[str, np.ndarray],
+                     arm_guides: dict) -> Trajectory:
+    """``traj`` retargeted once more with its joints pulled towards their own low-pass
+    around every contact change (:mod:`.transitions`), the arm passes' guides kept; kept
+    if the solver gave up a hard constraint on no more frames."""
+    opt = config.plant
+    model = traj.character.model
+    joints = moving_joints(model)
+    touching = [j for side in ("left", "right") for j in (f"{side}_ankle", f"{side}_toe", f"{side}_toe_end")]
+    touching += [j for part, label in body_labels.items() if np.any(label) for j in BODY_PART_JOINTS.get(part, ())]
+    carried = carried_targets(traj.character, traj.targets.names, joints, touching)
+    guides = TransitionGuides(model, traj.qpos, traj.targets.positions, traj.fps, {**labels, **body_labels}, joints,
+                              carried, opt.transition_window, opt.transition_sigma, opt.transition_cost,
+                              opt.transition_tolerance, arm_guides)
+    if not guides.near.any():
+        return traj
+    again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed")
+    return again if _relaxed(again) <= _relaxed(traj) else traj
 
 
 def _relaxed(traj: Trajectory) -> int:
@@ -430,15 +465,15 @@ def _track(
     progress: bool | None,
     labels: dict[str, np.ndarray] | None,
     plant: PlantOptions,
-    guides: dict | None = None,
+    guides=None,
     label: str = "retarget",
 ) -> Trajectory:
     """Run the per-frame pipeline over (planned) targets, holding the contact points of
-    ``labels`` (None: track the targets as they are), with ``guides`` (frame ->
-    :class:`~.branches.Guide`) on their frames; the solver's per-frame figures are
+    ``labels`` (None: track the targets as they are), with ``guides`` (``guides.get(frame)``:
+    a :class:`~.branches.Guide` or None; a dict or :class:`~.transitions.TransitionGuides`); the solver's per-frame figures are
     kept in compact arrays (int32, int8 and float64 seconds per frame).  ``label`` names
     the progress bar (``batch`` follows the ``"retarget"`` one)."""
-    guides = guides or {}
+    guides = {} if guides is None else guides
     planted = labels is not None
     pipeline = FrameRetargeter(
         character, targets.names, targets.has_orientation, targets.fps, options, plant if planted else None, anchored=False

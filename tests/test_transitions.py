@@ -1,0 +1,128 @@
+"""Contact changes smoothed by a last pass (physmocap.ik.transitions; issue 9, item 4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter1d
+
+from conftest import RETARGET_DIAGNOSTICS
+from physmocap.ik import transitions
+from physmocap.ik.branches import Guide
+from physmocap.ik.transitions import TransitionGuides, carried_targets, change_windows, moving_joints
+from physmocap.models import load_character
+
+pytestmark = RETARGET_DIAGNOSTICS
+
+
+def test_windows_surround_every_change_of_every_label():
+    a = np.zeros(30, bool)
+    a[10:20] = True  # changes between 9|10 and 19|20
+    b = np.zeros(30, bool)
+    b[27:] = True  # changes between 26|27, runs to the end (no change there)
+    near = change_windows({"a": a, "b": b}, 30, 2)  # 2 frames either side of the changing pair
+    assert np.flatnonzero(near).tolist() == [*range(7, 13), *range(17, 23), *range(24, 30)]
+    assert not change_windows({"a": np.ones(30, bool)}, 30, 5).any()
+
+
+def test_a_joint_is_kept_from_lagging_the_targets_it_carries_unless_it_carries_a_contact():
+    ch = load_character("humanoid")
+    model = ch.model
+    names = tuple(ch.tracked)
+    joints = moving_joints(model)
+    feet = ("left_ankle", "left_toe", "left_toe_end", "right_ankle", "right_toe", "right_toe_end")
+    carried = dict(zip((model.joint(j).name for j in joints), carried_targets(ch, names, joints, feet)))
+    assert carried["left_knee_flexion"].size == 0 and carried["right_hip_flexion"].size == 0  # legs: always pulled
+    elbow = {names[k] for k in carried["right_elbow_flexion"]}
+    assert "right_wrist" in elbow and "right_shoulder" not in elbow and "left_wrist" not in elbow
+    assert {"right_wrist", "left_wrist", "head"} <= {names[k] for k in carried["lumbar_flexion"]}
+    hands = carried_targets(ch, names, joints, feet + ("right_wrist",))
+    assert hands[joints.index(model.joint("right_elbow_flexion").id)].size == 0
+
+
+def _pass(F: int = 50):
+    ch = load_character("humanoid")
+    rng = np.random.default_rng(3)
+    qpos = np.tile(np.asarray(ch.rest_qpos, float), (F, 1))
+    qpos[:, 7:] += np.cumsum(rng.normal(0, 0.02, (F, ch.model.nq - 7)), axis=0)
+    return ch.model, qpos
+
+
+def _guides(model, qpos, labels, window=0.1, cost=2.0, arms=None, positions=None, carried=None):
+    joints = moving_joints(model)
+    F = qpos.shape[0]
+    positions = np.zeros((F, 1, 3)) if positions is None else positions
+    carried = [np.zeros(0, int)] * len(joints) if carried is None else carried
+    return TransitionGuides(model, qpos, positions, 100.0, labels, joints, carried, window, 0.02, cost, 0.01, arms)
+
+
+def test_the_reference_is_the_whole_clip_s_low_pass_block_by_block(monkeypatch):
+    """Low-passed a few frames at a time (bounded memory), the reference is the same numbers
+    as the whole clip's low-pass, ends included."""
+    model, qpos = _pass()
+    monkeypatch.setattr(transitions, "BLOCK_FRAMES", 7)
+    labels = {"x": np.r_[np.zeros(20, bool), np.ones(30, bool)]}
+    g = _guides(model, qpos, labels, window=1.0)
+    assert g.near.all()
+    whole = gaussian_filter1d(qpos[:, g.adr], 2.0, axis=0, mode="nearest", truncate=transitions.TRUNCATE)
+    for t in (49, 0, 13, 6, 7, 35):  # any order: blocks are recomputed as needed
+        np.testing.assert_array_equal(g.get(t).values, whole[t])
+    assert g.get(3).cost == 2.0 and len(g) == 50
+
+
+def test_guides_only_near_changes_and_arm_guides_keep_their_joints():
+    model, qpos = _pass()
+    labels = {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}
+    arm_joints = np.array([model.joint("right_elbow_flexion").id])
+    arm = Guide(model.jnt_qposadr[arm_joints], model.jnt_dofadr[arm_joints], np.array([1.25]), 7.0)
+    g = _guides(model, qpos, labels, window=0.05, arms={24: arm, 2: arm})
+    assert np.flatnonzero(g.near).tolist() == list(range(19, 31))
+    assert g.get(10) is None and g.get(2) is arm  # far from the change: only an arm's own guide
+    merged = g.get(24)
+    k = merged.qpos.tolist().index(int(arm.qpos[0]))
+    assert merged.values[k] == 1.25 and merged.cost[k] == 7.0
+    others = np.delete(np.arange(merged.qpos.size), k)
+    assert np.all(merged.cost[others] == 2.0) and merged.qpos.size == g.adr.size
+    assert len(g) == 13  # 12 window frames and the arm's frame 2
+
+
+def test_no_pull_where_the_low_pass_would_move_a_carried_target():
+    """A joint whose targets move fast (the low-pass would shift them by more than the
+    tolerance) is left alone on those frames; the others are still pulled."""
+    model, qpos = _pass()
+    F = qpos.shape[0]
+    positions = np.zeros((F, 1, 3))
+    positions[24:, 0, 0] = 0.5  # a target that jumps by 50 cm at frame 24: fast
+    joints = moving_joints(model)
+    first = [np.array([0])] + [np.zeros(0, int)] * (len(joints) - 1)
+    g = _guides(model, qpos, {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}, window=0.1,
+                positions=positions, carried=first)
+    assert int(model.jnt_qposadr[joints[0]]) not in g.get(24).qpos.tolist()
+    assert int(model.jnt_qposadr[joints[0]]) in g.get(16).qpos.tolist()  # far enough from the jump
+    assert g.get(24).qpos.size == len(joints) - 1
+
+
+def test_no_pull_without_cost():
+    model, qpos = _pass()
+    g = _guides(model, qpos, {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}, cost=0.0)
+    assert not g.near.any() and g.get(25) is None
+
+
+@pytest.mark.parametrize("character", ["humanoid", "robot"])
+def test_planting_adds_no_jerk_on_the_bundled_walk(character):
+    """Before: with planting, the bundled CMU walk's joints accelerated 1.27 (humanoid) and
+    1.21 (robot) times as much as without: holds that let go in one frame, and what they kept
+    back caught up at once.  The last pass spreads it over the frames around each change."""
+    from physmocap.ik.retarget import retarget
+    from physmocap.metrics import smoothness
+    from physmocap.sources import load_motion
+    from physmocap.resources import example_clip
+
+    motion = load_motion(example_clip())
+    ch = load_character(character)
+    acc = {}
+    for name, opts in (("plant", {}), ("free", {"plant": False}), ("one pass", {"smooth_transitions": False})):
+        traj = retarget(motion, ch, progress=False, arm_branches=False, **opts)
+        acc[name] = smoothness(ch.model, traj.qpos, traj.fps)["mean_abs_acc"]
+    assert acc["plant"] < 1.2 * acc["free"], acc
+    assert acc["one pass"] > 1.2 * acc["free"], acc  # the figure this pass brings down

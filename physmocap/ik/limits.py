@@ -572,10 +572,10 @@ class SelfCollisionLimit(mink.Limit):
         self._cache: tuple[bytes, tuple] | None = None
         self._g1 = self.pairs[:, 0].tolist()
         self._g2 = self.pairs[:, 1].tolist()
-        self._b1 = model.geom_bodyid[self.pairs[:, 0]]
-        self._b2 = model.geom_bodyid[self.pairs[:, 1]]
+        self._bodies = model.geom_bodyid[self.pairs]  # (pairs, 2): the bodies of a and b
         self._pj = PointJacobians(model)
-        self._i1, self._i2 = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
+        # flat indices of the pairs' geom positions in geom_xpos (a 1-D take is the cheapest gather)
+        self._x1, self._x2 = (3 * self.pairs[:, j, None] + np.arange(3) for j in range(2))
         bound = self._rsum + self.activation
         self._bound2 = bound * bound  # squared reach of each pair's bounding spheres (m^2)
         self._fromto = np.zeros((len(self.pairs), 6))
@@ -586,7 +586,8 @@ class SelfCollisionLimit(mink.Limit):
         """Indices of the pairs whose bounding spheres are within ``activation``."""
         if not len(self.pairs):
             return np.zeros(0, dtype=int)
-        diff = data.geom_xpos[self._i1] - data.geom_xpos[self._i2]
+        xpos = data.geom_xpos
+        diff = xpos.take(self._x1) - xpos.take(self._x2)
         return (np.einsum("ij,ij->i", diff, diff) <= self._bound2).nonzero()[0]
 
     def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -616,19 +617,18 @@ class SelfCollisionLimit(mink.Limit):
         k, d, fromto = self._close(data)
         if not len(k):
             return mink.Constraint()
-        pa, pb = fromto[:, :3], fromto[:, 3:]
-        n = pb - pa
+        n = fromto[:, 3:] - fromto[:, :3]  # p_b - p_a
         norm = np.sqrt(np.add.reduce(n * n, axis=1))  # what np.linalg.norm(n, axis=1) computes
         ok = norm >= 1e-9
         if not ok.all():
-            k, d, pa, pb, n, norm = k[ok], d[ok], pa[ok], pb[ok], n[ok], norm[ok]
+            k, d, fromto, n, norm = k[ok], d[ok], fromto[ok], n[ok], norm[ok]
             if not len(k):
                 return mink.Constraint()
         n /= norm[:, None]
-        n[d < 0] *= -1.0  # overlapping: fromto runs from b's deepest point into a's surface
-        m = len(k)
-        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.concatenate([pa, pb]))
-        G = -np.einsum("ki,kij->kj", n, J[m:] - J[:m])
+        np.negative(n, out=n, where=(d < 0)[:, None])  # overlapping: fromto runs from b's deepest point into a's surface
+        # p_a, p_b of each pair in turn: the Jacobians (m, 2, 3, nv) of a's and b's points
+        J = self._pj(data, self._bodies[k].ravel(), fromto.reshape(-1, 3)).reshape(len(k), 2, 3, -1)
+        G = -np.einsum("ki,kij->kj", n, J[:, 1] - J[:, 0])
         # the distance may shrink to the margin; a pair inside it must move apart, by at
         # most ``recovery`` per iteration (so that the QP stays feasible)
         h = np.where(d >= self.margin, d - self.margin, -np.minimum(self.margin - d, self.recovery))

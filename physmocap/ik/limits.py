@@ -630,6 +630,7 @@ class SelfCollisionLimit(mink.Limit):
         J = self._pj(data, self._bodies[k].ravel(), fromto.reshape(-1, 3)).reshape(len(k), 2, 3, -1)
         G = -np.einsum("ki,kij->kj", n, J[:, 1] - J[:, 0])
         # the distance may shrink to the margin; a pair inside it must move apart, by at
-        # most ``recovery`` per iteration (so that the QP stays feasible)
-        h = np.where(d >= self.margin, d - self.margin, -np.minimum(self.margin - d, self.recovery))
+        # most ``recovery`` per iteration (so that the QP stays feasible):
+        # h = d - m if d >= m else -min(m - d, r), i.e. max(d - m, -r) (m - d is -(d - m) exactly)
+        h = np.maximum(d - self.margin, -self.recovery)
         return mink.Constraint(G=G, h=h)

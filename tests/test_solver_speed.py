@@ -3,6 +3,8 @@
 * :meth:`FloorLimit.near` evaluates only the candidates of the geoms near the floor:
   its heights are :meth:`FloorLimit.heights`'s, and the points it leaves out are
   above the activation band.
+* :meth:`PointJacobians.vertical` (the floor rows' Jacobians, all points at once) gives
+  ``mj_jac``'s vertical rows, negated, to the bit.
 * The second-order correction (``SolverOptions.second_order_correction``) of a full
   step leaves the planted contacts far closer to their anchors than the step itself,
   and is off by default.
@@ -10,10 +12,13 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 
+from physmocap.ik.limits import PointJacobians
 from physmocap.ik.solver import ContactHolds, SolverOptions
+from physmocap.models import load_character
 from conftest import RETARGET_DIAGNOSTICS, shared_file
 from test_qp import _setup
 
@@ -37,6 +42,25 @@ def test_floor_near_points_are_the_heights_within_reach(name, seed):
         assert np.all(z_all[left_out] == np.inf)
         np.testing.assert_array_equal(limit.z(data), z_all)
         assert limit.lowest(data) == (z_all.min() if np.isfinite(z_all).any() else np.inf)
+
+
+@pytest.mark.parametrize("name,seed", [("humanoid", 0), ("robot", 1)])
+def test_vertical_point_jacobians_are_mj_jac_rows_to_the_bit(name, seed):
+    model = load_character(name).model
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(seed)
+    jacobians = PointJacobians(model)
+    k = 40  # beyond the buffers' first capacity; the world body included
+    for _ in range(5):
+        data.qpos[:] = model.qpos0 + rng.normal(0.0, 0.5, model.nq)
+        mujoco.mj_normalizeQuat(model, data.qpos)
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        bodies = rng.integers(0, model.nbody, k)
+        points = data.xpos[bodies] + rng.normal(0.0, 0.1, (k, 3))
+        out = np.empty((k, model.nv))
+        jacobians.vertical(data, bodies, points, out)
+        assert out.tobytes() == (-jacobians(data, bodies, points)[:, 2]).tobytes()
 
 
 def test_second_order_correction_is_off_by_default():

@@ -31,11 +31,32 @@ class PointJacobians:
     r"""Translational Jacobians :math:`J(p) = \partial p / \partial q` (world axes, ``(3, nv)``)
     of points fixed to bodies, by ``mj_jac`` (point by point, as the rows were first
     written: the same round-off), into one preallocated buffer (the floor and
-    self-collision rows need a few dozen per iteration)."""
+    self-collision rows need a few dozen per iteration).
+
+    :meth:`vertical` gives the vertical rows alone, for all points at once, by
+    ``mj_jac``'s own formula: with :math:`o = p - c` (:math:`c` the centre of mass of
+    the subtree of the body's root, ``subtree_com``) and the motion axes
+    :math:`(\omega_j, v_j)` = ``cdof[j]`` (per radian or metre of dof :math:`j`),
+
+    .. math::
+
+        J_z(p)_j = v_{j,z} + (\omega_{j,x} o_y - \omega_{j,y} o_x)
+
+    for the dofs :math:`j` on the body's chain (``dof_parentid`` from the body's last dof,
+    fixed bodies taking their parent's), 0 elsewhere: the same products, differences and
+    sums as ``mj_jac`` (so the same bits), as ``(k, nv)`` array operations instead of
+    ``k`` calls.
+    """
 
     def __init__(self, model: mujoco.MjModel, capacity: int = 32) -> None:
         self.model = model
         self._grow(capacity)
+        self._off_chain = ~_dof_chains(model)
+        self._root = np.asarray(model.body_rootid, dtype=int)
+        roots = np.unique(self._root[1:])
+        # one tree (a character): every point's offset is from the same centre of mass
+        self._one_root = int(roots[0]) if len(roots) == 1 else None
+        self._tmp = np.empty((capacity, model.nv))
 
     def _grow(self, capacity: int) -> None:
         """A buffer for ``capacity`` points."""
@@ -52,6 +73,40 @@ class PointJacobians:
         for row, b, p in zip(self._rows, bodies.tolist(), points):
             jac(model, data, row, None, p, b)
         return self._buf[:k]
+
+    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray, out: np.ndarray) -> None:
+        """``out`` ``(k, nv)`` := :math:`-J_z` of points ``(k, 3)`` (metres, world) on ``bodies``
+        ``(k,)`` (per radian or metre of each dof): ``mj_jac``'s rows negated, to the bit (the
+        dofs off a point's chain ``-0.0``, the negated zeros)."""
+        k = len(bodies)
+        if k > len(self._tmp):
+            self._tmp = np.empty((max(k, 2 * len(self._tmp)), self.model.nv))
+        com = data.subtree_com[self._root[bodies] if self._one_root is None else self._one_root]
+        off = points - com
+        axes, tmp = data.cdof.T, self._tmp[:k]
+        np.multiply(off[:, 1:2], axes[0], out=out)
+        np.multiply(off[:, 0:1], axes[1], out=tmp)
+        np.subtract(out, tmp, out=out)
+        np.add(out, axes[5], out=out)
+        np.negative(out, out=out)
+        np.putmask(out, self._off_chain[bodies], -0.0)
+
+
+def _dof_chains(model: mujoco.MjModel) -> np.ndarray:
+    """``(nbody, nv)`` booleans: the dofs that move each body, as ``mj_jac`` walks them (a
+    body without dofs takes its nearest ancestor's; the world has none)."""
+    chain = np.zeros((model.nbody, model.nv), dtype=bool)
+    for b in range(model.nbody):
+        body = b
+        while body and not model.body_dofnum[body]:
+            body = int(model.body_parentid[body])
+        if not body:
+            continue
+        i = int(model.body_dofadr[body] + model.body_dofnum[body] - 1)
+        while i >= 0:
+            chain[b, i] = True
+            i = int(model.dof_parentid[i])
+    return chain
 
 
 class FrameStepLimit(mink.Limit):
@@ -170,6 +225,11 @@ class GeomCandidates:
         self._rows_key: bytes | None = None
         self._rows: tuple = ()
         self._all = np.arange(len(self.gid))
+        # flat indices into geom_xpos / geom_xmat (a 1-D take is the cheapest gather): the
+        # geoms' heights, and per candidate its geom's position and rotation
+        self._geom_z = 3 * self.geoms + 2
+        self._xpos_at = 3 * self.gid[:, None] + np.arange(3)
+        self._xmat_at = 9 * self.gid[:, None] + np.arange(9)
 
     def points(self, data: mujoco.MjData, below: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Every candidate: ``(z (k,), point (k, 3))``, z being its lowest surface height.
@@ -196,31 +256,38 @@ class GeomCandidates:
         z[rows] = pts[rows, 2] - self.local[rows, 3]
         return z, pts
 
-    def _near_rows(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``(rows, their geom ids, their local points (k, 3), their radii)``: the candidates of
-        the geoms whose bounding sphere reaches below ``below``; kept while the same geoms
-        stay near, which they do over many iterations (a walking robot: its feet and shins)."""
-        near = data.geom_xpos[self.geoms, 2] - self.radius < below
+    def _near_rows(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(rows, flat indices of their geoms' heights in geom_xpos, of their geoms' rotations'
+        last rows in geom_xmat (k, 3), their local points (k, 3), their radii)``: the
+        candidates of the geoms whose bounding sphere reaches below ``below``; kept while the
+        same geoms stay near, which they do over many iterations (a walking robot: its feet
+        and shins)."""
+        near = data.geom_xpos.take(self._geom_z) - self.radius < below
         key = near.tobytes()
         if self._rows_key != key:
             self._rows_key = key
             rows = self._all if near.all() else np.flatnonzero(near[self.owner])
-            self._rows = (rows, self.gid[rows], self.local[rows, :3], self.local[rows, 3])
+            self._rows = (rows, self._xpos_at[rows, 2], self._xmat_at[rows, 6:], self.local[rows, :3], self.local[rows, 3])
         return self._rows
 
-    def near_z(self, data: mujoco.MjData, below: float) -> tuple[np.ndarray, np.ndarray]:
-        """``(rows (k,), z (k,))``: the candidates of the geoms whose bounding sphere reaches
-        below ``below`` (ascending rows) and their lowest surface heights (metres)."""
-        rows, gid, local, radius = self._near_rows(data, below)
-        z = data.geom_xpos[gid, 2] + np.einsum("kj,kj->k", data.geom_xmat[gid, 6:9], local)
-        z -= radius
+    def near_z(self, data: mujoco.MjData, below: float, extra: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        r"""``(rows (k,), z (k + extra,))``: the candidates of the geoms whose bounding sphere
+        reaches below ``below`` (ascending rows) and their lowest surface heights (metres),
+        :math:`z = x_{g,z} + R_{g,z} \cdot p - r` (geom position :math:`x_g`, rotation
+        :math:`R_g`, local point :math:`p`, radius :math:`r`); ``extra`` entries left
+        unset at the end of ``z`` for the caller."""
+        rows, z_at, r_at, local, radius = self._near_rows(data, below)
+        z = np.empty(len(rows) + extra)
+        head = z[: len(rows)]
+        np.add(data.geom_xpos.take(z_at), np.einsum("kj,kj->k", data.geom_xmat.take(r_at), local), out=head)
+        head -= radius
         return rows, z
 
     def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
-        """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``."""
-        gid = self.gid[rows]
-        R = data.geom_xmat[gid].reshape(-1, 3, 3)
-        return data.geom_xpos[gid] + np.einsum("kij,kj->ki", R, self.local[rows, :3])
+        """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``:
+        :math:`x_g + R_g p`."""
+        R = data.geom_xmat.take(self._xmat_at[rows]).reshape(-1, 3, 3)
+        return data.geom_xpos.take(self._xpos_at[rows]) + np.einsum("kij,kj->ki", R, self.local[rows, :3])
 
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
@@ -286,11 +353,12 @@ class FloorLimit(mink.Limit):
         self.margin = float(margin)
         self.activation = float(activation)
         self.enabled = True
-        self._jacp = np.zeros((3, model.nv))
         self._pj = PointJacobians(model)
         self._cand = GeomCandidates(model, self.geoms, known)
         self._bodies = np.concatenate([model.geom_bodyid[self._cand.gid], model.site_bodyid[self.sites]])
         self._site_rows = len(self._cand.gid) + np.arange(len(self.sites))
+        self._site_z = 3 * self.sites + 2  # flat indices of the sites' heights in site_xpos
+        self._near_idx: tuple = (None, None)  # near geoms' candidate rows -> with the sites' rows
         self._cache: tuple[bytes, tuple] | None = None
         self._zcache: tuple[bytes, tuple[np.ndarray, np.ndarray]] | None = None  # near(), per configuration
         #: site id -> clearance height (metres above the floor) for swing feet; set per frame.
@@ -339,10 +407,12 @@ class FloorLimit(mink.Limit):
         key = data.qpos.tobytes()
         if self._zcache is not None and self._zcache[0] == key:
             return self._zcache[1]
-        rows, z_g = self._cand.near_z(data, self.floor + self.activation)
+        rows, z_g = self._cand.near_z(data, self.floor + self.activation, len(self.sites))
         if len(self.sites):
-            rows = np.concatenate([rows, self._site_rows])
-            z_g = np.concatenate([z_g, data.site_xpos[self.sites, 2]])
+            if self._near_idx[0] is not rows:  # the geoms near the floor changed
+                self._near_idx = (rows, np.concatenate([rows, self._site_rows]))
+            rows = self._near_idx[1]
+            z_g[len(z_g) - len(self.sites) :] = data.site_xpos.take(self._site_z)
         out = (rows, z_g)
         self._zcache = (key, out)
         return out
@@ -371,19 +441,22 @@ class FloorLimit(mink.Limit):
         if active.size == 0:
             return mink.Constraint()
         n_act = len(active)
-        rows = n_act + len(self.clearance)
-        G = np.empty((rows, self.model.nv))
-        h = np.empty(rows)
-        b = self._bodies[active]
+        clear_sites, clear_heights, per_body = self._swing_arrays()
         ng = len(self._cand.gid)
         split = int(active.searchsorted(ng))
-        anchor = np.empty((n_act, 3))
+        # the points: active geom candidates, active contact sites, then the clearance sites
+        sites = self.sites[active[split:] - ng]
+        if len(clear_sites):
+            sites = np.concatenate([sites, clear_sites])
+        anchor = np.empty((split + len(sites), 3))
         anchor[:split] = self._cand.points_at(data, active[:split])
-        anchor[split:] = data.site_xpos[self.sites[active[split:] - ng]]
-        np.negative(self._pj(data, b, anchor)[:, 2], out=G[:n_act])
+        anchor[split:] = data.site_xpos[sites]
+        b = self._bodies[active]
+        G = np.empty((len(anchor), self.model.nv))
+        h = np.empty(len(anchor))
+        self._pj.vertical(data, np.concatenate([b, self.model.site_bodyid[clear_sites]]) if len(clear_sites) else b, anchor, G)
         za = zn[inside]
         h[:n_act] = za - self.floor - self.margin
-        clear_sites, clear_heights, per_body = self._swing_arrays()
         if per_body is not None:
             c = per_body[b]
             swing = ~np.isnan(c)
@@ -391,11 +464,8 @@ class FloorLimit(mink.Limit):
                 zs = za[swing]
                 h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
         # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        for row, sid in enumerate(clear_sites.tolist(), start=n_act):
-            mujoco.mj_jacSite(self.model, data, self._jacp, None, sid)
-            np.negative(self._jacp[2], out=G[row])
         if len(clear_sites):
-            zs = data.site_xpos[clear_sites, 2]
+            zs = anchor[n_act:, 2]
             h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
         return mink.Constraint(G=G, h=h)
 
@@ -502,10 +572,10 @@ class SelfCollisionLimit(mink.Limit):
         self._cache: tuple[bytes, tuple] | None = None
         self._g1 = self.pairs[:, 0].tolist()
         self._g2 = self.pairs[:, 1].tolist()
-        self._b1 = model.geom_bodyid[self.pairs[:, 0]]
-        self._b2 = model.geom_bodyid[self.pairs[:, 1]]
+        self._bodies = model.geom_bodyid[self.pairs]  # (pairs, 2): the bodies of a and b
         self._pj = PointJacobians(model)
-        self._i1, self._i2 = self.pairs[:, 0].copy(), self.pairs[:, 1].copy()
+        # flat indices of the pairs' geom positions in geom_xpos (a 1-D take is the cheapest gather)
+        self._x1, self._x2 = (3 * self.pairs[:, j, None] + np.arange(3) for j in range(2))
         bound = self._rsum + self.activation
         self._bound2 = bound * bound  # squared reach of each pair's bounding spheres (m^2)
         self._fromto = np.zeros((len(self.pairs), 6))
@@ -516,7 +586,8 @@ class SelfCollisionLimit(mink.Limit):
         """Indices of the pairs whose bounding spheres are within ``activation``."""
         if not len(self.pairs):
             return np.zeros(0, dtype=int)
-        diff = data.geom_xpos[self._i1] - data.geom_xpos[self._i2]
+        xpos = data.geom_xpos
+        diff = xpos.take(self._x1) - xpos.take(self._x2)
         return (np.einsum("ij,ij->i", diff, diff) <= self._bound2).nonzero()[0]
 
     def _close(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -546,20 +617,20 @@ class SelfCollisionLimit(mink.Limit):
         k, d, fromto = self._close(data)
         if not len(k):
             return mink.Constraint()
-        pa, pb = fromto[:, :3], fromto[:, 3:]
-        n = pb - pa
+        n = fromto[:, 3:] - fromto[:, :3]  # p_b - p_a
         norm = np.sqrt(np.add.reduce(n * n, axis=1))  # what np.linalg.norm(n, axis=1) computes
         ok = norm >= 1e-9
         if not ok.all():
-            k, d, pa, pb, n, norm = k[ok], d[ok], pa[ok], pb[ok], n[ok], norm[ok]
+            k, d, fromto, n, norm = k[ok], d[ok], fromto[ok], n[ok], norm[ok]
             if not len(k):
                 return mink.Constraint()
         n /= norm[:, None]
-        n[d < 0] *= -1.0  # overlapping: fromto runs from b's deepest point into a's surface
-        m = len(k)
-        J = self._pj(data, np.concatenate([self._b1[k], self._b2[k]]), np.concatenate([pa, pb]))
-        G = -np.einsum("ki,kij->kj", n, J[m:] - J[:m])
+        np.negative(n, out=n, where=(d < 0)[:, None])  # overlapping: fromto runs from b's deepest point into a's surface
+        # p_a, p_b of each pair in turn: the Jacobians (m, 2, 3, nv) of a's and b's points
+        J = self._pj(data, self._bodies[k].ravel(), fromto.reshape(-1, 3)).reshape(len(k), 2, 3, -1)
+        G = -np.einsum("ki,kij->kj", n, J[:, 1] - J[:, 0])
         # the distance may shrink to the margin; a pair inside it must move apart, by at
-        # most ``recovery`` per iteration (so that the QP stays feasible)
-        h = np.where(d >= self.margin, d - self.margin, -np.minimum(self.margin - d, self.recovery))
+        # most ``recovery`` per iteration (so that the QP stays feasible):
+        # h = d - m if d >= m else -min(m - d, r), i.e. max(d - m, -r) (m - d is -(d - m) exactly)
+        h = np.maximum(d - self.margin, -self.recovery)
         return mink.Constraint(G=G, h=h)

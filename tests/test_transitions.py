@@ -68,6 +68,7 @@ def test_the_reference_is_the_whole_clip_s_low_pass_block_by_block(monkeypatch):
     for t in (49, 0, 13, 6, 7, 35):  # any order: blocks are recomputed as needed
         np.testing.assert_array_equal(g.get(t).values, whole[t])
     assert g.get(3).cost == 2.0 and len(g) == 50
+    np.testing.assert_array_equal(g.get(3).start, qpos[3])  # every frame starts from the first pass's pose
 
 
 def test_guides_only_near_changes_and_arm_guides_keep_their_joints():
@@ -77,13 +78,14 @@ def test_guides_only_near_changes_and_arm_guides_keep_their_joints():
     arm = Guide(model.jnt_qposadr[arm_joints], model.jnt_dofadr[arm_joints], np.array([1.25]), 7.0)
     g = _guides(model, qpos, labels, window=0.05, arms={24: arm, 2: arm})
     assert np.flatnonzero(g.near).tolist() == list(range(19, 31))
-    assert g.get(10) is None and g.get(2) is arm  # far from the change: only an arm's own guide
+    far = g.get(10)  # far from the change: no pull, the first pass's pose to start from
+    assert far.qpos.size == 0 and np.array_equal(far.start, qpos[10])
+    assert np.array_equal(g.get(2).values, arm.values) and g.get(2).cost == 7.0  # only the arm's own guide
     merged = g.get(24)
     k = merged.qpos.tolist().index(int(arm.qpos[0]))
     assert merged.values[k] == 1.25 and merged.cost[k] == 7.0
     others = np.delete(np.arange(merged.qpos.size), k)
     assert np.all(merged.cost[others] == 2.0) and merged.qpos.size == g.adr.size
-    assert len(g) == 13  # 12 window frames and the arm's frame 2
 
 
 def test_no_pull_where_the_low_pass_would_move_a_carried_target():
@@ -105,7 +107,7 @@ def test_no_pull_where_the_low_pass_would_move_a_carried_target():
 def test_no_pull_without_cost():
     model, qpos = _pass()
     g = _guides(model, qpos, {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}, cost=0.0)
-    assert not g.near.any() and g.get(25) is None
+    assert not g.near.any() and g.get(25).qpos.size == 0
 
 
 @pytest.mark.parametrize("character", ["humanoid", "robot"])

@@ -150,12 +150,15 @@ class Guide:
         dofs: ``(K,)`` their dof addresses.
         values: ``(K,)`` where they are pulled (radians or metres).
         cost: Cost per radian (metre) of the pull, one for all or ``(K,)`` joint by joint.
+        start: ``(nq,)`` a configuration the frame's iterations start from (kept within the
+            ranges and the frame's velocity band), or None: the previous frame's pose.
     """
 
     qpos: np.ndarray
     dofs: np.ndarray
     values: np.ndarray
     cost: float | np.ndarray = GUIDE_COST
+    start: np.ndarray | None = None
 
     def arm(self, chain: ArmChain) -> np.ndarray | None:
         """The values this guide pulls ``chain``'s joints to, or None if it does not pull them."""

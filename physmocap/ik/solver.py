@@ -347,8 +347,8 @@ class FrameSolver:
     def _set_guide(self, guide) -> None:
         """This frame's guide (:class:`~physmocap.ik.branches.Guide`: some joints pulled to
         given values), or None."""
-        self._guided = guide is not None
-        if guide is not None:
+        self._guided = guide is not None and len(guide.qpos) > 0
+        if self._guided:
             target = self.configuration.data.qpos.copy()
             target[guide.qpos] = guide.values
             cost = np.zeros(self.model.nv)
@@ -367,10 +367,11 @@ class FrameSolver:
         self.momentum.set_target(q)
         self._prediction = q
 
-    def _start_from_prediction(self) -> None:
-        """Move to the constant-velocity prediction (:meth:`_predict`), kept inside the joint
-        ranges and the frame's velocity band (``SolverOptions.extrapolate_start``)."""
-        q = self._prediction.copy()
+    def _start_from(self, start: np.ndarray) -> None:
+        """Move to ``start`` (a configuration: the constant-velocity prediction of
+        :meth:`_predict` with ``SolverOptions.extrapolate_start``, or a guide's), kept inside
+        the joint ranges and the frame's velocity band."""
+        q = np.array(start, dtype=float)
         q[self._lim_qadr] = np.clip(q[self._lim_qadr], self._lim_range[:, 0], self._lim_range[:, 1])
         if self.options.velocity_limits and self.step_limit.q_prev is not None and len(self.step_limit.qposadr):
             lo, hi = self.step_limit.step_bounds()
@@ -735,9 +736,12 @@ class FrameSolver:
         self._prediction = None
         self._predict()
         start = None  # the previous frame's pose when the iterations start from the prediction
-        if opt.extrapolate_start and not first and self._prediction is not None and all(self._converged):
+        warm = guide.start if guide is not None and getattr(guide, "start", None) is not None else None
+        if warm is None and opt.extrapolate_start and not first and self._prediction is not None and all(self._converged):
+            warm = self._prediction
+        if warm is not None and not first:
             start = self.configuration.data.qpos.copy()
-            self._start_from_prediction()
+            self._start_from(warm)
         iters = opt.first_frame_iterations if first else opt.max_iterations
         if first:
             self._settle_from_rest()

@@ -28,7 +28,12 @@ Offline the whole clip is known.  After the first pass (and the arm passes of
    ``transition_cost`` per radian (metre) towards :math:`\bar q` on the window frames
    (a :class:`~physmocap.ik.branches.Guide`; an arm's own guide from the arm passes
    keeps its joints), every hard constraint as before: the holds still hold, the
-   floor and the limits still bound, only the free joints' timing changes.
+   floor and the limits still bound, only the free joints' timing changes.  Every frame's
+   iterations start from the first pass's pose on that frame (within the frame's velocity
+   band), not from the previous frame's: the answer is nearer, so it takes fewer
+   iterations (the PyMO walk: 2.7 a frame against 4.2 from the previous frame) and ends
+   better converged (its acceleration ratio 1.18 -> 0.99; the Bandai walk's scuffing
+   2.1 -> 0.6 %, its robot's 4.0 -> 0).
 
 Every hinge and slide joint is pulled, the arms too: the trunk's catch-ups move the
 shoulders, and arms that keep their hands on their targets jerk with them (the legs
@@ -42,6 +47,7 @@ Radians, metres, seconds.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Mapping, Sequence
 
 import mujoco
@@ -146,8 +152,8 @@ class TransitionGuides:
         self._keep = np.zeros((0, len(joints)), dtype=bool)
 
     def __len__(self) -> int:
-        """Frames with a guide."""
-        return int(np.count_nonzero(self.near)) + sum(1 for t in self.arms if not self.near[t])
+        """Frames with a guide: every frame (each starts from the first pass's pose)."""
+        return int(self.qpos.shape[0])
 
     def _low_pass(self, x: np.ndarray) -> np.ndarray:
         """``x`` low-passed along its first axis (mode "nearest": the clip's end values repeat)."""
@@ -173,8 +179,16 @@ class TransitionGuides:
             self._block = b
         return t - b * BLOCK_FRAMES
 
-    def get(self, t: int) -> Guide | None:
-        """Frame ``t``'s guide, or None."""
+    def get(self, t: int) -> Guide:
+        """Frame ``t``'s guide: the pull (if any) and the first pass's pose to start from."""
+        start = np.array(self.qpos[t], dtype=float)
+        pull = self._pull(t)
+        if pull is None:
+            return Guide(np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0), 0.0, start)
+        return dataclasses.replace(pull, start=start)
+
+    def _pull(self, t: int) -> Guide | None:
+        """Frame ``t``'s pull: the low-pass on the window frames, the arm passes' guide."""
         arm = self.arms.get(t)
         if not self.near[t]:
             return arm

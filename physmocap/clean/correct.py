@@ -327,13 +327,16 @@ def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out
 
 
-def _on_contact(
+def _stances(
     motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
     opt: CleanOptions,
-) -> np.ndarray | None:
-    r"""``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
-    that what stands on the floor below the joint stays where it stands, or None where
-    nothing does.
+) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    r"""Where the points below joint ``j`` stand on the floor over its bridge ``q (n, 4)`` on
+    frames ``s..e`` of ``R (F, J, 4)``: ``(points, target (n, K, 3), active (n, K), pos, wr)``,
+    the ``K`` contact points (joint indices), where each should stand on each frame of the
+    span and on which frames it does, and the forward kinematics of the bridged pose on
+    frames ``s - 1 .. e + 1`` (``pos (n + 2, J, 3)``, world rotations ``wr (n + 2, J, 4)``);
+    None where nothing stands.
 
     Below each child of ``j`` the lowest point (median height; a toe, a heel) is a contact
     where, on the good frames just before the span (or just after it), it is within
@@ -343,13 +346,10 @@ def _on_contact(
     into the span (or back from its end) while the bridged pose keeps the point within
     ``contact_radius`` of where it stood (and ``contact_lever`` of its distance from joint
     ``j``: a short lever, a foot's toe, says less) and the rest of the limb, its rotations
-    all good, can still reach it (the distance from joint ``j`` within ``contact_reach``);
-    on those frames joint ``j`` is turned so the points stand where they stood (the shortest
-    arc for one, the Kabsch fit for several), the turn easing out over ``contact_ramp``
-    seconds after the stance.  A frozen thigh or knee keeps its foot planted instead of
-    sliding it; in the swing nothing holds the foot and the bridge is left as it is."""
+    all good, can still reach it (the distance from joint ``j`` within ``contact_reach``); a
+    stance from both ends through the whole span moves its point steadily from where it
+    stood before to where it stands after."""
     from ..motion import forward_kinematics
-    from ..rotations import quat_conj, quat_mul
 
     F, n = len(R), e - s + 1
     if s < 2 or e + 2 >= F:
@@ -405,18 +405,52 @@ def _on_contact(
             active[k:, i] = True
     if not active.any():
         return None
-    f_idx = [f for f, _, _, _ in points]
-    turn = _turn(pos[1:-1, f_idx] - pj[:, None], target - pj[:, None], active.astype(float))  # world
+    return [f for f, _, _, _ in points], target, active, pos, wr
+
+
+def _turn_onto(
+    parents: np.ndarray, j: int, q: np.ndarray, points: list[int], target: np.ndarray, active: np.ndarray,
+    pos: np.ndarray, wr: np.ndarray, ramp: int,
+) -> np.ndarray:
+    """Joint ``j``'s bridge ``q (n, 4)`` turned so that the ``points`` below it stand at
+    ``target (n, K, 3)`` on the frames where they are ``active (n, K)`` (:func:`_stances`,
+    with the bridged pose's world positions ``pos`` and rotations ``wr`` on the span and one
+    frame either side): on those frames the world turn about joint ``j`` that takes the
+    points there (:func:`_turn`), expressed in the parent's frame and applied before ``q``;
+    on the other frames the nearest stance frame's turn, eased out linearly over ``ramp``
+    frames."""
+    from ..rotations import quat_conj, quat_mul
+
+    n = len(q)
+    pj = pos[1:-1, j]
+    turn = _turn(pos[1:-1, points] - pj[:, None], target - pj[:, None], active.astype(float))  # world
     on = np.flatnonzero(active.any(axis=1))
     idx = np.arange(n)
     near = on[np.argmin(np.abs(idx[:, None] - on[None]), axis=1)]
-    ramp = max(1, int(round(opt.contact_ramp * fps)))
     weight = np.clip(1.0 - np.abs(idx - near) / (ramp + 1.0), 0.0, 1.0)
     p = int(parents[j])
     wp = wr[1:-1, p][near] if p >= 0 else np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
     local = quat_mul(quat_mul(quat_conj(wp), turn[near]), wp)  # the world turn in the parent's frame
     local = Rotation.from_rotvec(Rotation.from_quat(local).as_rotvec() * weight[:, None]).as_quat()
     return quat_mul(local, q)
+
+
+def _on_contact(
+    motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+    opt: CleanOptions,
+) -> np.ndarray | None:
+    """``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
+    that what stands on the floor below the joint stays where it stands, or None where
+    nothing does: the stances found (:func:`_stances`; ``P (F, J, 3)`` the clip's world
+    positions, ``bad (F, J)`` the glitched pairs), joint ``j`` turned onto them
+    (:func:`_turn_onto`), the turn easing out over ``contact_ramp`` seconds after the
+    stance.  A frozen thigh or knee keeps its foot planted instead of sliding it; in the
+    swing nothing holds the foot and the bridge is left as it is."""
+    found = _stances(motion, R, P, bad, j, s, e, q, opt)
+    if found is None:
+        return None
+    ramp = max(1, int(round(opt.contact_ramp * float(motion.fps))))
+    return _turn_onto(np.asarray(motion.skeleton.parents), j, q, *found, ramp)
 
 
 def _remove_offset(R: np.ndarray, a: int, b: int) -> np.ndarray | None:

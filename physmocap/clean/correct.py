@@ -292,7 +292,42 @@ def _bridge(
     return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), names[best]
 
 
-def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
+@dataclasses.dataclass(frozen=True)
+class _Ground:
+    """What :func:`_stances` reads of the clip: the world positions of the joints below the
+    rotational glitches (``positions (F, K, 3)``, ``column``: joint index -> column of it;
+    :meth:`~physmocap.motion.Motion.joint_world_positions`, a block of frames at a time) and
+    the floor's height (:meth:`~physmocap.motion.Motion.floor_height`)."""
+
+    positions: np.ndarray
+    column: dict[int, int]
+    floor: float
+
+    @classmethod
+    def of(cls, motion: Motion, glitches: list[Glitch]) -> "_Ground":
+        """The joints below those of ``glitches`` that are repaired in rotation."""
+        parents = np.asarray(motion.skeleton.parents)
+        names = {n: j for j, n in enumerate(motion.skeleton.names)}
+        tops = {names[g.joint] for g in glitches if REPAIRED.get(g.kind) == "rotation"}
+        below = [k for k in range(len(parents)) if _ancestors(parents, k) & tops]
+        positions, column = motion.joint_world_positions(below)
+        return cls(positions, column, motion.floor_height())
+
+    def at(self, joint: int) -> np.ndarray:
+        """``(F, 3)``: the world positions of ``joint``."""
+        return self.positions[:, self.column[joint]]
+
+
+def _ancestors(parents: np.ndarray, k: int) -> set[int]:
+    """The joints above joint ``k`` (its parent, the parent's parent, ...)."""
+    out = set()
+    while parents[k] >= 0:
+        k = int(parents[k])
+        out.add(k)
+    return out
+
+
+def _contact_points(parents: np.ndarray, ground: _Ground, j: int) -> list[int]:
     """Per child of joint ``j``, the lowest (median height over the clip) joint of its
     subtree (end sites included): the points below ``j`` that may touch the floor."""
     top = {}
@@ -302,7 +337,8 @@ def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
             p, c = int(parents[p]), p
         if p == j:
             top.setdefault(c, []).append(k)
-    return [ks[int(np.argmin(np.median(P[:, ks, 2], axis=0)))] for ks in top.values()]
+    return [ks[int(np.argmin(np.median(ground.positions[:, [ground.column[k] for k in ks], 2], axis=0)))]
+            for ks in top.values()]
 
 
 def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -328,7 +364,7 @@ def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def _stances(
-    motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+    motion: Motion, R: np.ndarray, ground: _Ground, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
     opt: CleanOptions,
 ) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     r"""Where the points below joint ``j`` stand on the floor over its bridge ``q (n, 4)`` on
@@ -341,7 +377,7 @@ def _stances(
     Below each child of ``j`` the lowest point (median height; a toe, a heel) is a contact
     where, on the good frames just before the span (or just after it), it is within
     ``contact_height`` of the clip's floor and slower than ``contact_speed``
-    (``P (F, J, 3)``: the clip's world positions; ``bad (F, J)``: the glitched pairs; the
+    (``ground``: the clip's world positions and floor; ``bad (F, J)``: the glitched pairs; the
     frames where another glitch moves the point, a joint above it, are no stance).  The stance goes on
     into the span (or back from its end) while the bridged pose keeps the point within
     ``contact_radius`` of where it stood (and ``contact_lever`` of its distance from joint
@@ -356,9 +392,10 @@ def _stances(
         return None
     fps = float(motion.fps)
     parents = np.asarray(motion.skeleton.parents)
-    low = float(np.percentile(P[..., 2].min(axis=1), 5)) + opt.contact_height
+    low = ground.floor + opt.contact_height
     points = []
-    for f in _contact_points(parents, P, j):
+    for f in _contact_points(parents, ground, j):
+        P = ground.at(f)
         chain = [f]
         while chain[-1] >= 0:
             chain.append(int(parents[chain[-1]]))
@@ -366,8 +403,8 @@ def _stances(
         moved = bad[:, chain].any(axis=1)  # frames another glitch moves the contact point on
 
         def planted(t0: int, t1: int) -> bool:
-            fast = np.linalg.norm(P[t1, f] - P[t0, f]) * fps >= opt.contact_speed
-            return not (fast or moved[t0] or moved[t1] or P[t0, f, 2] >= low)
+            fast = np.linalg.norm(P[t1] - P[t0]) * fps >= opt.contact_speed
+            return not (fast or moved[t0] or moved[t1] or P[t0, 2] >= low)
 
         first, last = planted(s - 2, s - 1), planted(e + 1, e + 2)
         if first or last:
@@ -382,6 +419,7 @@ def _stances(
     target = np.zeros((n, len(points), 3))
     active = np.zeros((n, len(points)), dtype=bool)
     for i, (f, first, last, kept) in enumerate(points):
+        P = ground.at(f)
         pc = pos[1:-1, f]
         lever = np.linalg.norm(pc - pj, axis=-1)
         radius = np.minimum(opt.contact_radius, opt.contact_lever * lever)
@@ -391,14 +429,14 @@ def _stances(
             return (np.linalg.norm(pc - x, axis=-1) < radius) & reach & (pc[:, 2] < low) & kept
 
         if first:
-            still = holds(P[s - 1, f])
+            still = holds(P[s - 1])
             k = int(np.argmin(still)) if not still.all() else n
-            target[:k, i] = P[s - 1, f]
+            target[:k, i] = P[s - 1]
             active[:k, i] = True
         if last:
-            still = holds(P[e + 1, f])
+            still = holds(P[e + 1])
             k = n - (int(np.argmin(still[::-1])) if not still.all() else n)
-            end = P[e + 1, f]
+            end = P[e + 1]
             frac = ((np.arange(k, n) + 1.0) / (n + 1))[:, None]
             both = active[k:, i][:, None]  # one stance through the span: from one end to the other
             target[k:, i] = np.where(both, (1 - frac) * target[k:, i] + frac * end, end)
@@ -436,17 +474,17 @@ def _turn_onto(
 
 
 def _on_contact(
-    motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+    motion: Motion, R: np.ndarray, ground: _Ground, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
     opt: CleanOptions,
 ) -> np.ndarray | None:
     """``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
     that what stands on the floor below the joint stays where it stands, or None where
-    nothing does: the stances found (:func:`_stances`; ``P (F, J, 3)`` the clip's world
-    positions, ``bad (F, J)`` the glitched pairs), joint ``j`` turned onto them
+    nothing does: the stances found (:func:`_stances`; ``ground`` the clip's world
+    positions and floor, ``bad (F, J)`` the glitched pairs), joint ``j`` turned onto them
     (:func:`_turn_onto`), the turn easing out over ``contact_ramp`` seconds after the
     stance.  A frozen thigh or knee keeps its foot planted instead of sliding it; in the
     swing nothing holds the foot and the bridge is left as it is."""
-    found = _stances(motion, R, P, bad, j, s, e, q, opt)
+    found = _stances(motion, R, ground, bad, j, s, e, q, opt)
     if found is None:
         return None
     ramp = max(1, int(round(opt.contact_ramp * float(motion.fps))))
@@ -796,7 +834,7 @@ def correct_glitches(
     names_of = motion.skeleton.names
     swapped: set[tuple[int, int, int]] = set()
     matcher: _Matcher | None = None
-    world = None
+    ground: _Ground | None = None
     bad = _glitched(motion, glitches) if pos is not None else None
     for g in glitches:
         if g.kind == "lr_swap" and pos is not None:
@@ -823,10 +861,9 @@ def correct_glitches(
                 matcher = matcher or _matcher(motion, glitches, opt, canonical_joints(motion, mapping))
             fixed_q, curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
             if curve in ("cubic", "matched", "mirrored"):
-                if world is None:
-                    world = np.asarray(motion.world_positions(), dtype=float)
+                ground = ground or _Ground.of(motion, glitches)
                 bad = _glitched(motion, glitches) if bad is None else bad
-                planted = _on_contact(motion, arr, world, bad, j, g.start, g.end, fixed_q, opt)
+                planted = _on_contact(motion, arr, ground, bad, j, g.start, g.end, fixed_q, opt)
                 if planted is not None:
                     fixed_q, curve = planted, f"{curve}, on contact"
             arr[g.start : g.end + 1, j] = fixed_q

@@ -342,9 +342,19 @@ def _contact_points(parents: np.ndarray, ground: _Ground, j: int) -> list[int]:
 
 
 def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``(n, 4)``: per frame the rotation taking the vectors ``a (n, K, 3)`` onto ``b`` best
+    r"""``(n, 4)``: per frame the rotation taking the vectors ``a (n, K, 3)`` onto ``b`` best
     (the ``K`` weighted ``w (n, K)``): the shortest arc where one has weight, the Kabsch
-    fit where several have."""
+    fit where several have.
+
+    Not :func:`physmocap.markers.functional.kabsch`, whose maths differ in two ways that
+    matter here: it fits a rigid motion, rotation and translation, about the weighted
+    centroids of the two point sets, where this turn is about a fixed pivot (the joint,
+    which its parents place: it can turn, not move), :math:`\min_R \sum_k w_k \|R a_k -
+    b_k\|^2` with no centring (the centroids' fit turns about another point and, its
+    translation dropped, leaves the points off their targets); and with one point Kabsch is
+    undetermined (any turn about the target's direction fits), where the shortest arc is the
+    least turn that does.  (It also fits one constellation ``(K, 3)`` to every frame; here
+    the vectors change per frame.)"""
     from ..rotations import quat_between
 
     n = len(a)

@@ -610,3 +610,34 @@ def test_the_mirror_knows_sides_the_mapping_knows(walk):
     plain, _ = _mirror(walk, canonical_joints(walk))
     by_name, _ = _mirror(walk, {})
     np.testing.assert_array_equal(plain, by_name)
+
+
+def test_the_mirrored_body_is_scored_without_being_held(walk):
+    """The matcher holds one (F, J, 9) array, not a mirrored copy of it as well: the mirrored
+    windows' scores come from the plain body and the template reflected, and equal those of
+    the mirrored body built out (its glitched pairs left out; a side that does not move, so
+    not animated, read from its own rotations)."""
+    from scipy.signal import fftconvolve
+
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import _matcher
+    from physmocap.clean.detect import Glitch, animated_joints, canonical_joints
+    from physmocap.rotations import Rotation
+
+    R = np.array(walk.rotations, copy=True)
+    R[:, _joint(walk, "LeftToeBase")] = R[0, _joint(walk, "LeftToeBase")]  # still: not animated
+    m = dataclasses.replace(walk, rotations=R)
+    glitches = [Glitch("frozen", "RightUpLeg", 300, 347, 1.0), Glitch("spike", "LeftToeBase", 280, 282, 1.0),
+                Glitch("frozen", "Spine", 500, 530, 1.0)]
+    matcher = _matcher(m, glitches, CleanOptions(), canonical_joints(m))
+    held = [v for v in vars(matcher).values() if isinstance(v, np.ndarray) and v.shape[-1:] == (9,)]
+    assert len(held) == 1  # the plain body's rotation matrices, no mirrored copy
+    an = animated_joints(m)
+    other = matcher.twin[an]
+    assert _joint(m, "LeftToeBase") in other and _joint(m, "LeftToeBase") not in an
+    F, A = m.num_frames, len(an)
+    body = Rotation.from_quat(R[:, other].reshape(-1, 4)).as_matrix()
+    body = (matcher.reflect @ body @ matcher.reflect).reshape(F, A, 9) * ~matcher.bad[:, other][..., None]
+    T = matcher.M[250:400] * (~matcher.bad[250:400][:, an])[..., None]
+    built = fftconvolve(body.reshape(F, -1), T.reshape(150, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+    np.testing.assert_allclose(matcher._mirrored_scores(T), built, rtol=0, atol=1e-12 * np.abs(built).max())

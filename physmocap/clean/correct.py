@@ -99,9 +99,13 @@ class _Matcher:
     Mirrored (``mirror``: each joint's other side and the reflection :math:`M` across the
     body's midplane, :func:`_mirror`), the clip side of the correlation is the body mirrored,
     :math:`M R_{k'}(t) M` for every joint :math:`k` with its other side :math:`k'` (itself on
-    the midline), and the windows lend the other side's increments reflected, :math:`-Mv`
-    for a rotation vector :math:`v`; they may overlap the template (the other leg at the
-    same time, in a jump).
+    the midline; left out where :math:`k'` is glitched), and the windows lend the other
+    side's increments reflected, :math:`-Mv` for a rotation vector :math:`v`; they may
+    overlap the template (the other leg at the same time, in a jump).  The mirrored body is
+    not held: :math:`\operatorname{tr}((M X M)^\top Y) = \operatorname{tr}(X^\top M Y M)`,
+    so the plain body is correlated with the template reflected and moved onto the other
+    sides' columns instead (:meth:`_mirrored_scores`), the only ``(F, J, 9)`` array held
+    being the plain body's (about 1.2 GB for an hour of 38 joints at 120 Hz).
     """
 
     def __init__(
@@ -112,13 +116,50 @@ class _Matcher:
         self.R, self.animated, self.bad = R, animated, bad
         self.context, self.own_weight, self.best = context, own_weight, best
         self.M = Rotation.from_quat(R[:, animated].reshape(-1, 4)).as_matrix().reshape(F, len(animated), 9)
-        self.twin = self.reflect = self.Mm = None
+        self.twin = self.reflect = None
         if mirror is not None:
-            twin, reflect = mirror  # (J,) each joint's other side (itself on the midline), (3, 3)
-            self.twin, self.reflect = twin, reflect
-            src = Rotation.from_quat(R[:, twin[animated]].reshape(-1, 4)).as_matrix()
-            self.Mm = (reflect @ src @ reflect).reshape(F, len(animated), 9)
-            self.Mm = self.Mm * ~bad[:, twin[animated]][..., None]
+            # (J,) each joint's other side (itself on the midline), (3, 3)
+            self.twin, self.reflect = mirror
+
+    @property
+    def mirrors(self) -> bool:
+        """Whether the body can be mirrored (the skeleton has left and right sides)."""
+        return self.twin is not None
+
+    def _mirrored_scores(self, T: np.ndarray) -> np.ndarray:
+        r"""``(F - L + 1,)``: the template ``T (L, A, 9)`` (the animated joints' weighted
+        rotation matrices) correlated with the body mirrored, :math:`\sum_{t,k}
+        \operatorname{tr}(T_k(t)^\top M R_{k'}(t+x) M)` over the animated joints :math:`k`
+        whose other side :math:`k'` is not glitched at :math:`t+x`, without building the
+        mirrored body: the template reflected, :math:`M T_k M`, is correlated with the plain
+        body's column of :math:`k'` (or, where :math:`k'` is not animated, its own rotation
+        matrices), and the glitched pairs' terms are taken off one by one."""
+        from scipy.signal import fftconvolve
+
+        F, L, A = len(self.R), len(T), len(self.animated)
+        S = self.reflect
+        Tm = (S @ T.reshape(L, A, 3, 3) @ S).reshape(L, A, 9)
+        column = {k: i for i, k in enumerate(self.animated)}
+        other = np.array([int(self.twin[k]) for k in self.animated])
+        on_body = np.zeros_like(Tm)
+        rest = [i for i, c in enumerate(other) if c not in column]
+        for i, c in enumerate(other):
+            if c in column:
+                on_body[:, column[c]] = Tm[:, i]
+        score = fftconvolve(self.M.reshape(F, -1), on_body.reshape(L, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+        if rest:  # another side that does not move: its own rotations
+            X = Rotation.from_quat(self.R[:, other[rest]].reshape(-1, 4)).as_matrix().reshape(F, -1)
+            score += fftconvolve(X, Tm[:, rest].reshape(L, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+        frames, cols = np.nonzero(self.bad[:, other])
+        lag = np.arange(L)
+        for c0 in range(0, len(frames), 4096):  # the glitched pairs' terms, a bounded number at a time
+            u, i = frames[c0 : c0 + 4096], cols[c0 : c0 + 4096]
+            X = Rotation.from_quat(self.R[u, other[i]]).as_matrix().reshape(-1, 9)
+            terms = np.einsum("pc,tpc->pt", X, Tm[:, i])
+            x = u[:, None] - lag[None]
+            keep = (x >= 0) & (x <= F - L)
+            score -= np.bincount(x[keep], weights=terms[keep], minlength=F - L + 1)
+        return score
 
     def _scores(self, j: int, s: int, e: int, hidden: np.ndarray, mirrored: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(offsets d, scores)`` of the windows that may lend joint ``j`` motion for
@@ -134,9 +175,11 @@ class _Matcher:
         if j in self.animated:
             col = self.animated.index(j)
             w[:, col] *= self.own_weight * ~hidden[lo:hi]
-        T = (self.M[lo:hi] * w[..., None]).reshape(hi - lo, -1)
-        body = self.Mm if mirrored else self.M
-        score = fftconvolve(body.reshape(F, -1), T[::-1], mode="valid", axes=0).sum(axis=1)
+        T = self.M[lo:hi] * w[..., None]
+        if mirrored:
+            score = self._mirrored_scores(T)
+        else:
+            score = fftconvolve(self.M.reshape(F, -1), T.reshape(hi - lo, -1)[::-1], mode="valid", axes=0).sum(axis=1)
         d = np.arange(len(score)) - lo
         src = int(self.twin[j]) if mirrored else j
         ok = (s - 1 + d >= 0) & (e + 1 + d < F)
@@ -157,7 +200,7 @@ class _Matcher:
         from ..rotations import quat_conj, quat_mul
 
         F, n = len(self.R), e - s + 1
-        if s < 1 or e + 1 >= F or (mirrored and self.Mm is None):
+        if s < 1 or e + 1 >= F or (mirrored and not self.mirrors):
             return None
         hide = np.zeros(F, dtype=bool) if hidden is None else hidden.copy()
         hide[s : e + 1] = True
@@ -260,7 +303,7 @@ def _bridge(
     if matcher is None:
         return cubic, "cubic"
     F, n = len(R), e - s + 1
-    kinds = [False, True] if matcher.Mm is not None else [False]  # mirrored or not
+    kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
     err = np.zeros(1 + len(kinds))
     tested = np.zeros(1 + len(kinds), dtype=bool)
     for a in _pseudo_gaps(s, e, F):

@@ -41,7 +41,7 @@ from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
 from .positional import twin as positional_twin, twin_pairs
 
-__all__ = ["correct_glitches"]
+__all__ = ["blend_shares", "correct_glitches"]
 
 
 #: Glitch kinds that are repaired (the others are reported only).
@@ -284,6 +284,26 @@ def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
     return []
 
 
+def _blend_name(names: list[str], weights: np.ndarray) -> str:
+    """How an average of estimates is reported: ``"blend of mirrored 62% + matched 38%"``,
+    each estimate's name and share of the weights, the largest first."""
+    share = np.asarray(weights, dtype=float) / float(np.sum(weights))
+    order = np.argsort(-share, kind="stable")
+    return "blend of " + " + ".join(f"{names[i]} {share[i]:.0%}" for i in order)
+
+
+def blend_shares(corrected: str) -> dict[str, float]:
+    """The estimates a repair's report (``Glitch.corrected``) names, with their shares, the
+    largest first: ``"mirrored"`` -> ``{"mirrored": 1.0}``, ``"blend of mirrored 62% + matched
+    38%, on contact"`` -> ``{"mirrored": 0.62, "matched": 0.38}`` (what follows a comma says
+    what was done after, not how it was estimated)."""
+    how = corrected.split(",")[0]
+    if not how.startswith("blend of "):
+        return {how: 1.0}
+    parts = (part.rsplit(" ", 1) for part in how[len("blend of "):].split(" + "))
+    return {name: float(share.rstrip("%")) / 100.0 for name, share in parts}
+
+
 def _bridge(
     R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0
 ) -> tuple[np.ndarray, str]:
@@ -296,7 +316,9 @@ def _bridge(
     error are averaged (in the tangent space at the best one), weighted by the inverse of
     their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
-    and the best estimate's name ("cubic", "matched" or "mirrored")."""
+    and how: the estimate's name ("cubic", "matched" or "mirrored"), or where several were
+    averaged their names and weights (:func:`_blend_name`: "blend of mirrored 62% + matched
+    38%")."""
     from ..rotations import quat_conj, quat_mul
 
     cubic = _hermite(R[:, j], s - 1, e + 1)
@@ -332,7 +354,7 @@ def _bridge(
     w = 1.0 / np.maximum(err[near], 1e-12)
     base = found[best]
     step = sum(wi * Rotation.from_quat(quat_mul(quat_conj(base), found[i])).as_rotvec() for wi, i in zip(w, near))
-    return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), names[best]
+    return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), _blend_name([names[i] for i in near], w)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -677,8 +699,9 @@ def _judged_position(
     (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
     the best one's error are averaged, weighted by the inverse of their errors.  One that does
     not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
-    turning over) is left out.  Returns the positions and the best one's name, or None where
-    riding on the parent wins or no pseudo-gap can tell."""
+    turning over) is left out.  Returns the positions and how (the estimate's name, or where
+    several were averaged their names and weights, :func:`_blend_name`), or None where riding
+    on the parent wins or no pseudo-gap can tell."""
     F, n = len(P), e - s + 1
     joints = [j, parent, child] + ([anchor] if anchor is not None else [])
     if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, joints[1:]].any():
@@ -701,7 +724,8 @@ def _judged_position(
         return None
     near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
     w = 1.0 / np.maximum(err[near], 1e-12)
-    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), names[best]
+    how = names[best] if len(near) < 2 else _blend_name([names[i] for i in near], w)
+    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), how
 
 
 def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
@@ -861,12 +885,14 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" or "mirrored" (:class:`_Matcher`; ", on contact" where :func:`_on_contact`
-    then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
+    "matched" or "mirrored" (:class:`_Matcher`), or "blend of ..." where several of those
+    were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
+    ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
     back at its length, :func:`_along_bone`), "child-relative" or "among its neighbours" (riding
-    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`;
+    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`,
+    or "blend of ..." of these with their shares;
     ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
@@ -913,7 +939,7 @@ def correct_glitches(
             if 0 <= a and b < F:
                 matcher = matcher or _matcher(motion, glitches, opt, canonical_joints(motion, mapping))
             fixed_q, curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
-            if curve in ("cubic", "matched", "mirrored"):
+            if curve not in ("offset removed", "held"):  # bridged
                 ground = ground or _Ground.of(motion, glitches)
                 bad = _glitched(motion, glitches) if bad is None else bad
                 planted = _on_contact(motion, arr, ground, bad, j, g.start, g.end, fixed_q, opt)

@@ -667,3 +667,20 @@ def test_a_blend_is_reported_with_its_shares():
     assert blend_shares("matched, on contact") == {"matched": 1.0}
     assert blend_shares("blend of among its neighbours 60% + child-relative 40%, on bones") == {
         "among its neighbours": 0.6, "child-relative": 0.4}
+
+
+def test_the_window_correlation_is_summed_in_blocks_of_joints(monkeypatch):
+    """The matcher's correlation sums its channels in the frequency domain a block of joints at
+    a time: the same scores (to rounding) as correlating every channel and summing, whatever
+    the block."""
+    from scipy.signal import fftconvolve
+
+    import physmocap.clean.correct as correct
+
+    rng = np.random.default_rng(3)
+    body, T = rng.normal(size=(500, 7, 9)), rng.normal(size=(61, 7, 9))
+    T[:, 4] = 0.0  # a joint left out of the template
+    whole = fftconvolve(body.reshape(500, -1), T.reshape(61, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+    np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
+    monkeypatch.setattr(correct, "CORRELATION_BLOCK_BYTES", 1)  # one joint a block
+    np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())

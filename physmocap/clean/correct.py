@@ -78,6 +78,32 @@ def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
     return quat_mul(np.broadcast_to(R[a], (n, 4)), Rotation.from_rotvec(p).as_quat())
 
 
+#: Bytes of spectra :func:`_correlation` holds at once (a block of joints at a time).
+CORRELATION_BLOCK_BYTES = 64 << 20
+
+
+def _correlation(body: np.ndarray, T: np.ndarray) -> np.ndarray:
+    r"""``(F - L + 1,)``: :math:`\sum_{t,k,c} T_{kc}(t)\, B_{kc}(t + x)` for ``body B (F, K,
+    9)`` and a template ``T (L, K, 9)``, the correlation summed over its channels: in the
+    frequency domain, the channels' products summed before one inverse transform, a block of
+    joints at a time (:data:`CORRELATION_BLOCK_BYTES` of spectra), so neither the channels'
+    correlations nor the whole body's spectrum are ever held.  A joint whose template is all
+    zero is skipped."""
+    from scipy import fft
+
+    F, L, K = len(body), len(T), T.shape[1]
+    size = fft.next_fast_len(F + L - 1, real=True)
+    used = [k for k in range(K) if T[:, k].any()]
+    per = max(1, CORRELATION_BLOCK_BYTES // (16 * 9 * (size // 2 + 1)))
+    acc = np.zeros(size // 2 + 1, dtype=complex)
+    for b0 in range(0, len(used), per):
+        cols = used[b0 : b0 + per]
+        X = fft.rfft(np.asarray(body[:, cols], dtype=float).reshape(F, -1), size, axis=0)
+        Y = fft.rfft(T[::-1, cols].reshape(L, -1), size, axis=0)
+        acc += np.einsum("fc,fc->f", X, Y)
+    return fft.irfft(acc, size)[L - 1 : F]
+
+
 class _Matcher:
     r"""Bridging a glitch with the motion the clip itself makes elsewhere.
 
@@ -134,8 +160,6 @@ class _Matcher:
         mirrored body: the template reflected, :math:`M T_k M`, is correlated with the plain
         body's column of :math:`k'` (or, where :math:`k'` is not animated, its own rotation
         matrices), and the glitched pairs' terms are taken off one by one."""
-        from scipy.signal import fftconvolve
-
         F, L, A = len(self.R), len(T), len(self.animated)
         S = self.reflect
         Tm = (S @ T.reshape(L, A, 3, 3) @ S).reshape(L, A, 9)
@@ -146,10 +170,10 @@ class _Matcher:
         for i, c in enumerate(other):
             if c in column:
                 on_body[:, column[c]] = Tm[:, i]
-        score = fftconvolve(self.M.reshape(F, -1), on_body.reshape(L, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+        score = _correlation(self.M, on_body)
         if rest:  # another side that does not move: its own rotations
-            X = Rotation.from_quat(self.R[:, other[rest]].reshape(-1, 4)).as_matrix().reshape(F, -1)
-            score += fftconvolve(X, Tm[:, rest].reshape(L, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+            X = Rotation.from_quat(self.R[:, other[rest]].reshape(-1, 4)).as_matrix().reshape(F, len(rest), 9)
+            score += _correlation(X, Tm[:, rest])
         frames, cols = np.nonzero(self.bad[:, other])
         lag = np.arange(L)
         for c0 in range(0, len(frames), 4096):  # the glitched pairs' terms, a bounded number at a time
@@ -166,8 +190,6 @@ class _Matcher:
         ``s..e`` (``hidden (F,)``: joint ``j``'s frames not to use, the span included);
         ``mirrored``: windows of the body mirrored left to right (joint ``j``'s other side
         lends its motion, reflected)."""
-        from scipy.signal import fftconvolve
-
         F, n = len(self.R), e - s + 1
         c = max(2, int(round(self.context * n)))
         lo, hi = max(0, s - c), min(F, e + 1 + c)
@@ -179,7 +201,7 @@ class _Matcher:
         if mirrored:
             score = self._mirrored_scores(T)
         else:
-            score = fftconvolve(self.M.reshape(F, -1), T.reshape(hi - lo, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+            score = _correlation(self.M, T)
         d = np.arange(len(score)) - lo
         src = int(self.twin[j]) if mirrored else j
         ok = (s - 1 + d >= 0) & (e + 1 + d < F)

@@ -395,14 +395,19 @@ class Motion:
         percentile of the per-frame minimum is not.  A source that established
         the floor itself (a tracker levelled on its feet, whose lowest joints
         are ankles above the floor) records its height as ``meta["floor_z"]``,
-        which is returned instead.
+        which is returned instead.  The world positions are computed
+        :data:`WORLD_BLOCK_FRAMES` frames at a time (the same values as one pass).
         """
         if "floor_z" in self.meta:
             return float(self.meta["floor_z"])
-        z = self.world_positions()[..., 2]
-        if self.positions is not None:
-            z = np.where(np.isfinite(z), z, np.inf)
-        lowest = z.min(axis=1)
+        F = self.num_frames
+        lowest = np.empty(F)
+        for start in range(0, F, WORLD_BLOCK_FRAMES):
+            end = min(start + WORLD_BLOCK_FRAMES, F)
+            z = self.slice_frames(start, end).world_positions()[..., 2]
+            if self.positions is not None:
+                z = np.where(np.isfinite(z), z, np.inf)
+            lowest[start:end] = z.min(axis=1)
         lowest = lowest[np.isfinite(lowest)]
         if lowest.size == 0:
             return 0.0

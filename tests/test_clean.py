@@ -25,6 +25,14 @@ def _joint(m, name):
     return m.skeleton.names.index(name)
 
 
+def _led_by(corrected: str) -> str:
+    """The estimate with the largest share in a repair's report ("cubic" of "blend of cubic
+    59% + mirrored 41%")."""
+    from physmocap.clean.correct import blend_shares
+
+    return next(iter(blend_shares(corrected)))
+
+
 def _with(m, j, frames, q=None, hold=False):
     R = np.array(m.rotations, copy=True)
     if hold:
@@ -51,7 +59,7 @@ def test_rotation_glitches_are_found_named_and_repaired(walk, kind, deg, frames)
     fixed, report = clean(bad)
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
     assert len(mine) == 1 and mine[0].kind == kind and (mine[0].start, mine[0].end) == (frames[0], frames[-1])
-    assert mine[0].corrected == ("offset removed" if len(frames) >= 0.15 * walk.fps else "cubic")
+    assert _led_by(mine[0].corrected) == ("offset removed" if len(frames) >= 0.15 * walk.fps else "cubic")
     P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
     before = np.linalg.norm(Pb[frames] - P0[frames], axis=-1).max()
     after = np.linalg.norm(Pf[frames] - P0[frames], axis=-1).max()
@@ -115,7 +123,7 @@ def test_hyperextension_is_found_named_and_repaired(walk, joint, excess, frames)
     assert len(mine) == 1, report.table()
     g = mine[0]
     assert (g.start, g.end) == (frames[0], frames[-1]) and g.joint == walk.skeleton.names[j]
-    assert g.plane == "sagittal" and g.corrected == "cubic"
+    assert g.plane == "sagittal" and _led_by(g.corrected) == "cubic"
     # a sudden bend is a spike that names its movement; its excess is the anatomical glitch's severity
     from physmocap.clean.detect import anatomical_glitches
 
@@ -383,7 +391,7 @@ def test_frozen_knee_gets_the_motion_the_body_makes_elsewhere(walk):
     frames = list(range(300, 348))
     bad = _with(walk, j, frames, hold=True)
     fixed, report = clean(bad)
-    mine = [(g.kind, g.start, g.end, g.corrected) for g in report.glitches if g.joint == "RightLeg"]
+    mine = [(g.kind, g.start, g.end, _led_by(g.corrected)) for g in report.glitches if g.joint == "RightLeg"]
     assert mine in ([("frozen", 300, 347, "matched")], [("frozen", 300, 347, "mirrored")])
     P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
     before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
@@ -422,16 +430,17 @@ def test_frozen_thigh_gets_the_other_legs_motion_mirrored(walk):
     assert errors[True] < 0.5 * errors[False], errors
     # chosen on the thigh's own motion next to the span (no foot held: contact_height ~ 0)
     fixed, done = correct_glitches(bad, glitch, CleanOptions(contact_height=1e-6))
-    assert done[0].corrected == "mirrored"
+    assert _led_by(done[0].corrected) == "mirrored"
     assert _span_rms(fixed, walk, frames) < 0.05 * _span_rms(bad, walk, frames)
 
 
 def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
     """Where two or three bridges rebuild the joint's own motion next to the span about as
     well (``blend_ratio``), their mean, weighted by the inverse of that error, is used;
-    ``blend_ratio=1`` keeps the best one alone."""
+    ``blend_ratio=1`` keeps the best one alone.  The report names the blend, not the best
+    bridge alone: "blend of cubic 59% + mirrored 41%", each bridge's share of the weights."""
     from physmocap.clean import CleanOptions
-    from physmocap.clean.correct import _bridge, _hermite, _matcher
+    from physmocap.clean.correct import _bridge, _hermite, _matcher, blend_shares
     from physmocap.clean.detect import Glitch, _angle, canonical_joints
 
     j, frames = _joint(walk, "LeftForeArm"), list(range(200, 248))
@@ -442,7 +451,10 @@ def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
     alone, name = _bridge(R, j, 200, 247, matcher, 1.0)
     assert any(np.allclose(alone, q) for q in found)
     mixed, name_mixed = _bridge(R, j, 200, 247, matcher, 1e9)  # every bridge counts
-    assert name_mixed == name
+    assert name in ("cubic", "matched", "mirrored")
+    shares = blend_shares(name_mixed)
+    assert name_mixed.startswith("blend of ") and sorted(shares) == ["cubic", "matched", "mirrored"]
+    assert next(iter(shares)) == name and abs(sum(shares.values()) - 1.0) <= 0.015  # the best leads; whole percents
     spread = max(_angle(a, b).max() for a in found for b in found)
     assert min(_angle(mixed, q).max() for q in found) > 0.01 * spread  # none of them alone
     assert max(_angle(mixed, q).max() for q in found) <= spread + 1e-6  # among them
@@ -538,6 +550,7 @@ def test_clean_options_are_validated():
 def test_repair_settings_come_from_the_options(walk):
     """``offset_min_time`` decides between taking a segment's offset off and bridging it."""
     from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import blend_shares
 
     j = _joint(walk, "LeftForeArm")
     frames = list(range(180, 216))  # 0.3 s
@@ -545,7 +558,7 @@ def test_repair_settings_come_from_the_options(walk):
     bad = _with(walk, j, frames, q)
     _, report = clean(bad, CleanOptions(offset_min_time=1.0, match_windows=1))
     mine = [g for g in report.glitches if g.joint == "LeftForeArm"]
-    assert len(mine) == 1 and mine[0].corrected.split(",")[0] in ("cubic", "matched", "mirrored")
+    assert len(mine) == 1 and set(blend_shares(mine[0].corrected)) <= {"cubic", "matched", "mirrored"}
 
 
 def test_glitch_at_the_clips_start_holds_the_first_good_rotation(walk):
@@ -610,3 +623,64 @@ def test_the_mirror_knows_sides_the_mapping_knows(walk):
     plain, _ = _mirror(walk, canonical_joints(walk))
     by_name, _ = _mirror(walk, {})
     np.testing.assert_array_equal(plain, by_name)
+
+
+def test_the_mirrored_body_is_scored_without_being_held(walk):
+    """The matcher holds one (F, J, 9) array, not a mirrored copy of it as well: the mirrored
+    windows' scores come from the plain body and the template reflected, and equal those of
+    the mirrored body built out (its glitched pairs left out; a side that does not move, so
+    not animated, read from its own rotations)."""
+    from scipy.signal import fftconvolve
+
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import _matcher
+    from physmocap.clean.detect import Glitch, animated_joints, canonical_joints
+    from physmocap.rotations import Rotation
+
+    R = np.array(walk.rotations, copy=True)
+    R[:, _joint(walk, "LeftToeBase")] = R[0, _joint(walk, "LeftToeBase")]  # still: not animated
+    m = dataclasses.replace(walk, rotations=R)
+    glitches = [Glitch("frozen", "RightUpLeg", 300, 347, 1.0), Glitch("spike", "LeftToeBase", 280, 282, 1.0),
+                Glitch("frozen", "Spine", 500, 530, 1.0)]
+    matcher = _matcher(m, glitches, CleanOptions(), canonical_joints(m))
+    held = [v for v in vars(matcher).values() if isinstance(v, np.ndarray) and v.shape[-1:] == (9,)]
+    assert len(held) == 1  # the plain body's rotation matrices, no mirrored copy
+    an = animated_joints(m)
+    other = matcher.twin[an]
+    assert _joint(m, "LeftToeBase") in other and _joint(m, "LeftToeBase") not in an
+    F, A = m.num_frames, len(an)
+    body = Rotation.from_quat(R[:, other].reshape(-1, 4)).as_matrix()
+    body = (matcher.reflect @ body @ matcher.reflect).reshape(F, A, 9) * ~matcher.bad[:, other][..., None]
+    T = matcher.M[250:400] * (~matcher.bad[250:400][:, an])[..., None]
+    built = fftconvolve(body.reshape(F, -1), T.reshape(150, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+    np.testing.assert_allclose(matcher._mirrored_scores(T), built, rtol=0, atol=1e-12 * np.abs(built).max())
+
+
+def test_a_blend_is_reported_with_its_shares():
+    """The report names every bridge of an average and its share of the weights, the largest
+    first, and blend_shares reads it back (a single estimate is all of it)."""
+    from physmocap.clean.correct import _blend_name, blend_shares
+
+    name = _blend_name(["cubic", "matched", "mirrored"], np.array([1.0, 2.0, 5.0]))
+    assert name == "blend of mirrored 62% + matched 25% + cubic 12%"
+    assert blend_shares(name + ", on contact") == {"mirrored": 0.62, "matched": 0.25, "cubic": 0.12}
+    assert blend_shares("matched, on contact") == {"matched": 1.0}
+    assert blend_shares("blend of among its neighbours 60% + child-relative 40%, on bones") == {
+        "among its neighbours": 0.6, "child-relative": 0.4}
+
+
+def test_the_window_correlation_is_summed_in_blocks_of_joints(monkeypatch):
+    """The matcher's correlation sums its channels in the frequency domain a block of joints at
+    a time: the same scores (to rounding) as correlating every channel and summing, whatever
+    the block."""
+    from scipy.signal import fftconvolve
+
+    import physmocap.clean.correct as correct
+
+    rng = np.random.default_rng(3)
+    body, T = rng.normal(size=(500, 7, 9)), rng.normal(size=(61, 7, 9))
+    T[:, 4] = 0.0  # a joint left out of the template
+    whole = fftconvolve(body.reshape(500, -1), T.reshape(61, -1)[::-1], mode="valid", axes=0).sum(axis=1)
+    np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
+    monkeypatch.setattr(correct, "CORRELATION_BLOCK_BYTES", 1)  # one joint a block
+    np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())

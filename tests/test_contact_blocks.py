@@ -27,3 +27,13 @@ def test_positional_motion_is_not_copied() -> None:
     positional = motion.replace(positions=motion.world_positions(), rotations=None, translations=None)
     world, column = positional.joint_world_positions([3, 1])
     assert world is positional.positions and column == {3: 3, 1: 1}
+
+
+def test_floor_height_in_blocks_is_the_whole_clips(monkeypatch) -> None:
+    import physmocap.motion as motion_module
+    from physmocap.sources import load_motion
+
+    motion = load_motion(shared_file("cmu_12_01_walk.bvh"))
+    whole = float(np.percentile(motion.world_positions()[..., 2].min(axis=1), 5.0))
+    monkeypatch.setattr(motion_module, "WORLD_BLOCK_FRAMES", 97)  # several blocks, the last one short
+    assert motion.floor_height() == whole

@@ -41,7 +41,7 @@ from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
 from .positional import twin as positional_twin, twin_pairs
 
-__all__ = ["correct_glitches"]
+__all__ = ["blend_shares", "correct_glitches"]
 
 
 #: Glitch kinds that are repaired (the others are reported only).
@@ -78,6 +78,32 @@ def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
     return quat_mul(np.broadcast_to(R[a], (n, 4)), Rotation.from_rotvec(p).as_quat())
 
 
+#: Bytes of spectra :func:`_correlation` holds at once (a block of joints at a time).
+CORRELATION_BLOCK_BYTES = 64 << 20
+
+
+def _correlation(body: np.ndarray, T: np.ndarray) -> np.ndarray:
+    r"""``(F - L + 1,)``: :math:`\sum_{t,k,c} T_{kc}(t)\, B_{kc}(t + x)` for ``body B (F, K,
+    9)`` and a template ``T (L, K, 9)``, the correlation summed over its channels: in the
+    frequency domain, the channels' products summed before one inverse transform, a block of
+    joints at a time (:data:`CORRELATION_BLOCK_BYTES` of spectra), so neither the channels'
+    correlations nor the whole body's spectrum are ever held.  A joint whose template is all
+    zero is skipped."""
+    from scipy import fft
+
+    F, L, K = len(body), len(T), T.shape[1]
+    size = fft.next_fast_len(F + L - 1, real=True)
+    used = [k for k in range(K) if T[:, k].any()]
+    per = max(1, CORRELATION_BLOCK_BYTES // (16 * 9 * (size // 2 + 1)))
+    acc = np.zeros(size // 2 + 1, dtype=complex)
+    for b0 in range(0, len(used), per):
+        cols = used[b0 : b0 + per]
+        X = fft.rfft(np.asarray(body[:, cols], dtype=float).reshape(F, -1), size, axis=0)
+        Y = fft.rfft(T[::-1, cols].reshape(L, -1), size, axis=0)
+        acc += np.einsum("fc,fc->f", X, Y)
+    return fft.irfft(acc, size)[L - 1 : F]
+
+
 class _Matcher:
     r"""Bridging a glitch with the motion the clip itself makes elsewhere.
 
@@ -99,9 +125,13 @@ class _Matcher:
     Mirrored (``mirror``: each joint's other side and the reflection :math:`M` across the
     body's midplane, :func:`_mirror`), the clip side of the correlation is the body mirrored,
     :math:`M R_{k'}(t) M` for every joint :math:`k` with its other side :math:`k'` (itself on
-    the midline), and the windows lend the other side's increments reflected, :math:`-Mv`
-    for a rotation vector :math:`v`; they may overlap the template (the other leg at the
-    same time, in a jump).
+    the midline; left out where :math:`k'` is glitched), and the windows lend the other
+    side's increments reflected, :math:`-Mv` for a rotation vector :math:`v`; they may
+    overlap the template (the other leg at the same time, in a jump).  The mirrored body is
+    not held: :math:`\operatorname{tr}((M X M)^\top Y) = \operatorname{tr}(X^\top M Y M)`,
+    so the plain body is correlated with the template reflected and moved onto the other
+    sides' columns instead (:meth:`_mirrored_scores`), the only ``(F, J, 9)`` array held
+    being the plain body's (about 1.2 GB for an hour of 38 joints at 120 Hz).
     """
 
     def __init__(
@@ -112,21 +142,54 @@ class _Matcher:
         self.R, self.animated, self.bad = R, animated, bad
         self.context, self.own_weight, self.best = context, own_weight, best
         self.M = Rotation.from_quat(R[:, animated].reshape(-1, 4)).as_matrix().reshape(F, len(animated), 9)
-        self.twin = self.reflect = self.Mm = None
+        self.twin = self.reflect = None
         if mirror is not None:
-            twin, reflect = mirror  # (J,) each joint's other side (itself on the midline), (3, 3)
-            self.twin, self.reflect = twin, reflect
-            src = Rotation.from_quat(R[:, twin[animated]].reshape(-1, 4)).as_matrix()
-            self.Mm = (reflect @ src @ reflect).reshape(F, len(animated), 9)
-            self.Mm = self.Mm * ~bad[:, twin[animated]][..., None]
+            # (J,) each joint's other side (itself on the midline), (3, 3)
+            self.twin, self.reflect = mirror
+
+    @property
+    def mirrors(self) -> bool:
+        """Whether the body can be mirrored (the skeleton has left and right sides)."""
+        return self.twin is not None
+
+    def _mirrored_scores(self, T: np.ndarray) -> np.ndarray:
+        r"""``(F - L + 1,)``: the template ``T (L, A, 9)`` (the animated joints' weighted
+        rotation matrices) correlated with the body mirrored, :math:`\sum_{t,k}
+        \operatorname{tr}(T_k(t)^\top M R_{k'}(t+x) M)` over the animated joints :math:`k`
+        whose other side :math:`k'` is not glitched at :math:`t+x`, without building the
+        mirrored body: the template reflected, :math:`M T_k M`, is correlated with the plain
+        body's column of :math:`k'` (or, where :math:`k'` is not animated, its own rotation
+        matrices), and the glitched pairs' terms are taken off one by one."""
+        F, L, A = len(self.R), len(T), len(self.animated)
+        S = self.reflect
+        Tm = (S @ T.reshape(L, A, 3, 3) @ S).reshape(L, A, 9)
+        column = {k: i for i, k in enumerate(self.animated)}
+        other = np.array([int(self.twin[k]) for k in self.animated])
+        on_body = np.zeros_like(Tm)
+        rest = [i for i, c in enumerate(other) if c not in column]
+        for i, c in enumerate(other):
+            if c in column:
+                on_body[:, column[c]] = Tm[:, i]
+        score = _correlation(self.M, on_body)
+        if rest:  # another side that does not move: its own rotations
+            X = Rotation.from_quat(self.R[:, other[rest]].reshape(-1, 4)).as_matrix().reshape(F, len(rest), 9)
+            score += _correlation(X, Tm[:, rest])
+        frames, cols = np.nonzero(self.bad[:, other])
+        lag = np.arange(L)
+        for c0 in range(0, len(frames), 4096):  # the glitched pairs' terms, a bounded number at a time
+            u, i = frames[c0 : c0 + 4096], cols[c0 : c0 + 4096]
+            X = Rotation.from_quat(self.R[u, other[i]]).as_matrix().reshape(-1, 9)
+            terms = np.einsum("pc,tpc->pt", X, Tm[:, i])
+            x = u[:, None] - lag[None]
+            keep = (x >= 0) & (x <= F - L)
+            score -= np.bincount(x[keep], weights=terms[keep], minlength=F - L + 1)
+        return score
 
     def _scores(self, j: int, s: int, e: int, hidden: np.ndarray, mirrored: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """``(offsets d, scores)`` of the windows that may lend joint ``j`` motion for
         ``s..e`` (``hidden (F,)``: joint ``j``'s frames not to use, the span included);
         ``mirrored``: windows of the body mirrored left to right (joint ``j``'s other side
         lends its motion, reflected)."""
-        from scipy.signal import fftconvolve
-
         F, n = len(self.R), e - s + 1
         c = max(2, int(round(self.context * n)))
         lo, hi = max(0, s - c), min(F, e + 1 + c)
@@ -134,9 +197,11 @@ class _Matcher:
         if j in self.animated:
             col = self.animated.index(j)
             w[:, col] *= self.own_weight * ~hidden[lo:hi]
-        T = (self.M[lo:hi] * w[..., None]).reshape(hi - lo, -1)
-        body = self.Mm if mirrored else self.M
-        score = fftconvolve(body.reshape(F, -1), T[::-1], mode="valid", axes=0).sum(axis=1)
+        T = self.M[lo:hi] * w[..., None]
+        if mirrored:
+            score = self._mirrored_scores(T)
+        else:
+            score = _correlation(self.M, T)
         d = np.arange(len(score)) - lo
         src = int(self.twin[j]) if mirrored else j
         ok = (s - 1 + d >= 0) & (e + 1 + d < F)
@@ -157,7 +222,7 @@ class _Matcher:
         from ..rotations import quat_conj, quat_mul
 
         F, n = len(self.R), e - s + 1
-        if s < 1 or e + 1 >= F or (mirrored and self.Mm is None):
+        if s < 1 or e + 1 >= F or (mirrored and not self.mirrors):
             return None
         hide = np.zeros(F, dtype=bool) if hidden is None else hidden.copy()
         hide[s : e + 1] = True
@@ -241,6 +306,26 @@ def _pseudo_gaps(s: int, e: int, F: int) -> list[int]:
     return []
 
 
+def _blend_name(names: list[str], weights: np.ndarray) -> str:
+    """How an average of estimates is reported: ``"blend of mirrored 62% + matched 38%"``,
+    each estimate's name and share of the weights, the largest first."""
+    share = np.asarray(weights, dtype=float) / float(np.sum(weights))
+    order = np.argsort(-share, kind="stable")
+    return "blend of " + " + ".join(f"{names[i]} {share[i]:.0%}" for i in order)
+
+
+def blend_shares(corrected: str) -> dict[str, float]:
+    """The estimates a repair's report (``Glitch.corrected``) names, with their shares, the
+    largest first: ``"mirrored"`` -> ``{"mirrored": 1.0}``, ``"blend of mirrored 62% + matched
+    38%, on contact"`` -> ``{"mirrored": 0.62, "matched": 0.38}`` (what follows a comma says
+    what was done after, not how it was estimated)."""
+    how = corrected.split(",")[0]
+    if not how.startswith("blend of "):
+        return {how: 1.0}
+    parts = (part.rsplit(" ", 1) for part in how[len("blend of "):].split(" + "))
+    return {name: float(share.rstrip("%")) / 100.0 for name, share in parts}
+
+
 def _bridge(
     R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0
 ) -> tuple[np.ndarray, str]:
@@ -253,14 +338,16 @@ def _bridge(
     error are averaged (in the tangent space at the best one), weighted by the inverse of
     their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
-    and the best estimate's name ("cubic", "matched" or "mirrored")."""
+    and how: the estimate's name ("cubic", "matched" or "mirrored"), or where several were
+    averaged their names and weights (:func:`_blend_name`: "blend of mirrored 62% + matched
+    38%")."""
     from ..rotations import quat_conj, quat_mul
 
     cubic = _hermite(R[:, j], s - 1, e + 1)
     if matcher is None:
         return cubic, "cubic"
     F, n = len(R), e - s + 1
-    kinds = [False, True] if matcher.Mm is not None else [False]  # mirrored or not
+    kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
     err = np.zeros(1 + len(kinds))
     tested = np.zeros(1 + len(kinds), dtype=bool)
     for a in _pseudo_gaps(s, e, F):
@@ -289,10 +376,45 @@ def _bridge(
     w = 1.0 / np.maximum(err[near], 1e-12)
     base = found[best]
     step = sum(wi * Rotation.from_quat(quat_mul(quat_conj(base), found[i])).as_rotvec() for wi, i in zip(w, near))
-    return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), names[best]
+    return quat_mul(base, Rotation.from_rotvec(step / w.sum()).as_quat()), _blend_name([names[i] for i in near], w)
 
 
-def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
+@dataclasses.dataclass(frozen=True)
+class _Ground:
+    """What :func:`_stances` reads of the clip: the world positions of the joints below the
+    rotational glitches (``positions (F, K, 3)``, ``column``: joint index -> column of it;
+    :meth:`~physmocap.motion.Motion.joint_world_positions`, a block of frames at a time) and
+    the floor's height (:meth:`~physmocap.motion.Motion.floor_height`)."""
+
+    positions: np.ndarray
+    column: dict[int, int]
+    floor: float
+
+    @classmethod
+    def of(cls, motion: Motion, glitches: list[Glitch]) -> "_Ground":
+        """The joints below those of ``glitches`` that are repaired in rotation."""
+        parents = np.asarray(motion.skeleton.parents)
+        names = {n: j for j, n in enumerate(motion.skeleton.names)}
+        tops = {names[g.joint] for g in glitches if REPAIRED.get(g.kind) == "rotation"}
+        below = [k for k in range(len(parents)) if _ancestors(parents, k) & tops]
+        positions, column = motion.joint_world_positions(below)
+        return cls(positions, column, motion.floor_height())
+
+    def at(self, joint: int) -> np.ndarray:
+        """``(F, 3)``: the world positions of ``joint``."""
+        return self.positions[:, self.column[joint]]
+
+
+def _ancestors(parents: np.ndarray, k: int) -> set[int]:
+    """The joints above joint ``k`` (its parent, the parent's parent, ...)."""
+    out = set()
+    while parents[k] >= 0:
+        k = int(parents[k])
+        out.add(k)
+    return out
+
+
+def _contact_points(parents: np.ndarray, ground: _Ground, j: int) -> list[int]:
     """Per child of joint ``j``, the lowest (median height over the clip) joint of its
     subtree (end sites included): the points below ``j`` that may touch the floor."""
     top = {}
@@ -302,13 +424,24 @@ def _contact_points(parents: np.ndarray, P: np.ndarray, j: int) -> list[int]:
             p, c = int(parents[p]), p
         if p == j:
             top.setdefault(c, []).append(k)
-    return [ks[int(np.argmin(np.median(P[:, ks, 2], axis=0)))] for ks in top.values()]
+    return [ks[int(np.argmin(np.median(ground.positions[:, [ground.column[k] for k in ks], 2], axis=0)))]
+            for ks in top.values()]
 
 
 def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``(n, 4)``: per frame the rotation taking the vectors ``a (n, K, 3)`` onto ``b`` best
+    r"""``(n, 4)``: per frame the rotation taking the vectors ``a (n, K, 3)`` onto ``b`` best
     (the ``K`` weighted ``w (n, K)``): the shortest arc where one has weight, the Kabsch
-    fit where several have."""
+    fit where several have.
+
+    Not :func:`physmocap.markers.functional.kabsch`, whose maths differ in two ways that
+    matter here: it fits a rigid motion, rotation and translation, about the weighted
+    centroids of the two point sets, where this turn is about a fixed pivot (the joint,
+    which its parents place: it can turn, not move), :math:`\min_R \sum_k w_k \|R a_k -
+    b_k\|^2` with no centring (the centroids' fit turns about another point and, its
+    translation dropped, leaves the points off their targets); and with one point Kabsch is
+    undetermined (any turn about the target's direction fits), where the shortest arc is the
+    least turn that does.  (It also fits one constellation ``(K, 3)`` to every frame; here
+    the vectors change per frame.)"""
     from ..rotations import quat_between
 
     n = len(a)
@@ -327,38 +460,39 @@ def _turn(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     return out
 
 
-def _on_contact(
-    motion: Motion, R: np.ndarray, P: np.ndarray, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+def _stances(
+    motion: Motion, R: np.ndarray, ground: _Ground, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
     opt: CleanOptions,
-) -> np.ndarray | None:
-    r"""``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
-    that what stands on the floor below the joint stays where it stands, or None where
-    nothing does.
+) -> tuple[list[int], np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    r"""Where the points below joint ``j`` stand on the floor over its bridge ``q (n, 4)`` on
+    frames ``s..e`` of ``R (F, J, 4)``: ``(points, target (n, K, 3), active (n, K), pos, wr)``,
+    the ``K`` contact points (joint indices), where each should stand on each frame of the
+    span and on which frames it does, and the forward kinematics of the bridged pose on
+    frames ``s - 1 .. e + 1`` (``pos (n + 2, J, 3)``, world rotations ``wr (n + 2, J, 4)``);
+    None where nothing stands.
 
     Below each child of ``j`` the lowest point (median height; a toe, a heel) is a contact
     where, on the good frames just before the span (or just after it), it is within
     ``contact_height`` of the clip's floor and slower than ``contact_speed``
-    (``P (F, J, 3)``: the clip's world positions; ``bad (F, J)``: the glitched pairs; the
+    (``ground``: the clip's world positions and floor; ``bad (F, J)``: the glitched pairs; the
     frames where another glitch moves the point, a joint above it, are no stance).  The stance goes on
     into the span (or back from its end) while the bridged pose keeps the point within
     ``contact_radius`` of where it stood (and ``contact_lever`` of its distance from joint
     ``j``: a short lever, a foot's toe, says less) and the rest of the limb, its rotations
-    all good, can still reach it (the distance from joint ``j`` within ``contact_reach``);
-    on those frames joint ``j`` is turned so the points stand where they stood (the shortest
-    arc for one, the Kabsch fit for several), the turn easing out over ``contact_ramp``
-    seconds after the stance.  A frozen thigh or knee keeps its foot planted instead of
-    sliding it; in the swing nothing holds the foot and the bridge is left as it is."""
+    all good, can still reach it (the distance from joint ``j`` within ``contact_reach``); a
+    stance from both ends through the whole span moves its point steadily from where it
+    stood before to where it stands after."""
     from ..motion import forward_kinematics
-    from ..rotations import quat_conj, quat_mul
 
     F, n = len(R), e - s + 1
     if s < 2 or e + 2 >= F:
         return None
     fps = float(motion.fps)
     parents = np.asarray(motion.skeleton.parents)
-    low = float(np.percentile(P[..., 2].min(axis=1), 5)) + opt.contact_height
+    low = ground.floor + opt.contact_height
     points = []
-    for f in _contact_points(parents, P, j):
+    for f in _contact_points(parents, ground, j):
+        P = ground.at(f)
         chain = [f]
         while chain[-1] >= 0:
             chain.append(int(parents[chain[-1]]))
@@ -366,8 +500,8 @@ def _on_contact(
         moved = bad[:, chain].any(axis=1)  # frames another glitch moves the contact point on
 
         def planted(t0: int, t1: int) -> bool:
-            fast = np.linalg.norm(P[t1, f] - P[t0, f]) * fps >= opt.contact_speed
-            return not (fast or moved[t0] or moved[t1] or P[t0, f, 2] >= low)
+            fast = np.linalg.norm(P[t1] - P[t0]) * fps >= opt.contact_speed
+            return not (fast or moved[t0] or moved[t1] or P[t0, 2] >= low)
 
         first, last = planted(s - 2, s - 1), planted(e + 1, e + 2)
         if first or last:
@@ -382,6 +516,7 @@ def _on_contact(
     target = np.zeros((n, len(points), 3))
     active = np.zeros((n, len(points)), dtype=bool)
     for i, (f, first, last, kept) in enumerate(points):
+        P = ground.at(f)
         pc = pos[1:-1, f]
         lever = np.linalg.norm(pc - pj, axis=-1)
         radius = np.minimum(opt.contact_radius, opt.contact_lever * lever)
@@ -391,32 +526,66 @@ def _on_contact(
             return (np.linalg.norm(pc - x, axis=-1) < radius) & reach & (pc[:, 2] < low) & kept
 
         if first:
-            still = holds(P[s - 1, f])
+            still = holds(P[s - 1])
             k = int(np.argmin(still)) if not still.all() else n
-            target[:k, i] = P[s - 1, f]
+            target[:k, i] = P[s - 1]
             active[:k, i] = True
         if last:
-            still = holds(P[e + 1, f])
+            still = holds(P[e + 1])
             k = n - (int(np.argmin(still[::-1])) if not still.all() else n)
-            end = P[e + 1, f]
+            end = P[e + 1]
             frac = ((np.arange(k, n) + 1.0) / (n + 1))[:, None]
             both = active[k:, i][:, None]  # one stance through the span: from one end to the other
             target[k:, i] = np.where(both, (1 - frac) * target[k:, i] + frac * end, end)
             active[k:, i] = True
     if not active.any():
         return None
-    f_idx = [f for f, _, _, _ in points]
-    turn = _turn(pos[1:-1, f_idx] - pj[:, None], target - pj[:, None], active.astype(float))  # world
+    return [f for f, _, _, _ in points], target, active, pos, wr
+
+
+def _turn_onto(
+    parents: np.ndarray, j: int, q: np.ndarray, points: list[int], target: np.ndarray, active: np.ndarray,
+    pos: np.ndarray, wr: np.ndarray, ramp: int,
+) -> np.ndarray:
+    """Joint ``j``'s bridge ``q (n, 4)`` turned so that the ``points`` below it stand at
+    ``target (n, K, 3)`` on the frames where they are ``active (n, K)`` (:func:`_stances`,
+    with the bridged pose's world positions ``pos`` and rotations ``wr`` on the span and one
+    frame either side): on those frames the world turn about joint ``j`` that takes the
+    points there (:func:`_turn`), expressed in the parent's frame and applied before ``q``;
+    on the other frames the nearest stance frame's turn, eased out linearly over ``ramp``
+    frames."""
+    from ..rotations import quat_conj, quat_mul
+
+    n = len(q)
+    pj = pos[1:-1, j]
+    turn = _turn(pos[1:-1, points] - pj[:, None], target - pj[:, None], active.astype(float))  # world
     on = np.flatnonzero(active.any(axis=1))
     idx = np.arange(n)
     near = on[np.argmin(np.abs(idx[:, None] - on[None]), axis=1)]
-    ramp = max(1, int(round(opt.contact_ramp * fps)))
     weight = np.clip(1.0 - np.abs(idx - near) / (ramp + 1.0), 0.0, 1.0)
     p = int(parents[j])
     wp = wr[1:-1, p][near] if p >= 0 else np.tile([0.0, 0.0, 0.0, 1.0], (n, 1))
     local = quat_mul(quat_mul(quat_conj(wp), turn[near]), wp)  # the world turn in the parent's frame
     local = Rotation.from_rotvec(Rotation.from_quat(local).as_rotvec() * weight[:, None]).as_quat()
     return quat_mul(local, q)
+
+
+def _on_contact(
+    motion: Motion, R: np.ndarray, ground: _Ground, bad: np.ndarray, j: int, s: int, e: int, q: np.ndarray,
+    opt: CleanOptions,
+) -> np.ndarray | None:
+    """``q (n, 4)``, joint ``j``'s bridge over frames ``s..e`` of ``R (F, J, 4)``, turned so
+    that what stands on the floor below the joint stays where it stands, or None where
+    nothing does: the stances found (:func:`_stances`; ``ground`` the clip's world
+    positions and floor, ``bad (F, J)`` the glitched pairs), joint ``j`` turned onto them
+    (:func:`_turn_onto`), the turn easing out over ``contact_ramp`` seconds after the
+    stance.  A frozen thigh or knee keeps its foot planted instead of sliding it; in the
+    swing nothing holds the foot and the bridge is left as it is."""
+    found = _stances(motion, R, ground, bad, j, s, e, q, opt)
+    if found is None:
+        return None
+    ramp = max(1, int(round(opt.contact_ramp * float(motion.fps))))
+    return _turn_onto(np.asarray(motion.skeleton.parents), j, q, *found, ramp)
 
 
 def _remove_offset(R: np.ndarray, a: int, b: int) -> np.ndarray | None:
@@ -552,8 +721,9 @@ def _judged_position(
     (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
     the best one's error are averaged, weighted by the inverse of their errors.  One that does
     not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
-    turning over) is left out.  Returns the positions and the best one's name, or None where
-    riding on the parent wins or no pseudo-gap can tell."""
+    turning over) is left out.  Returns the positions and how (the estimate's name, or where
+    several were averaged their names and weights, :func:`_blend_name`), or None where riding
+    on the parent wins or no pseudo-gap can tell."""
     F, n = len(P), e - s + 1
     joints = [j, parent, child] + ([anchor] if anchor is not None else [])
     if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, joints[1:]].any():
@@ -576,7 +746,8 @@ def _judged_position(
         return None
     near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
     w = 1.0 / np.maximum(err[near], 1e-12)
-    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), names[best]
+    how = names[best] if len(near) < 2 else _blend_name([names[i] for i in near], w)
+    return sum(wi * found[names[i]] for wi, i in zip(w, near)) / w.sum(), how
 
 
 def _bone_child(P: np.ndarray, parents: np.ndarray, j: int, s: int, e: int, bad: np.ndarray) -> int | None:
@@ -736,12 +907,14 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" or "mirrored" (:class:`_Matcher`; ", on contact" where :func:`_on_contact`
-    then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
+    "matched" or "mirrored" (:class:`_Matcher`), or "blend of ..." where several of those
+    were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
+    ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
     back at its length, :func:`_along_bone`), "child-relative" or "among its neighbours" (riding
-    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`;
+    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`,
+    or "blend of ..." of these with their shares;
     ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
     or "" for reported only); ``options`` sets the repair (``offset_min_time``, ``match_*``).
@@ -762,7 +935,7 @@ def correct_glitches(
     names_of = motion.skeleton.names
     swapped: set[tuple[int, int, int]] = set()
     matcher: _Matcher | None = None
-    world = None
+    ground: _Ground | None = None
     bad = _glitched(motion, glitches) if pos is not None else None
     for g in glitches:
         if g.kind == "lr_swap" and pos is not None:
@@ -788,11 +961,10 @@ def correct_glitches(
             if 0 <= a and b < F:
                 matcher = matcher or _matcher(motion, glitches, opt, canonical_joints(motion, mapping))
             fixed_q, curve = _repair_rotation(arr, j, g, float(motion.fps), matcher, opt)
-            if curve in ("cubic", "matched", "mirrored"):
-                if world is None:
-                    world = np.asarray(motion.world_positions(), dtype=float)
+            if curve not in ("offset removed", "held"):  # bridged
+                ground = ground or _Ground.of(motion, glitches)
                 bad = _glitched(motion, glitches) if bad is None else bad
-                planted = _on_contact(motion, arr, world, bad, j, g.start, g.end, fixed_q, opt)
+                planted = _on_contact(motion, arr, ground, bad, j, g.start, g.end, fixed_q, opt)
                 if planted is not None:
                     fixed_q, curve = planted, f"{curve}, on contact"
             arr[g.start : g.end + 1, j] = fixed_q

@@ -108,7 +108,7 @@ def test_g1_feet_land_without_dropping(g1_walk):
 def test_g1_walk_is_no_jerkier_than_the_peer(g1_walk):
     """Issue 13: the G1's mean absolute joint acceleration on this walk no higher than the
     peer retargeter's 46 rad/s^2.  Before the last pass that smooths contact changes
-    (physmocap.ik.transitions): 55.5; after: 43.3 (37.6 with planting off)."""
+    (physmocap.ik.transitions): 55.5; after: 42.0 (37.6 with planting off)."""
     from physmocap import metrics
 
     ch, traj = g1_walk

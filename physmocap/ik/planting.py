@@ -352,7 +352,7 @@ class FootPlanter:
             pivoting = hints is not None and hints.pivoting is not None and bool(hints.pivoting[k])
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
             partner = self.locked & (self.feet == self.feet[k]) & (np.arange(n) != k)
-            if partner.any() and not rolling:  # a foot already held: its further holds, without look-ahead
+            if partner.any() and not rolling and not pivoting:  # a foot already held: its further holds, without look-ahead
                 rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)

@@ -275,8 +275,9 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
                      labels: dict[str, np.ndarray], body_labels: dict[str, np.ndarray],
                      arm_guides: dict) -> Trajectory:
     """``traj`` retargeted once more with its joints pulled towards their own low-pass
-    around every contact change (:mod:`.transitions`), the arm passes' guides kept; kept
-    if the solver gave up a hard constraint on no more frames."""
+    around every contact change and towards themselves elsewhere (:mod:`.transitions`), the
+    arm passes' guides kept; kept if the solver softened or gave up a hard constraint on no
+    more frames."""
     opt = config.plant
     model = traj.character.model
     joints = moving_joints(model)
@@ -289,7 +290,8 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
     if not guides.near.any():
         return traj
     again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed")
-    return again if _relaxed(again) <= _relaxed(traj) else traj
+    softened = int(np.count_nonzero(again.solver.relaxation)) > int(np.count_nonzero(traj.solver.relaxation))
+    return traj if softened or _relaxed(again) > _relaxed(traj) else again
 
 
 def _relaxed(traj: Trajectory) -> int:

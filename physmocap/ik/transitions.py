@@ -8,46 +8,45 @@ one frame at heel strike, and the joints' mean acceleration was 1.46 times that 
 same clip without planting (the issue's bound is 1.2).
 
 Offline the whole clip is known.  After the first pass (and the arm passes of
-:mod:`.branches`):
+:mod:`.branches`), the clip is retargeted once more with every hinge and slide joint
+pulled (a posture pull of ``transition_cost`` per radian or metre, a
+:class:`~physmocap.ik.branches.Guide`) towards a reference:
 
-1. **windows**: the frames within ``transition_window`` seconds of a change of any
-   contact label (heels, toes, knees, hands, pelvis);
-2. **reference**: the pass's hinge and slide joints low-passed by a Gaussian of
-   standard deviation ``transition_sigma`` seconds,
-   :math:`\bar q_j = G_\sigma * q_j` (zero phase; the ends repeat the end values),
-   which spreads a one-frame catch-up over the frames around it, before the change as
-   well as after;
-3. **the actor's own fast motion is left alone**: a joint that carries no contact (an
-   arm, the trunk, the head, where no hand or knee is labelled) is not pulled on a frame
-   where the same low-pass would move one of the targets it carries (on its body or
-   below) by more than ``transition_tolerance``: there the motion is the actor's (a
-   punch), not a catch-up, and a pull towards the low-pass would lag it (pulled, the
-   forearm of a 30 fps punch fell 10 degrees behind at its peak).  The legs are always
-   pulled: their targets move fast exactly at the contact changes;
-4. **last pass**: the clip is retargeted again with a posture pull of
-   ``transition_cost`` per radian (metre) towards :math:`\bar q` on the window frames
-   (a :class:`~physmocap.ik.branches.Guide`; an arm's own guide from the arm passes
-   keeps its joints), every hard constraint as before: the holds still hold, the
-   floor and the limits still bound, only the free joints' timing changes.  Every frame's
-   iterations start from the first pass's pose on that frame (within the frame's velocity
-   band), not from the previous frame's: the answer is nearer, so it takes fewer
-   iterations (the PyMO walk: 2.7 a frame against 4.2 from the previous frame) and ends
-   better converged (its acceleration ratio 1.18 -> 0.99; the Bandai walk's scuffing
-   2.1 -> 0.6 %, its robot's 4.0 -> 0).
+1. **around contact changes** (the frames within ``transition_window`` seconds of a
+   change of any contact label: heels, toes, knees, hands, pelvis) the reference is the
+   first pass low-passed by a Gaussian of standard deviation ``transition_sigma``
+   seconds, :math:`\bar q_j = G_\sigma * q_j` (zero phase; the ends repeat the end
+   values), which spreads a one-frame catch-up over the frames around it, before the
+   change as well as after;
+2. **the actor's own fast motion** is not low-passed: a joint that carries no contact
+   (an arm, the trunk, the head, where no hand or knee is labelled) keeps the first
+   pass's own pose as its reference on a frame where the same low-pass would move one of
+   the targets it carries (on its body or below) by more than ``transition_tolerance``:
+   there the motion is the actor's (a punch), not a catch-up, and a pull towards the
+   low-pass would lag it.  The legs always take the low-pass: their targets move fast
+   exactly at the contact changes;
+3. **everywhere else** the reference is the first pass itself: nothing to smooth there,
+   and without a pull the last pass drifted in directions the tasks barely see (the
+   OptiTrack clip's lumbar rotation, 36 degrees from the first pass's 20 s after the
+   last contact change).
+
+Every hard constraint holds as before: the holds still hold, the floor and the limits
+still bound.  An arm's own guide from the arm passes keeps its joints.  Every frame's
+iterations start from the first pass's pose on that frame (within the frame's velocity
+band), not from the previous frame's: the answer is nearer, so it takes fewer iterations
+(the PyMO walk: 2.7 a frame against 4.2) and ends better converged (its acceleration
+ratio 1.18 -> 0.99; the Bandai walk's scuffing 2.1 -> 0.6 %, its robot's 4.0 -> 0).
 
 Every hinge and slide joint is pulled, the arms too: the trunk's catch-ups move the
 shoulders, and arms that keep their hands on their targets jerk with them (the legs
-alone left the walks' acceleration ratios at 1.26-1.31).
-
-The pass is kept only if the solver relaxed a hard constraint on no more frames.  Far
-from contact changes nothing pulls, and a clip without contacts (``--no-plant``) has
-no such pass.  Streaming retargeting cannot look ahead and does not do this.
-Radians, metres, seconds.
+alone left the walks' acceleration ratios at 1.26-1.31).  The pass is kept only if the
+solver relaxed a hard constraint (a contact equality softened included) on no more
+frames.  A clip without contact changes (``--no-plant``) has no such pass.  Streaming
+retargeting cannot look ahead and does not do this.  Radians, metres, seconds.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Mapping, Sequence
 
 import mujoco
@@ -76,8 +75,8 @@ def change_windows(labels: Mapping[str, np.ndarray], num_frames: int, window_fra
 
 
 def moving_joints(model: mujoco.MjModel) -> list[int]:
-    """The hinge and slide joints (ids, ascending): every joint but the free root (its
-    motion is left to the tasks)."""
+    """The hinge and slide joints (ids, ascending): a free root's motion is left to the
+    tasks (and a ball joint, which a posture value per coordinate cannot pull)."""
     return [j for j in range(model.njnt) if int(model.jnt_type[j]) in MOVING_TYPES]
 
 
@@ -108,11 +107,11 @@ def carried_targets(character, names: Sequence[str], joints: Sequence[int], cont
 class TransitionGuides:
     """Frame -> the :class:`~physmocap.ik.branches.Guide` of the last pass (module docstring).
 
-    On the frames within ``window`` seconds of a label change, the hinge and slide ``joints``
-    are pulled with ``cost`` per radian (metre) towards ``qpos`` low-passed by a Gaussian of
-    ``sigma`` seconds, each only where the same low-pass moves none of the target
-    ``positions`` it carries by more than ``tolerance``; ``arms`` (frame -> guide of the
-    arm passes) keep their joints.  The reference is low-passed :data:`BLOCK_FRAMES` at a
+    Every frame pulls the hinge and slide ``joints`` with ``cost`` per radian (metre): on
+    the frames within ``window`` seconds of a label change towards ``qpos`` low-passed by a
+    Gaussian of ``sigma`` seconds (a joint only where the same low-pass moves none of the
+    target ``positions`` it carries by more than ``tolerance``), elsewhere towards
+    ``qpos`` itself; ``arms`` (frame -> guide of the arm passes) keep their joints.  The reference is low-passed :data:`BLOCK_FRAMES` at a
     time as the pass reaches them (the same numbers as the whole clip at once), so an
     hour-long clip holds one block.
 
@@ -139,7 +138,7 @@ class TransitionGuides:
         self.near = change_windows(labels, qpos.shape[0], int(round(window * fps)))
         joints = [int(j) for j in joints]
         if not joints or cost <= 0.0:
-            self.near[:] = False
+            self.near[:] = False  # nothing to pull: no pass
         self.adr = model.jnt_qposadr[joints].astype(int)
         self.dofs = model.jnt_dofadr[joints].astype(int)
         self.carried = [np.asarray(c, dtype=int) for c in carried]
@@ -152,7 +151,7 @@ class TransitionGuides:
         self._keep = np.zeros((0, len(joints)), dtype=bool)
 
     def __len__(self) -> int:
-        """Frames with a guide: every frame (each starts from the first pass's pose)."""
+        """Frames with a guide: every frame."""
         return int(self.qpos.shape[0])
 
     def _low_pass(self, x: np.ndarray) -> np.ndarray:
@@ -180,30 +179,21 @@ class TransitionGuides:
         return t - b * BLOCK_FRAMES
 
     def get(self, t: int) -> Guide:
-        """Frame ``t``'s guide: the pull (if any) and the first pass's pose to start from."""
+        """Frame ``t``'s guide: the reference (module docstring), the arm passes' guide for
+        its joints, and the first pass's pose to start from."""
         start = np.array(self.qpos[t], dtype=float)
-        pull = self._pull(t)
-        if pull is None:
-            return Guide(np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0), 0.0, start)
-        return dataclasses.replace(pull, start=start)
-
-    def _pull(self, t: int) -> Guide | None:
-        """Frame ``t``'s pull: the low-pass on the window frames, the arm passes' guide."""
+        values = start[self.adr]
+        if self.near[t]:
+            r = self._block_at(t)
+            values = np.where(self._keep[r], self._reference[r], values)
         arm = self.arms.get(t)
-        if not self.near[t]:
-            return arm
-        r = self._block_at(t)
-        keep = self._keep[r].copy()
-        if arm is not None:
-            keep &= ~np.isin(self.adr, arm.qpos)
-        if not keep.any():
-            return arm
-        qpos, dofs, values = self.adr[keep], self.dofs[keep], self._reference[r, keep]
         if arm is None:
-            return Guide(qpos, dofs, values, self.cost)
+            return Guide(self.adr, self.dofs, values, self.cost, start)
+        mine = ~np.isin(self.adr, arm.qpos)
         return Guide(
-            qpos=np.concatenate([qpos, arm.qpos]),
-            dofs=np.concatenate([dofs, arm.dofs]),
-            values=np.concatenate([values, arm.values]),
-            cost=np.concatenate([np.full(qpos.size, self.cost), np.broadcast_to(arm.cost, arm.qpos.shape)]),
+            qpos=np.concatenate([self.adr[mine], arm.qpos]),
+            dofs=np.concatenate([self.dofs[mine], arm.dofs]),
+            values=np.concatenate([values[mine], arm.values]),
+            cost=np.concatenate([np.full(int(mine.sum()), self.cost), np.broadcast_to(arm.cost, arm.qpos.shape)]),
+            start=start,
         )

@@ -53,6 +53,7 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from ..spill import release
 from .branches import MOVING_TYPES, Guide
 
 __all__ = ["change_windows", "moving_joints", "carried_targets", "TransitionGuides"]
@@ -111,9 +112,11 @@ class TransitionGuides:
     the frames within ``window`` seconds of a label change towards ``qpos`` low-passed by a
     Gaussian of ``sigma`` seconds (a joint only where the same low-pass moves none of the
     target ``positions`` it carries by more than ``tolerance``), elsewhere towards
-    ``qpos`` itself; ``arms`` (frame -> guide of the arm passes) keep their joints.  The reference is low-passed :data:`BLOCK_FRAMES` at a
-    time as the pass reaches them (the same numbers as the whole clip at once), so an
-    hour-long clip holds one block.
+    ``qpos`` itself; ``arms`` (frame -> guide of the arm passes) keep their joints.  The
+    reference is low-passed :data:`BLOCK_FRAMES` at a time as the pass reaches them (the same
+    numbers as the whole clip at once), so an hour-long clip holds one block, and the pages of
+    spilled arrays it reads are let go block by block (:func:`~physmocap.spill.release`;
+    frames are asked for in order).
 
     Args:
         model: The character's model.
@@ -176,15 +179,17 @@ class TransitionGuides:
             self._keep = np.stack([~fast[:, c].any(axis=1) for c in self.carried], axis=1) if self.carried else \
                 np.ones((len(moved), 0), dtype=bool)
             self._block = b
+            for array in (self.qpos, self.positions):  # spilled: the pages read leave the memory
+                release(array)
         return t - b * BLOCK_FRAMES
 
     def get(self, t: int) -> Guide:
         """Frame ``t``'s guide: the reference (module docstring), the arm passes' guide for
         its joints, and the first pass's pose to start from."""
+        r = self._block_at(t)  # each block once, in order: the spilled pages let go as it goes
         start = np.array(self.qpos[t], dtype=float)
         values = start[self.adr]
         if self.near[t]:
-            r = self._block_at(t)
             values = np.where(self._keep[r], self._reference[r], values)
         arm = self.arms.get(t)
         if arm is None:

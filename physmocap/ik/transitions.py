@@ -91,10 +91,10 @@ def _up(model: mujoco.MjModel, body: int) -> set[int]:
 
 
 def carried_targets(character, names: Sequence[str], joints: Sequence[int], contacts: Sequence[str]) -> list[np.ndarray]:
-    """Per joint, the target columns (of canonical ``names``) whose fast motion keeps it from
-    being pulled: those whose tracked frame is on the joint's body or below it; none for a
-    joint that carries one of the ``contacts`` (canonical joints of the parts in contact:
-    its catch-ups at their changes are what the pull is for)."""
+    """Per joint, the target columns (of canonical ``names``) whose fast motion keeps it on the
+    first pass's own pose instead of the low-pass: those whose tracked frame is on the joint's
+    body or below it; none for a joint that carries one of the ``contacts`` (canonical joints
+    of the parts in contact: its catch-ups at their changes are what the low-pass is for)."""
     model = character.model
     above = [_up(model, character.tracked[n].body_id(model)) for n in names]
     touching = set().union(*(above[names.index(c)] for c in contacts if c in names))

@@ -110,6 +110,24 @@ def test_no_pull_where_the_low_pass_would_move_a_carried_target():
     assert g.get(24).values[1] == gaussian_filter1d(qpos[:, g.adr[1]], 2.0, mode="nearest", truncate=4.0)[24]
 
 
+def test_a_lost_target_is_no_fast_motion():
+    """A target lost for a while (its stand-in position jumps, here to 50 cm) does not keep
+    the joints carrying it off the low-pass."""
+    model, qpos = _pass()
+    F = qpos.shape[0]
+    positions = np.zeros((F, 1, 3))
+    positions[20:30, 0, 0] = 0.5
+    valid = np.ones((F, 1), dtype=bool)
+    valid[20:30] = False
+    joints = moving_joints(model)
+    first = [np.array([0])] + [np.zeros(0, int)] * (len(joints) - 1)
+    labels = {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}
+    g = TransitionGuides(model, qpos, positions, 100.0, labels, joints, first, 0.1, 0.02, 2.0, 0.01, None, valid)
+    adr0 = int(model.jnt_qposadr[joints[0]])
+    smooth = gaussian_filter1d(qpos[:, adr0], 2.0, mode="nearest", truncate=transitions.TRUNCATE)
+    assert g.get(20).values[0] == smooth[20] and g.get(29).values[0] == smooth[29]
+
+
 def test_no_pull_without_cost():
     model, qpos = _pass()
     g = _guides(model, qpos, {"x": np.r_[np.zeros(25, bool), np.ones(25, bool)]}, cost=0.0)

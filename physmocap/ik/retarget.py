@@ -286,7 +286,7 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
     carried = carried_targets(traj.character, traj.targets.names, joints, touching)
     guides = TransitionGuides(model, traj.qpos, traj.targets.positions, traj.fps, {**labels, **body_labels}, joints,
                               carried, opt.transition_window, opt.transition_sigma, opt.transition_cost,
-                              opt.transition_tolerance, arm_guides)
+                              opt.transition_tolerance, arm_guides, traj.targets.valid)
     if not guides.near.any():
         return traj
     again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed")

@@ -51,7 +51,7 @@ from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 
 from ..spill import release
 from .branches import MOVING_TYPES, Guide
@@ -130,14 +130,17 @@ class TransitionGuides:
         cost: Cost per radian (metre) of the pull.
         tolerance: Metres.
         arms: Frame -> arm guide (:mod:`.branches`).
+        valid: ``(F, N)`` which targets are tracked (None: all); a target lost within the
+            low-pass's reach of a frame is not fast motion there (its stand-in position jumps).
     """
 
     def __init__(self, model: mujoco.MjModel, qpos: np.ndarray, positions: np.ndarray, fps: float,
                  labels: Mapping[str, np.ndarray], joints: Sequence[int], carried: Sequence[np.ndarray],
                  window: float, sigma: float, cost: float, tolerance: float,
-                 arms: Mapping[int, Guide] | None = None) -> None:
+                 arms: Mapping[int, Guide] | None = None, valid: np.ndarray | None = None) -> None:
         self.qpos = qpos
         self.positions = positions
+        self.valid = valid
         self.near = change_windows(labels, qpos.shape[0], int(round(window * fps)))
         joints = [int(j) for j in joints]
         if not joints or cost <= 0.0:
@@ -176,10 +179,15 @@ class TransitionGuides:
             x = np.asarray(self.positions[lo:hi], dtype=float)
             moved = np.linalg.norm(self._low_pass(x) - x, axis=-1)[rows]  # (block, N) metres
             fast = moved > self.tolerance
+            if self.valid is not None:  # a lost target (held at a stand-in) is no fast motion
+                reach = int(TRUNCATE * self.sigma + 0.5)
+                tracked = minimum_filter1d(np.asarray(self.valid[lo:hi], dtype=np.uint8), 2 * reach + 1, axis=0,
+                                           mode="nearest")[rows]
+                fast &= tracked.astype(bool)
             self._keep = np.stack([~fast[:, c].any(axis=1) for c in self.carried], axis=1) if self.carried else \
                 np.ones((len(moved), 0), dtype=bool)
             self._block = b
-            for array in (self.qpos, self.positions):  # spilled: the pages read leave the memory
+            for array in (self.qpos, self.positions, self.valid):  # spilled: the pages read leave the memory
                 release(array)
         return t - b * BLOCK_FRAMES
 

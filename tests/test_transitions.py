@@ -174,3 +174,17 @@ def test_far_from_contact_changes_the_last_pass_stays_on_the_first():
     hinges = model.jnt_qposadr[[j for j in range(model.njnt) if model.jnt_type[j] == 3]]
     apart = np.degrees(np.abs(smoothed.qpos[:, hinges] - first.qpos[:, hinges]))
     assert apart[last + int(0.5 * smoothed.fps):].max() < 1.0, apart[last + 60:].max()
+
+
+def test_a_low_pass_longer_than_a_second_is_refused_by_name():
+    """Its kernel and the frames it reads grow with it: an hour-long sigma would read the whole
+    clip into memory.  Bad numbers are refused as every planting option is."""
+    from physmocap.errors import OptionError
+    from physmocap.ik.planting import PlantOptions
+
+    for bad in (1e6, -0.01, float("nan")):
+        with pytest.raises(OptionError, match="transition_sigma"):
+            PlantOptions(transition_sigma=bad)
+    with pytest.raises(OptionError, match="smooth_transitions"):
+        PlantOptions(smooth_transitions="yes")
+    assert PlantOptions(transition_sigma=1.0).transition_sigma == 1.0

@@ -47,6 +47,7 @@ import mujoco
 import numpy as np
 
 from ..models.geometry import character_geoms, foot_bodies, geom_candidates
+from ..errors import OptionError
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
 from .targets import character_rest_frames
@@ -160,7 +161,16 @@ class PlantOptions:
 
     def __post_init__(self) -> None:
         check_fields(self, "planting")
+        if self.transition_sigma > MAX_TRANSITION_SIGMA:
+            # the low-pass's kernel and the frames it reads grow with it (an hour-long sigma would
+            # read the whole clip into memory); a contact change's catch-up lasts a few frames
+            raise OptionError(
+                f"planting option transition_sigma must be at most {MAX_TRANSITION_SIGMA:g} s, got {self.transition_sigma!r}"
+            )
 
+
+#: Seconds: the largest ``PlantOptions.transition_sigma`` (about 60 times the default).
+MAX_TRANSITION_SIGMA = 1.0
 
 #: Pitch (radians) of a foot's ankle-to-toe targets beyond which its heading is not read
 #: (:meth:`Planting._turn_with_plan`): at 60 degrees the horizontal part is half the bone.  (A

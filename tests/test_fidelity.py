@@ -204,6 +204,39 @@ def test_spins_keep_up(character, bound):
     assert trajectory_fidelity(traj).facing_p95_deg < bound
 
 
+def test_a_held_foot_does_not_swing_round_as_it_lifts():
+    """Before: on the CMU dance the humanoid's left foot was held where it landed, 13 degrees
+    off its target heading, through a 1.2 s stance; when its heel lifted (frames 355-361) the
+    foot swung round its held toe tip and the heel swivelled 10 cm on the floor (535 cm/s
+    on one frame; foot slip 2.41 cm/s over the clip).  Held feet now turn towards their
+    target heading (physmocap.ik.footturn)."""
+    from physmocap.metrics.fidelity import geom_floor_contact
+    from physmocap.models.geometry import foot_bodies
+
+    shared_file("cmu_05_10_dance_spins.bvh")
+    _, traj = retargeted("cmu_05_10_dance_spins.bvh", "humanoid")
+    model = traj.character.model
+    feet = foot_bodies(model, traj.character.contacts)
+    worst = 0.0
+    for t in range(traj.num_frames - 1):
+        pair = geom_floor_contact(model, traj.qpos[t:t + 2], traj.fps, 0.0, feet)
+        if pair.resting_samples:
+            worst = max(worst, pair.slip_mean_cm_s)
+    assert worst < 100.0, worst
+    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 1.0
+
+
+def test_crouched_legs_point_their_knees_where_the_actor_does():
+    """Before: the robot's worst segment on the CMU dance was 8.5 degrees (median, right
+    shank): its feet held on the actor's foot heading through crouched stances, where the
+    actor's knees point elsewhere and a robot's ankle cannot turn about its shank
+    (physmocap.ik.footturn's aim goes half way to the knee's heading)."""
+    shared_file("cmu_05_10_dance_spins.bvh")
+    for character in ("humanoid", "robot"):
+        _, traj = retargeted("cmu_05_10_dance_spins.bvh", character)
+        assert trajectory_fidelity(traj).worst_segment_median_deg < 8.0, character
+
+
 @pytest.mark.parametrize("clip", ["cmu_01_01_jumps.bvh", "pymo_walk.bvh", "cmu_12_01_walk.bvh"])
 def test_root_path_does_not_drift(clip):
     """Before: the body followed its planted feet and drifted: 15 cm mean deviation on the

@@ -151,7 +151,9 @@ def test_planting_adds_no_jerk_on_the_bundled_walk(character):
         traj = retarget(motion, ch, progress=False, arm_branches=False, **opts)
         acc[name] = smoothness(ch.model, traj.qpos, traj.fps)["mean_abs_acc"]
     assert acc["plant"] < 1.2 * acc["free"], acc
-    assert acc["one pass"] > 1.2 * acc["free"], acc  # the figure this pass brings down
+    # the figure this pass brings down (one pass: 1.27 and 1.21 times the free figure at stop
+    # 25, 1.20 for the robot since held feet turn towards their target heading, .footturn)
+    assert acc["plant"] < 0.8 * acc["one pass"], acc
 
 
 def test_far_from_contact_changes_the_last_pass_stays_on_the_first():

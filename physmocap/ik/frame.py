@@ -89,6 +89,7 @@ class FrameRetargeter:
         self.names = tuple(names)
         self.fps = float(fps)
         self.solver = FrameSolver(character, self.names, has_orientation, fps, solver)
+        self.has_orientation = np.asarray(has_orientation, dtype=bool)
         self.plant_options = plant
         self.anchored = bool(anchored)
         self.planting: Planting | None = None
@@ -154,7 +155,8 @@ class FrameRetargeter:
         """Forget every anchor and lock (a stream calibrating again); the pose is kept."""
         plant = self.plant_options
         self.planting = (
-            Planting(self.character, self.names, self.fps, plant, floor=self.solver.options.floor_height, anchored=self.anchored)
+            Planting(self.character, self.names, self.fps, plant, floor=self.solver.options.floor_height,
+                     anchored=self.anchored, has_orientation=self.has_orientation)
             if plant is not None and plant.plant
             else None
         )
@@ -189,7 +191,8 @@ class FrameRetargeter:
             if first:  # converge on the targets alone, then plant the feet where they are
                 solver.solve_frame(positions, orientations, valid, first=True)
                 solver.forget_previous()
-            shifted, tasks, hard, _ = self.planting.step(positions, labels, solver.configuration.data, valid=valid)
+            shifted, tasks, hard, _ = self.planting.step(positions, labels, solver.configuration.data, valid=valid,
+                                                         orientations=orientations)
             holds = ContactHolds(
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )

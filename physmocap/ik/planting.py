@@ -50,6 +50,7 @@ from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..errors import OptionError
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
+from .footturn import HeadingFollower, matrix_to_xyzw
 from .targets import character_rest_frames
 from .tasks import SitePositionTask
 
@@ -111,18 +112,20 @@ class PlantOptions:
             its front edge, a tenth of ``cost_z``: without it the foot could tip
             onto its side edge instead of pitching (measured on the bundled robot:
             25 degrees of roll, its ankle roll limit, and 11 cm/s of slip).
-        pivot_threshold: Offline only: radians a foot held at two points may be turned
-            by the plan before its holds turn with it (beyond this they follow the
-            plan's heading, :meth:`FootPlanter.turn`, so an actor pivoting on a planted
-            foot is followed; below it the turn is taken as the capture's drift and the
-            foot stays put, and what is left snaps back when the foot lets go).  2 degrees,
-            measured on the shared clips (whose flat feet drift by a median 1.4-6.5
+        pivot_threshold: Offline only: radians a foot held at two points may be off its
+            target heading before its holds turn (:mod:`.footturn`: beyond it they follow
+            the target's heading, so an actor pivoting on a planted foot is followed; within
+            it the difference is taken as the capture's drift and the foot stays put).  2
+            degrees, measured on the shared clips (whose flat feet drift by a median 1.4-6.5
             degrees over a stance; a spin turns one by 30 degrees and more): against 5
             degrees it follows the dance better (worst segment 8.3 -> 7.5 degrees, the
             robot's facing on the jumps' turn p95 8.3 -> 5.8) with the feet's slip about
             the same (heels swivel more about the ball: the PyMO walk's geom slip 1.3 ->
             2.1 cm/s); against 0 it keeps the walks' heels from swivelling with every
             degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).
+        heading_rate: Offline only: radians per second at which a held foot's heading
+            error beyond ``pivot_threshold`` that the target's own turning does not explain
+            (a foot caught off its heading as it landed) is taken out (:mod:`.footturn`).
         smooth_transitions: Offline only: retarget once more with the joints pulled towards
             their own low-pass around every contact change (:mod:`physmocap.ik.transitions`),
             so that what a hold kept back does not catch up in one frame when it lets go.
@@ -152,6 +155,7 @@ class PlantOptions:
     ease_time: float = 0.1
     pivot_cost: float = 40.0
     pivot_threshold: float = 0.035
+    heading_rate: float = 1.0
     toe_release_speed: float = 0.8
     smooth_transitions: bool = True
     transition_window: float = 0.1
@@ -173,7 +177,7 @@ class PlantOptions:
 MAX_TRANSITION_SIGMA = 1.0
 
 #: Pitch (radians) of a foot's ankle-to-toe targets beyond which its heading is not read
-#: (:meth:`Planting._turn_with_plan`): at 60 degrees the horizontal part is half the bone.  (A
+#: (:class:`~.footturn.HeadingFollower`): at 60 degrees the horizontal part is half the bone.  (A
 #: streamed foot, still held as it pitched through its toe-off, read heading steps of 20-90
 #: degrees a frame on the PyMO walk; the stream does not turn its holds yet.)
 HEADING_PITCH = np.radians(60.0)
@@ -544,6 +548,7 @@ class Planting:
         options: PlantOptions | None = None,
         floor: float = 0.0,
         anchored: bool = True,
+        has_orientation: Sequence[bool] | None = None,
     ) -> None:
         self.options = opt = options or PlantOptions()
         #: False when the targets were planted offline (:mod:`.footplan`): only the site
@@ -603,12 +608,6 @@ class Planting:
         #: per side, a causal toe hold let go early (:meth:`_toes_moving`), until its label ends
         self._toe_gone = {"left": False, "right": False}
         self._toe_prev: dict[str, np.ndarray] = {}
-        #: per side, the planned foot heading on the previous frame (radians; offline)
-        self._heading: dict[str, float] = {}
-        #: per side, the planned turn since the foot was last held at two points, and the
-        #: part of it the holds have followed (radians; :meth:`_turn_with_plan`)
-        self._planned_turn = np.zeros(2)
-        self._held_turn = np.zeros(2)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
         foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
@@ -625,6 +624,10 @@ class Planting:
                 ref[j] = (tf.kind, tf.object_id(model))
             moved = [self.names.index(f"{side}_{j}") for j in FOOT_JOINTS if f"{side}_{j}" in self.names]
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
+        self._has_orientation = (np.zeros(len(self.names), dtype=bool) if has_orientation is None
+                                 else np.asarray(has_orientation, dtype=bool))
+        #: offline: turns a foot held at two points towards its target heading (:mod:`.footturn`)
+        self._turner = None if self.anchored else self._heading_follower(character)
 
     def _rest_distances(self, character) -> np.ndarray:
         """``(n, n)`` horizontal rest-pose distances between contact sites on the same body
@@ -791,32 +794,40 @@ class Planting:
         locks = self.locks
         return {t.site_id: c for t, f, down in zip(locks.tasks, locks.free, locks.landed) if f and not down}
 
-    def _turn_with_plan(self, positions: np.ndarray) -> None:
-        """Turn each foot's holds (:meth:`FootPlanter.turn`) by its planned heading's change
-        since the previous frame: the heading of the foot's targets, ankle to toe, horizontal.
-        A foot pitched by more than :data:`HEADING_PITCH` (its toe nearly below or above its
-        ankle) has no reliable heading: it does not turn on that frame."""
+    def _heading_follower(self, character) -> HeadingFollower:
+        """The :class:`~.footturn.HeadingFollower` of this character's feet (offline planting)."""
+        model = character.model
+        data = character.rest_data()
+        feet = {}
         for s, side in enumerate(("left", "right")):
-            if side not in self.feet:
+            ks = np.array(self._side_sites[side], dtype=int)
+            if side not in self.feet or ks.size < 2:
                 continue
-            ia, it = self.feet[side][:2]
-            if ia == it:
-                continue
-            v = positions[it] - positions[ia]
-            heading = float(np.arctan2(v[1], v[0]))
-            step = 0.0
-            level = np.hypot(v[0], v[1]) >= np.cos(HEADING_PITCH) * np.linalg.norm(v)
-            if side in self._heading and level:
-                step = (heading - self._heading[side] + np.pi) % (2.0 * np.pi) - np.pi
-            self._heading[side] = heading
-            if np.count_nonzero(self.locks.locked & (self.locks.feet == s)) < 2:
-                self._planned_turn[s] = self._held_turn[s] = 0.0
-                continue
-            self._planned_turn[s] += step
-            free = self.options.pivot_threshold
-            turn = np.sign(self._planned_turn[s]) * max(0.0, abs(self._planned_turn[s]) - free)
-            self.locks.turn(s, float(turn - self._held_turn[s]))
-            self._held_turn[s] = turn
+            ia, it, ra, rt, _ = self.feet[side]
+            rest_sites = np.array([data.site_xpos[self.locks.tasks[k].site_id] for k in ks])
+            ankle = character.tracked[self.names[ia]]
+            ankle_rest = matrix_to_xyzw(ankle.rotation(model, data))
+            ankle_toe = None if ia == it else (
+                character.tracked[self.names[it]].position(model, data) - ankle.position(model, data))
+            feet[side] = (ia, it, ks, rest_sites, ankle_rest, ankle_toe)
+        opt = self.options
+        legs = {side: spec[:3] for side, spec in self.lengths.items() if side in feet}
+        self._leg_frames = {side: tuple(character.tracked[self.names[i]] for i in legs[side]) for side in legs}
+        return HeadingFollower(self._has_orientation, feet, self.locks.fps, opt.pivot_threshold,
+                               opt.heading_rate, HEADING_PITCH, legs)
+
+    def _turn_holds(self, positions: np.ndarray, orientations: np.ndarray | None, valid: np.ndarray | None,
+                    data: mujoco.MjData) -> None:
+        """Turn each foot's holds towards its target heading (:class:`~.footturn.HeadingFollower`,
+        :meth:`FootPlanter.turn`)."""
+        if orientations is None:
+            orientations = np.tile([0.0, 0.0, 0.0, 1.0], (len(self.names), 1))
+        model = self.character.model
+        legs = {side: np.array([f.position(model, data) for f in frames]) for side, frames in self._leg_frames.items()}
+        turns = self._turner.turns(positions, orientations, valid, self.locks.locked, self.locks.anchor, legs)
+        for s, side in enumerate(("left", "right")):
+            if turns.get(side, 0.0) != 0.0:
+                self.locks.turn(s, turns[side])
 
     @staticmethod
     def _xy(data: mujoco.MjData, ref: tuple[str, int]) -> np.ndarray:
@@ -825,11 +836,12 @@ class Planting:
 
     def step(
         self, positions: np.ndarray, labels: Mapping[str, bool], data: mujoco.MjData, first: bool = False,
-        valid: np.ndarray | None = None,
+        valid: np.ndarray | None = None, orientations: np.ndarray | None = None,
     ) -> tuple[np.ndarray, list[SitePositionTask], list[SitePositionTask], np.ndarray]:
         """Shifted targets ``(N, 3)``, soft tasks, equality constraints, and the
         foot offsets ``(2, 2)`` (left, right); ``valid`` ``(N,)``: which targets are tracked
-        on this frame (None: all)."""
+        on this frame (None: all); ``orientations`` ``(N, 4)`` x-y-z-w: the targets'
+        orientations (offline: a held foot turns towards its ankle's, :mod:`.footturn`)."""
         out = np.array(positions, dtype=float, copy=True)
         offsets = np.zeros((2, 2))
         if not self.options.plant:
@@ -853,7 +865,7 @@ class Planting:
             waiting = toe & heel & self._toe_segment
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
                               pivoting=toes_only & self._pivot)
-            self._turn_with_plan(positions)
+            self._turn_holds(positions, orientations, valid, data)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

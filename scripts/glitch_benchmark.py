@@ -460,8 +460,8 @@ def rotational(args: argparse.Namespace) -> None:
                 print(f"    untouched  {g.kind:13s} {g.joint:18s} frames {g.start}-{g.end} severity {g.severity:.1f} {g.unit}")
         cells = []
         P0 = motion.world_positions()
-        for ti, t in enumerate(args.types):
-            rng = np.random.default_rng([args.seed, ci, ti])
+        for t in args.types:
+            rng = np.random.default_rng([args.seed, ci, TYPES.index(t)])  # the same glitches whichever types run
             glitched, truth, faint = inject(motion, rng, args.per_type, (t,), args.floor)
             fixed, report = clean(glitched)
             det = _flagged(report, names) - faint

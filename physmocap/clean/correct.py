@@ -729,10 +729,13 @@ def _judged_position(
     """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` from the estimate of
     :func:`_position_estimates` that rebuilds the joint's own good motion next to the span
     best, all put at their bone lengths (:func:`_on_bones`) where ``child`` is tracked
-    (``above``: the anchor's parent, for a joint with no tracked child): each is tried on the pseudo-gaps
-    (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
-    (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
-    the best one's error are averaged, weighted by the inverse of their errors.  One that does
+    (``above``: the anchor's parent, for a joint with no tracked child): each is tried on the
+    pseudo-gaps (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
+    (``bad (F, J)``), as the rotational bridges are judged, its error the mean squared
+    distance per frame (m^2) over the pseudo-gaps where it can be built (a plane ill-defined
+    on one pseudo-gap, a limb held straight there, leaves the other to judge it); those
+    within ``blend_ratio`` times the best one's error are averaged, weighted by the inverse of
+    their errors.  One that does
     not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
     turning over) is left out.  Returns the positions and how (the estimate's name, or where
     several were averaged their names and weights, :func:`_blend_name`), or None where riding
@@ -743,8 +746,7 @@ def _judged_position(
         return None
     found = _position_estimates(P, j, parent, child, anchor, s, e, opt.plane_min_deg, above)
     names = [k for k, est in found.items() if k == "parent-relative" or _moves_on(P, est, j, s, e, opt.stretch_distance)]
-    err = np.zeros(len(names))
-    tested = False
+    total, count = np.zeros(len(names)), np.zeros(len(names))
     for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
         if bad[a - 1 : b + 2, joints].any() or not np.isfinite(P[a - 1 : b + 2, joints]).all():
@@ -752,12 +754,17 @@ def _judged_position(
         trial = _position_estimates(P, j, parent, child, anchor, a, b, opt.plane_min_deg, above)
         for i, k in enumerate(names):
             est = trial.get(k)
-            if est is not None and child is not None:
+            if est is None:
+                continue  # its plane is ill-defined there: judged on the other pseudo-gap
+            if child is not None:
                 est = _on_bones(P, est, j, parent, child, a, b)
-            err[i] = np.inf if est is None else err[i] + np.sum((est - P[a : b + 1, j]) ** 2)
-        tested = True
+            total[i] += np.sum((est - P[a : b + 1, j]) ** 2)
+            count[i] += n
+    if not count[names.index("parent-relative")]:
+        return None
+    err = np.where(count > 0, total / np.maximum(count, 1), np.inf)  # m^2 per frame
     best = int(np.argmin(err))
-    if not tested or names[best] == "parent-relative":
+    if names[best] == "parent-relative":
         return None
     near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
     w = 1.0 / np.maximum(err[near], 1e-12)

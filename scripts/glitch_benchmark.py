@@ -492,7 +492,7 @@ def rotational(args: argparse.Namespace) -> None:
                 err[t][0] += np.nansum(eb)
                 err[t][1] += np.nansum(ea)
                 err[t][2] += np.isfinite(eb).sum()
-                off = ~own_fix[frames]  # no truth on the clip's own repaired glitches (the "worse" counts leave them out too)
+                off = ~own_fix[frames]  # no truth on the clip's own repaired glitches ("worse" leaves them out too)
                 err[t][7] += np.nansum(eb[off])
                 err[t][8] += np.nansum(ea[off])
                 changed = np.any(np.asarray(fixed.rotations) != np.asarray(glitched.rotations), axis=(1, 2))

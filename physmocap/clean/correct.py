@@ -711,7 +711,9 @@ def _position_estimates(
     elbow's bend interpolated, instead of keeping its world direction)."""
     out = {"parent-relative": _repair_position(P, j, parent, s, e)[0]}
     if child is None:
-        ridden = None if anchor is None or above is None else _among_neighbours(P, j, parent, anchor, above, s, e, min_deg)
+        ridden = None
+        if anchor is not None and above is not None:
+            ridden = _among_neighbours(P, j, parent, anchor, above, s, e, min_deg)
         if ridden is not None:
             out["with its parent's bone"] = ridden
         return out

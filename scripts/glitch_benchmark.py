@@ -32,7 +32,9 @@ increase of a frame's worst joint-position error on any frame the correction cha
 the frames of the clip's own glitches, where the "clean" reference is itself glitched), and how
 many of those touched frames got more than 1 cm worse; "beyond ROM" counts the touched frames
 the correction left beyond a range of motion (:mod:`physmocap.clean.anatomy`) that the
-untouched clip is within there.
+untouched clip is within there; "own out" is the reduction again with the frames the untouched
+clip's own repairs change left out (the dance clip's thigh flip, which every cleaned version
+repairs and the reference keeps: an injected span over it is scored against a glitch).
 
 **Joint-position sources** (``--sources positional`` or ``both``, the default): every shared
 BVH as the joint positions of its forward kinematics (a tracker's view of the same motion, every
@@ -441,8 +443,9 @@ def rotational(args: argparse.Namespace) -> None:
     count = {t: np.zeros(3, int) for t in args.types}  # tp, fp, fn
     own_fp = {t: 0 for t in args.types}  # false positives the untouched clip already had
     # sum sq before, sum sq after, n, worst increase (cm), touched frames, of them > 1 cm worse,
-    # of them beyond a range of motion the untouched clip is within
-    err = {t: [0.0, 0.0, 0, 0.0, 0, 0, 0] for t in args.types}
+    # of them beyond a range of motion the untouched clip is within, sum sq before and after off
+    # the frames the untouched clip's own repairs change
+    err = {t: [0.0, 0.0, 0, 0.0, 0, 0, 0, 0.0, 0.0] for t in args.types}
     methods = {t: {m: np.zeros(4) for m in METHODS} for t in args.types}
     faint_total = {t: 0 for t in args.types}
     print(f"{'clip':26s} {'frames':>6s} {'untouched flagged %':>19s} {'changed %':>9s}  " + " ".join(f"{t[:9] + ' P/R':>13s}" for t in args.types) + "  (strict P)")
@@ -460,8 +463,8 @@ def rotational(args: argparse.Namespace) -> None:
                 print(f"    untouched  {g.kind:13s} {g.joint:18s} frames {g.start}-{g.end} severity {g.severity:.1f} {g.unit}")
         cells = []
         P0 = motion.world_positions()
-        for ti, t in enumerate(args.types):
-            rng = np.random.default_rng([args.seed, ci, ti])
+        for t in args.types:
+            rng = np.random.default_rng([args.seed, ci, TYPES.index(t)])  # the same glitches whichever types run
             glitched, truth, faint = inject(motion, rng, args.per_type, (t,), args.floor)
             fixed, report = clean(glitched)
             det = _flagged(report, names) - faint
@@ -489,6 +492,9 @@ def rotational(args: argparse.Namespace) -> None:
                 err[t][0] += np.nansum(eb)
                 err[t][1] += np.nansum(ea)
                 err[t][2] += np.isfinite(eb).sum()
+                off = ~own_fix[frames]  # no truth on the clip's own repaired glitches ("worse" leaves them out too)
+                err[t][7] += np.nansum(eb[off])
+                err[t][8] += np.nansum(ea[off])
                 changed = np.any(np.asarray(fixed.rotations) != np.asarray(glitched.rotations), axis=(1, 2))
                 changed = np.flatnonzero(changed & ~own_fix)  # not the clip's own glitches: no truth there
                 if len(changed):
@@ -500,15 +506,16 @@ def rotational(args: argparse.Namespace) -> None:
                     err[t][6] += len(set(changed.tolist()) & (_beyond_rom(fixed) - base_rom))
         print(f"{clip:26s} {motion.num_frames:6d} {100 * len(flagged) / motion.num_frames:19.2f} {100 * own_fix.mean():9.2f}  " + " ".join(f"{c:>13s}" for c in cells), flush=True)
     print()
-    print(f"{'type':11s} {'strict P':>9s} {'injected P':>10s} {'recall':>7s} {'F1':>6s} {'pairs':>6s} {'sub-noise':>9s} {'RMS before':>10s} {'after cm':>8s} {'removed':>7s} {'worst +cm':>9s} {'>1cm worse':>12s} {'beyond ROM':>10s}")
+    print(f"{'type':11s} {'strict P':>9s} {'injected P':>10s} {'recall':>7s} {'F1':>6s} {'pairs':>6s} {'sub-noise':>9s} {'RMS before':>10s} {'after cm':>8s} {'removed':>7s} {'worst +cm':>9s} {'>1cm worse':>12s} {'beyond ROM':>10s} {'own out':>7s}")
     tot = np.zeros(3, int)
     for t in args.types:
         tot += count[t]
         p, r, f = _prf(*count[t])
         pi, _, f = _prf(count[t][0], count[t][1] - own_fp[t], count[t][2])
-        b, a, n, w, touched, worse, rom = err[t]
+        b, a, n, w, touched, worse, rom, bo, ao = err[t]
         rb, ra = np.sqrt(b / max(1, n)) * 100, np.sqrt(a / max(1, n)) * 100
-        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f} {worse:5d}/{touched:<6d} {rom:10d}")
+        out = 1 - np.sqrt(ao / max(1e-24, bo))  # the share removed off the clip's own repaired frames
+        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f} {worse:5d}/{touched:<6d} {rom:10d} {out:7.1%}")
     p, r, f = _prf(*tot)
     pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")

@@ -265,19 +265,71 @@ def test_a_lost_knee_rides_on_the_plane_of_its_neighbours(bench):
     assert err.max() < 0.04
 
 
-def test_a_held_ankle_rides_on_its_toe(walk, bench):
-    """The walk's left ankle held for 0.4 s of a swing (seed 3 of the benchmark): riding on the
-    knee, its offset turning steadily, then put at its two bone lengths, it landed on the wrong
-    side of the small circle the shank and the foot allow (21.6 cm off); riding on the toe,
-    which rebuilds the ankle's motion next to the span better, it is within 2 cm."""
+def _held(walk, bench, name: str, start: int, stop: int):
+    """The walk as joint positions with joint ``name`` held on frames ``start..stop - 1`` (at
+    its position on the frame before), cleaned: ``(clean positions, cleaned motion, report,
+    joint index)``."""
     import dataclasses
 
     pos = bench.positional_version(walk)
     P0 = np.asarray(pos.positions)
     P = np.array(P0, copy=True)
-    ankle = walk.skeleton.names.index("LeftFoot")
-    P[341:389, ankle] = P[340, ankle]
+    j = walk.skeleton.names.index(name)
+    P[start:stop, j] = P[start - 1, j]
     fixed, report = clean(dataclasses.replace(pos, positions=P))
+    return P0, fixed, report, j
+
+
+def test_a_held_ankle_rides_on_its_toe(walk, bench):
+    """The walk's left ankle held for 0.4 s of a swing (seed 3 of the benchmark): riding on the
+    knee, its offset turning steadily, then put at its two bone lengths, it landed on the wrong
+    side of the small circle the shank and the foot allow (21.6 cm off); riding on the toe,
+    which rebuilds the ankle's motion next to the span better, it is within 2 cm."""
+    P0, fixed, report, ankle = _held(walk, bench, "LeftFoot", 341, 389)
     (g,) = [g for g in report.glitches if g.joint == "LeftFoot"]
     assert (g.kind, g.start, g.end, g.corrected) == ("frozen", 341, 388, "child-relative, on bones")
     assert np.linalg.norm(np.asarray(fixed.positions)[341:389, ankle] - P0[341:389, ankle], axis=-1).max() < 0.02
+
+
+def test_a_held_toe_end_turns_with_its_foot(walk, bench):
+    """The walk's right toe end (no tracked child) held for 0.4 s of a stride: riding on the
+    toe joint alone, its offset turning steadily from one end to the other, it missed the real
+    toe end by up to 4.7 cm; riding on its parent's bone (its offset kept in the frame of the
+    toe joint, the ankle and the knee, which rebuilds its motion next to the span better) it
+    is within 1.2 cm."""
+    P0, fixed, report, toe = _held(walk, bench, "RightToeBase_End", 300, 348)
+    (g,) = [g for g in report.glitches if g.joint == "RightToeBase_End"]
+    assert (g.kind, g.start, g.end, g.corrected) == ("frozen", 300, 347, "with its parent's bone")
+    assert np.linalg.norm(np.asarray(fixed.positions)[300:348, toe] - P0[300:348, toe], axis=-1).max() < 0.015
+
+
+def test_an_estimate_ill_defined_on_one_pseudo_gap_is_judged_on_the_other():
+    """A hand (no tracked child) riding rigidly on a swinging upper arm, held for 30 frames;
+    through most of the pseudo-gap after the span the arm is raised in line with the collar
+    (within ``plane_min_deg``), so the plane of elbow, shoulder and collar is ill-defined there.
+    The estimate riding on that plane is judged on the pseudo-gap before the span alone (its
+    error per frame there) and wins: it rebuilds the swing exactly, where riding on the elbow
+    (its offset turning steadily) cuts across it.  Summing the errors over both pseudo-gaps,
+    an estimate missing on one counted as lost, kept the elbow's."""
+    from physmocap.clean import CleanOptions
+    from physmocap.clean.correct import _judged_position, _neighbour_frames, _pseudo_gaps
+
+    F, s, e = 200, 80, 109
+    t = np.arange(F, dtype=float)
+    lift = (1.5 + 0.4 * np.sin(2 * np.pi * t / 70)) * np.clip(np.abs(t - 125) / 15, 0, 1) ** 2  # rad below the line
+    P = np.zeros((F, 4, 3))  # collar, shoulder (at the origin), elbow, hand
+    P[:, 0] = [-0.3, 0.0, 0.0]
+    P[:, 2] = 0.3 * np.stack([np.cos(lift), np.zeros(F), -np.sin(lift)], axis=-1)
+    P[:, 3] = P[:, 2] + 0.25 * np.stack([np.cos(lift + 0.6), np.zeros(F), -np.sin(lift + 0.6)], axis=-1)  # bent 0.6 rad
+    truth = P[s : e + 1, 3].copy()
+    P[s : e + 1, 3] = P[s - 1, 3]
+    bad = np.zeros((F, 4), dtype=bool)
+    bad[s : e + 1, 3] = True
+    opt = CleanOptions()
+    before, after = _pseudo_gaps(s, e, F)
+    n = e - s + 1
+    assert _neighbour_frames(P, 2, 1, 0, np.arange(after - 1, after + n + 1), opt.plane_min_deg) is None
+    assert _neighbour_frames(P, 2, 1, 0, np.arange(before - 1, before + n + 1), opt.plane_min_deg) is not None
+    est, how = _judged_position(P, bad, 3, 2, None, 1, s, e, opt, above=0)
+    assert how == "with its parent's bone"
+    np.testing.assert_allclose(est, truth, atol=1e-9)

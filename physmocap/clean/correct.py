@@ -22,7 +22,8 @@ from the parent and the child (:func:`_on_bones`); a stretched bone whose joint 
 on continuously is instead put back at its length along its own direction (:func:`_along_bone`),
 and a joint with a tracked child rides on whichever of its parent, its child and the plane of
 its parent, child and grandparent rebuilds its own motion next to the span best
-(:func:`_judged_position`);
+(:func:`_judged_position`; one with no tracked child, a hand or a toe's end, on its parent or
+on its parent's bone, the plane of its parent, grandparent and great-grandparent);
 a left/right swap by trading the two joints' positions back over the span.
 Discontinuities (a jump with no return) are reported, not changed: the motion after them
 may be the real one.  A rotational repair whose pose leaves a range of motion is re-solved
@@ -696,14 +697,27 @@ def _among_neighbours(
 
 
 def _position_estimates(
-    P: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int, min_deg: float
+    P: np.ndarray, j: int, parent: int, child: int | None, anchor: int | None, s: int, e: int, min_deg: float,
+    above: int | None = None,
 ) -> dict[str, np.ndarray]:
     """Estimates of joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)``, by name:
     riding on its parent (its offset from the parent turning steadily, :func:`_repair_position`),
-    riding on its child the same way, and riding on the plane of parent, child and ``anchor``
-    (the parent's parent, :func:`_among_neighbours`, where that plane is well defined)."""
-    out = {"parent-relative": _repair_position(P, j, parent, s, e)[0],
-           "child-relative": _repair_position(P, j, child, s, e)[0]}  # fmt: skip
+    and, where it has a tracked ``child``, riding on the child the same way and on the plane of
+    parent, child and ``anchor`` (the parent's parent, :func:`_among_neighbours`, where that
+    plane is well defined); a joint with no tracked child (a hand, a toe's end) rides instead on
+    its parent's bone, the plane of the parent, ``anchor`` and ``above`` (the anchor's parent:
+    :func:`_among_neighbours` with the anchor in the child's place), so its offset turns with
+    the limb above it ("with its parent's bone": a frozen hand swings with the upper arm at the
+    elbow's bend interpolated, instead of keeping its world direction)."""
+    out = {"parent-relative": _repair_position(P, j, parent, s, e)[0]}
+    if child is None:
+        ridden = None
+        if anchor is not None and above is not None:
+            ridden = _among_neighbours(P, j, parent, anchor, above, s, e, min_deg)
+        if ridden is not None:
+            out["with its parent's bone"] = ridden
+        return out
+    out["child-relative"] = _repair_position(P, j, child, s, e)[0]
     ridden = None if anchor is None else _among_neighbours(P, j, parent, child, anchor, s, e, min_deg)
     if ridden is not None:
         out["among its neighbours"] = ridden
@@ -711,38 +725,48 @@ def _position_estimates(
 
 
 def _judged_position(
-    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int, anchor: int | None, s: int, e: int,
-    opt: CleanOptions,
+    P: np.ndarray, bad: np.ndarray, j: int, parent: int, child: int | None, anchor: int | None, s: int, e: int,
+    opt: CleanOptions, above: int | None = None,
 ) -> tuple[np.ndarray, str] | None:
     """Joint ``j``'s positions on frames ``s..e`` of ``P (F, J, 3)`` from the estimate of
     :func:`_position_estimates` that rebuilds the joint's own good motion next to the span
-    best, all put at their bone lengths (:func:`_on_bones`): each is tried on the pseudo-gaps
-    (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
-    (``bad (F, J)``), as the rotational bridges are judged; those within ``blend_ratio`` times
-    the best one's error are averaged, weighted by the inverse of their errors.  One that does
+    best, all put at their bone lengths (:func:`_on_bones`) where ``child`` is tracked
+    (``above``: the anchor's parent, for a joint with no tracked child): each is tried on the
+    pseudo-gaps (:func:`_pseudo_gaps`) where the joints it rides on are tracked and unglitched
+    (``bad (F, J)``), as the rotational bridges are judged, its error the mean squared
+    distance per frame (m^2) over the pseudo-gaps where it can be built (a plane ill-defined
+    on one pseudo-gap, a limb held straight there, leaves the other to judge it); those
+    within ``blend_ratio`` times the best one's error are averaged, weighted by the inverse of
+    their errors.  One that does
     not move on continuously over the span (:func:`_moves_on`, ``stretch_distance``: a plane
     turning over) is left out.  Returns the positions and how (the estimate's name, or where
     several were averaged their names and weights, :func:`_blend_name`), or None where riding
     on the parent wins or no pseudo-gap can tell."""
     F, n = len(P), e - s + 1
-    joints = [j, parent, child] + ([anchor] if anchor is not None else [])
+    joints = [j] + [k for k in (parent, child, anchor, above) if k is not None]
     if s < 1 or e + 1 >= F or bad[s - 1 : e + 2, joints[1:]].any():
         return None
-    found = _position_estimates(P, j, parent, child, anchor, s, e, opt.plane_min_deg)
+    found = _position_estimates(P, j, parent, child, anchor, s, e, opt.plane_min_deg, above)
     names = [k for k, est in found.items() if k == "parent-relative" or _moves_on(P, est, j, s, e, opt.stretch_distance)]
-    err = np.zeros(len(names))
-    tested = False
+    total, count = np.zeros(len(names)), np.zeros(len(names))
     for a in _pseudo_gaps(s, e, F):
         b = a + n - 1
         if bad[a - 1 : b + 2, joints].any() or not np.isfinite(P[a - 1 : b + 2, joints]).all():
             continue
-        trial = _position_estimates(P, j, parent, child, anchor, a, b, opt.plane_min_deg)
+        trial = _position_estimates(P, j, parent, child, anchor, a, b, opt.plane_min_deg, above)
         for i, k in enumerate(names):
             est = trial.get(k)
-            err[i] = np.inf if est is None else err[i] + np.sum((_on_bones(P, est, j, parent, child, a, b) - P[a : b + 1, j]) ** 2)
-        tested = True
+            if est is None:
+                continue  # its plane is ill-defined there: judged on the other pseudo-gap
+            if child is not None:
+                est = _on_bones(P, est, j, parent, child, a, b)
+            total[i] += np.sum((est - P[a : b + 1, j]) ** 2)
+            count[i] += n
+    if not count[names.index("parent-relative")]:
+        return None
+    err = np.where(count > 0, total / np.maximum(count, 1), np.inf)  # m^2 per frame
     best = int(np.argmin(err))
-    if not tested or names[best] == "parent-relative":
+    if names[best] == "parent-relative":
         return None
     near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= opt.blend_ratio * err[best]]
     w = 1.0 / np.maximum(err[near], 1e-12)
@@ -913,7 +937,9 @@ def correct_glitches(
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"
     or "linear" (a position, :func:`_repair_position`), "along its bone" (a stretched bone put
     back at its length, :func:`_along_bone`), "child-relative" or "among its neighbours" (riding
-    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`,
+    on the child, or on the plane of its parent, child and grandparent, :func:`_judged_position`),
+    "with its parent's bone" (a joint with no tracked child riding on the plane of its parent,
+    grandparent and great-grandparent,
     or "blend of ..." of these with their shares;
     ", on bones" where any was then put at its
     bone lengths from its parent and child, :func:`_on_bones`), "swapped back",
@@ -976,9 +1002,10 @@ def correct_glitches(
         if g.kind == "bone_stretch" and parent is not None:
             est, how = _along_bone(arr, est, j, parent, g.start, g.end, how, opt.stretch_distance)
         child = _bone_child(arr, parents, j, g.start, g.end, bad) if parent is not None else None
-        anchor = int(parents[parent]) if child is not None and parents[parent] >= 0 else None
-        if child is not None and how == "parent-relative":
-            judged = _judged_position(arr, bad, j, parent, child, anchor, g.start, g.end, opt)
+        anchor = int(parents[parent]) if parent is not None and parents[parent] >= 0 else None
+        above = int(parents[anchor]) if child is None and anchor is not None and parents[anchor] >= 0 else None
+        if (child is not None or above is not None) and how == "parent-relative":
+            judged = _judged_position(arr, bad, j, parent, child, anchor, g.start, g.end, opt, above)
             if judged is not None:
                 est, how = judged
         if child is not None and np.isfinite(arr[g.start : g.end + 1, parent]).all():

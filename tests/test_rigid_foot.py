@@ -14,7 +14,7 @@ import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, retargeted
 from physmocap.ik.footplan import RigidFoot, planted_positions
-from physmocap.ik.rigidfoot import tip_reference, toe_line_correction
+from physmocap.ik.rigidfoot import LEVEL_PITCH_FULL, LEVEL_PITCH_NONE, level_roll, tip_reference, toe_line_correction
 from physmocap.metrics.fidelity import saturation_matrix
 from physmocap.rotations import Rotation
 
@@ -91,3 +91,33 @@ def test_a_rigid_foot_does_not_snap_at_toe_off():
     for t in offs:
         near[max(0, t - 3) : t + 4] = True
     assert not sat[near].any(), np.flatnonzero(sat.any(axis=1) & near)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 70.0, -150.0])
+@pytest.mark.parametrize("roll", [-25.0, 10.0])
+def test_a_rolled_foot_is_levelled_about_its_forward_axis(yaw, roll):
+    """Levelled, the lateral axis is horizontal and the forward axis (pitch, heading) is
+    kept; weight 0 leaves the target alone; a foot pitched past LEVEL_PITCH_NONE too."""
+    rest = Rotation.from_euler("z", 30.0, degrees=True).as_quat()  # an ankle frame turned at rest
+    for pitch in (-30.0, 15.0):
+        q = (Rotation.from_euler("ZYX", [yaw, pitch, roll], degrees=True) * Rotation.from_quat(rest)).as_quat()
+        out = level_roll(np.array([q, q]), rest, np.array([1.0, 0.0]))
+        turned = Rotation.from_quat(out[0]) * Rotation.from_quat(rest).inv()
+        before = Rotation.from_quat(q) * Rotation.from_quat(rest).inv()
+        assert turned.apply([0.0, 1.0, 0.0])[2] == pytest.approx(0.0, abs=1e-9)
+        assert np.allclose(turned.apply([1.0, 0.0, 0.0]), before.apply([1.0, 0.0, 0.0]), atol=1e-9)
+        assert np.allclose(out[1], q)
+    steep = (Rotation.from_euler("ZYX", [yaw, -np.degrees(LEVEL_PITCH_NONE) - 5.0, roll], degrees=True)
+             * Rotation.from_quat(rest)).as_quat()
+    assert np.allclose(level_roll(steep[None], rest, np.ones(1))[0], steep)
+    assert LEVEL_PITCH_FULL < LEVEL_PITCH_NONE
+
+
+def test_a_rigid_foot_rolls_over_its_edge_not_a_corner():
+    """Before: the robot's foot followed the PyMO actor's foot turning 10-30 degrees about
+    its long axis at toe-off and tipped onto one corner of its front edge, which slid as the
+    roll grew: foot slip 1.53 cm/s.  Its roll is now levelled while only its toes are down."""
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    _, traj = retargeted("pymo_walk.bvh", "robot")
+    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 1.3

@@ -37,9 +37,10 @@ from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
-from .footplan import BODY_PART_JOINTS, plant_body_contacts, planted_positions
+from .footplan import BODY_PART_JOINTS, contact_intervals, ease_weights, plant_body_contacts, planted_positions
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
+from .rigidfoot import level_roll
 from .solver import RELAXATION_LEVELS, SolverOptions
 from .targets import Targets, build_targets, character_rest_frames
 from .toetips import extend_toe_tips
@@ -346,7 +347,10 @@ def plan_targets(
     for side, foot in planting.rigid_feet().items():
         i = targets.names.index(f"{side}_ankle")
         if levelled.has_orientation[i]:  # its front edge is carried by the ankle's orientation target
-            rigid[side] = (foot, _get_columns(levelled.orientations, [i])[:, 0])  # gathered: one column is on every page
+            orientation = _get_columns(levelled.orientations, [i])[:, 0]  # gathered: one column is on every page
+            orientation = level_roll(orientation, foot.rest_quat, _toes_only_weights(labels, side, targets.fps, plant.ease_time))
+            _set_columns(levelled.orientations, [i], orientation[:, None])
+            rigid[side] = (foot, orientation)
     _, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
         planting.toe_contacts(), rigid_feet=rigid, in_place=True,
@@ -355,6 +359,21 @@ def plan_targets(
         plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return levelled
+
+
+def _toes_only_weights(labels: dict[str, np.ndarray], side: str, fps: float, ease_time: float) -> np.ndarray:
+    """``(F,)`` 1 on the frames where only ``side``'s toes are labelled (heel up), eased in
+    before and out after each such interval over ``ease_time`` seconds (:func:`~.footplan.ease_weights`)."""
+    toe, heel = labels.get(f"{side}_toe"), labels.get(f"{side}_heel")
+    if toe is None:
+        return np.zeros(len(next(iter(labels.values()))))
+    only = np.asarray(toe, dtype=bool) & ~(np.zeros_like(toe, dtype=bool) if heel is None else np.asarray(heel, dtype=bool))
+    w = np.zeros(len(only))
+    k = int(round(ease_time * fps))
+    for s, e in contact_intervals(only):  # each interval's ramps over its own frames only
+        a, b = max(0, s - k - 1), min(len(only), e + k + 2)
+        np.maximum(w[a:b], ease_weights(b - a, s - a, e - a, k), out=w[a:b])
+    return w
 
 
 def spill_targets(targets: Targets) -> None:

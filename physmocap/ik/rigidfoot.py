@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rotations import quat_apply, quat_between, quat_conj
+from ..rotations import quat_apply, quat_between, quat_conj, quat_mul
 
-__all__ = ["tip_reference", "toe_line_correction"]
+__all__ = ["tip_reference", "toe_line_correction", "level_roll"]
 
 
 def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,3 +67,44 @@ def toe_line_correction(rotations: np.ndarray, ankle: np.ndarray, tip: np.ndarra
     bad = ~valid | (n < 1e-6) | ~np.all(np.isfinite(C), axis=-1)
     C[bad] = (0.0, 0.0, 0.0, 1.0)
     return C
+
+
+#: Pitch (radians) of a foot's forward axis up to which :func:`level_roll` levels it fully,
+#: and beyond which not at all: a foot standing on its tip has its edge level whatever its
+#: roll, and levelling it there would turn it about its (nearly vertical) long axis.
+LEVEL_PITCH_FULL = np.radians(45.0)
+LEVEL_PITCH_NONE = np.radians(75.0)
+
+
+def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    r"""``(F, 4)`` ankle orientation targets turned about the foot's forward axis until its
+    lateral axis is horizontal, by ``weights (F,)`` (0: unchanged, 1: level).
+
+    A rigid foot rolling over its front edge keeps that edge on the floor only while its
+    lateral axis stays level; the actor's foot at toe-off turns about its long axis too
+    (10-30 degrees on the PyMO walk), which the toes absorb, and a rigid foot following it
+    tips onto one corner of its edge, the corner sliding as the roll grows (the bundled
+    robot's foot slip on the PyMO walk).  With :math:`R = Q\,Q_0^{-1}` the rotation from
+    the rest pose (facing +X, Z up), :math:`f = R\hat x`, :math:`l = R\hat y`, turning
+    :math:`l` by :math:`\varphi` about :math:`f` gives :math:`l\cos\varphi + (f \times l)
+    \sin\varphi`, level for :math:`\varphi = \arctan(-l_z / (f \times l)_z)` (the
+    smaller of the two turns).  The turn is :math:`w\,s\,\varphi`, with :math:`s` fading
+    from 1 to 0 as the foot pitches from :data:`LEVEL_PITCH_FULL` to :data:`LEVEL_PITCH_NONE`.
+
+    Args:
+        orientations: ``(F, 4)`` x-y-z-w ankle orientation targets.
+        rest_quat: ``(4,)`` the ankle frame's rest orientation.
+        weights: ``(F,)`` in [0, 1].
+    """
+    q = np.asarray(orientations, dtype=float)
+    R = quat_mul(q, quat_conj(np.asarray(rest_quat, dtype=float)))
+    f = quat_apply(R, np.broadcast_to([1.0, 0.0, 0.0], q[:, :3].shape))
+    lat = quat_apply(R, np.broadcast_to([0.0, 1.0, 0.0], q[:, :3].shape))
+    up = np.cross(f, lat)[:, 2]
+    phi = np.arctan2(-lat[:, 2], up)
+    phi = np.where(np.abs(phi) > np.pi / 2.0, phi - np.sign(phi) * np.pi, phi)  # the smaller turn
+    pitch = np.arcsin(np.clip(np.abs(f[:, 2]), 0.0, 1.0))
+    x = np.clip((LEVEL_PITCH_NONE - pitch) / (LEVEL_PITCH_NONE - LEVEL_PITCH_FULL), 0.0, 1.0)
+    half = 0.5 * np.asarray(weights, dtype=float) * x * x * (3.0 - 2.0 * x) * phi
+    C = np.concatenate([f * np.sin(half)[:, None], np.cos(half)[:, None]], axis=1)
+    return quat_mul(C, q)

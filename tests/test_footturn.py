@@ -123,3 +123,20 @@ def test_a_bent_leg_holds_its_foot_between_the_actors_foot_and_knee():
     assert aim == pytest.approx(LEG_SHARE * knee)
     straight = _targets(0.0, knee_turn=knee)
     assert f.reference("left", 0.0, 0.0, straight[0], None, legs_now(0.0)["left"]) == pytest.approx(0.0)
+
+
+def test_a_knee_bending_the_other_way_gives_no_aim():
+    """A character whose knee plane points away from the actor's (a reverse knee) would aim
+    the foot 180 degrees round; beyond MAX_KNEE_TURN the foot keeps its target heading."""
+    f = _follower(legs=True)
+    bend = BEND_FULL + 0.2
+    actor, _ = _targets(0.0, bend=bend)
+    backwards, _ = _targets(np.pi, bend=bend)  # the character's knee pointing backwards
+    assert f.reference("left", 0.0, 0.0, actor, None, backwards[:3]) == pytest.approx(0.0)
+
+
+def test_without_orientations_the_heading_comes_from_the_toe():
+    f = _follower(orientation=True)
+    positions, _ = _targets(np.radians(30.0))
+    assert f.target_heading("left", positions, None, None) == pytest.approx(
+        f.target_heading("left", *_targets(np.radians(30.0)), None))

@@ -8,7 +8,7 @@ from its target through a 1.2 s stance, then its heel swivelling 10 cm on the fl
 in 5 frames as it lifted).
 
 :class:`HeadingFollower` measures, per foot held at two or more points, the yaw
-:math:`e` of its holds against the foot's target heading, and turns the holds by
+:math:`e` of its holds against its *aim* (below), and turns the holds by
 
 .. math::
 
@@ -16,9 +16,11 @@ in 5 frames as it lifted).
             -(|\Delta\psi| + \omega/F),\; |\Delta\psi| + \omega/F\bigr)
 
 where :math:`f` is the dead band (``PlantOptions.pivot_threshold``: a capture's
-drift of a degree or two does not swivel the foot), :math:`\Delta\psi` the target
-heading's own change since the previous frame (a pivot on a planted foot is
-followed at once, however fast) and :math:`\omega` the rate (rad/s,
+drift of a degree or two does not swivel the foot), :math:`\Delta\psi` the aim's
+own change since the previous frame (a pivot on a planted foot is followed at once,
+however fast; so is the aim's knee part, below, wobble included: low-passed or only
+followed at the rate, it left the foot off its free pose when a point let go, and the
+dance's foot slip rose again, 0.98 -> 1.14 cm/s) and :math:`\omega` the rate (rad/s,
 ``PlantOptions.heading_rate``) at which an error already there when the foot was
 caught (a landing off the target's heading) is taken out, :math:`F` the frame rate.
 
@@ -40,7 +42,8 @@ Headings (radians, about world Z):
   stances put the humanoid's shank 10 degrees off the actor's; held on the knee's,
   its feet 19 degrees off the actor's (median over flat stances).  The aim goes
   :data:`LEG_SHARE` (half) of the way, as the knees bend from :data:`BEND_FROM` to
-  :data:`BEND_FULL` (a walk's stance knee stays below them).
+  :data:`BEND_FULL` (a walk's stance knee reaches the band at times: on the CMU walk the
+  aim is up to 5 degrees off the target heading).
 
 A target pitched more than :data:`~physmocap.ik.planting.HEADING_PITCH` (its
 reference vector's horizontal part shorter than :math:`\cos` of it) gives no heading:
@@ -90,10 +93,15 @@ def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[fl
 
 
 #: Radians: knees bent less than this (actor's or character's) hold the foot at its own
-#: target heading; bent more than :data:`BEND_FULL`, at the heading of the actor's knee plane.
+#: target heading; bent more than :data:`BEND_FULL`, :data:`LEG_SHARE` of the way to the
+#: heading that points the character's knee where the actor's points.
 BEND_FROM = np.radians(20.0)
 BEND_FULL = np.radians(40.0)
 LEG_SHARE = 0.5
+#: Radians: a knee plane further than this from the foot's target heading is a knee that
+#: bends the other way from the actor's (a reverse-knee robot): it gives no aim (without the
+#: bound, such a knee's wobble of a millimetre flipped the aim between +-67 degrees).
+MAX_KNEE_TURN = np.radians(60.0)
 
 
 class _Foot:
@@ -119,7 +127,6 @@ class HeadingFollower:
     """Per frame, how far to turn the holds of each foot (see the module docstring).
 
     Args:
-        names: Canonical joints of the targets, in target order.
         has_orientation: ``(N,)`` which targets have an orientation.
         feet: ``side -> (ankle target index, toe target index, contact site indices
             heel to toe, (n, 3) their rest positions, (4,) x-y-z-w rest orientation of
@@ -142,12 +149,12 @@ class HeadingFollower:
         self.min_level = float(np.cos(max_pitch))
         self._previous: dict[str, float] = {}
 
-    def target_heading(self, side: str, positions: np.ndarray, orientations: np.ndarray,
+    def target_heading(self, side: str, positions: np.ndarray, orientations: np.ndarray | None,
                        valid: np.ndarray | None) -> float | None:
         """The foot's target heading (radians), None where it has none on this frame."""
         foot = self.feet[side]
         ok = valid is None or bool(valid[foot.ankle])
-        if ok and self.has_orientation[foot.ankle]:
+        if ok and orientations is not None and self.has_orientation[foot.ankle]:
             q = quat_mul(orientations[foot.ankle], quat_conj(foot.ankle_rest))
             v = quat_apply(q, foot.reference)
             offset = 0.0
@@ -184,11 +191,12 @@ class HeadingFollower:
         psi_t, bend_t = knee_plane(*positions[list(leg)])
         psi_c, bend_c = knee_plane(*leg_now)
         w = LEG_SHARE * _smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
-        if w == 0.0:
+        knee = wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading)
+        if w == 0.0 or abs(knee) > MAX_KNEE_TURN:  # beyond it: a knee bending the other way from the actor's
             return foot_heading
-        return wrap_angle(foot_heading + w * wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading))
+        return wrap_angle(foot_heading + w * knee)
 
-    def turns(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray | None,
+    def turns(self, positions: np.ndarray, orientations: np.ndarray | None, valid: np.ndarray | None,
               locked: np.ndarray, anchors: np.ndarray, legs_now: dict[str, np.ndarray] | None = None) -> dict[str, float]:
         """Side -> radians to turn that foot's holds by on this frame (0 where it is held at
         fewer than two points or has no target heading); ``legs_now``: side -> ``(3, 3)`` the

@@ -820,8 +820,6 @@ class Planting:
                     data: mujoco.MjData) -> None:
         """Turn each foot's holds towards its target heading (:class:`~.footturn.HeadingFollower`,
         :meth:`FootPlanter.turn`)."""
-        if orientations is None:
-            orientations = np.tile([0.0, 0.0, 0.0, 1.0], (len(self.names), 1))
         model = self.character.model
         legs = {side: np.array([f.position(model, data) for f in frames]) for side, frames in self._leg_frames.items()}
         turns = self._turner.turns(positions, orientations, valid, self.locks.locked, self.locks.anchor, legs)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -32,6 +32,9 @@ import numpy as np
 from ..canonical import canonical_parent
 from .planting import PlantOptions, Planting
 from .solver import ContactHolds, FrameSolver, SolverOptions
+
+if TYPE_CHECKING:
+    from .branches import Guide
 
 __all__ = ["FrameResult", "FrameRetargeter", "PELVIS_LAG_FREE", "PELVIS_LAG_TIME"]
 
@@ -164,7 +167,7 @@ class FrameRetargeter:
             else None
         )
 
-    def carried(self, guide):
+    def carried(self, guide: Guide | None) -> Guide | None:
         r"""``guide`` with its start moved by this pass's offset from the pass it follows
         (:attr:`~physmocap.ik.branches.Guide.follow`) on the previous frame,
         :math:`p_t \oplus (q_{t-1} \ominus p_{t-1})`, :math:`p` that pass's answers and
@@ -184,7 +187,8 @@ class FrameRetargeter:
         return dataclasses.replace(guide, start=start)
 
     def _solve_guided(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray,
-                      holds: ContactHolds | None, guide, first: bool = False) -> tuple[np.ndarray, int, int]:
+                      holds: ContactHolds | None, guide: Guide | None,
+                      first: bool = False) -> tuple[np.ndarray, int, int]:
         """:meth:`~physmocap.ik.solver.FrameSolver.solve_frame` with the guide's start
         :meth:`carried`; keeps the followed pass's answer on this frame for the next."""
         out = self.solver.solve_frame(positions, orientations, valid, holds=holds, first=first, guide=self.carried(guide))

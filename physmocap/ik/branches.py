@@ -152,6 +152,9 @@ class Guide:
         cost: Cost per radian (metre) of the pull, one for all or ``(K,)`` joint by joint.
         start: ``(nq,)`` a configuration the frame's iterations start from (kept within the
             ranges and the frame's velocity band), or None: the previous frame's pose.
+        follow: ``start`` is the answer, on this frame, of an earlier pass that this one
+            follows: the iterations start from it moved by this pass's offset from that pass
+            on the previous frame (:meth:`~physmocap.ik.frame.FrameRetargeter.carried`).
     """
 
     qpos: np.ndarray
@@ -159,6 +162,7 @@ class Guide:
     values: np.ndarray
     cost: float | np.ndarray = GUIDE_COST
     start: np.ndarray | None = None
+    follow: bool = False
 
     def arm(self, chain: ArmChain) -> np.ndarray | None:
         """The values this guide pulls ``chain``'s joints to, or None if it does not pull them."""

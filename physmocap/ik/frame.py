@@ -21,15 +21,20 @@ result is a :class:`FrameResult`.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
+import mujoco
 import numpy as np
 
 from ..canonical import canonical_parent
 from .planting import PlantOptions, Planting
 from .solver import ContactHolds, FrameSolver, SolverOptions
+
+if TYPE_CHECKING:
+    from .branches import Guide
 
 __all__ = ["FrameResult", "FrameRetargeter", "PELVIS_LAG_FREE", "PELVIS_LAG_TIME"]
 
@@ -104,6 +109,9 @@ class FrameRetargeter:
             tracked = character.tracked["pelvis"]
             x = tracked.position(character.model, self.solver.configuration.data)
             self._pelvis = (self.names.index("pelvis"), x, 1.0 - np.exp(-1.0 / (PELVIS_LAG_TIME * self.fps)))
+        #: the followed pass's answer on the last frame (``(nq,)``; a guide that follows
+        #: another pass, :attr:`~physmocap.ik.branches.Guide.follow`), or None
+        self._followed: np.ndarray | None = None
         self.restart_contacts()
 
     @staticmethod
@@ -161,6 +169,34 @@ class FrameRetargeter:
             else None
         )
 
+    def carried(self, guide: Guide | None) -> Guide | None:
+        r"""``guide`` with its start moved by this pass's offset from the pass it follows
+        (:attr:`~physmocap.ik.branches.Guide.follow`) on the previous frame,
+        :math:`p_t \oplus (q_{t-1} \ominus p_{t-1})`, :math:`p` that pass's answers and
+        :math:`q` this pass's (radians, metres; :func:`mujoco.mj_differentiatePos`, so a free
+        joint's rotation is carried on its quaternion): where the two passes differ by an
+        offset that changes slowly (a foot held a millimetre from where the earlier pass
+        held it), the iterations start at the answer instead of one step from it.  ``guide``
+        itself where it follows no pass or on the first frame that does."""
+        q, p = self.solver.q_prev, self._followed
+        if guide is None or not guide.follow or q is None or p is None:
+            return guide
+        model = self.character.model
+        v = np.empty(model.nv)
+        mujoco.mj_differentiatePos(model, v, 1.0, p, q)
+        start = np.array(guide.start, dtype=float)
+        mujoco.mj_integratePos(model, start, v, 1.0)
+        return dataclasses.replace(guide, start=start)
+
+    def _solve_guided(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray,
+                      holds: ContactHolds | None, guide: Guide | None,
+                      first: bool = False) -> tuple[np.ndarray, int, int]:
+        """:meth:`~physmocap.ik.solver.FrameSolver.solve_frame` with the guide's start
+        :meth:`carried`; keeps the followed pass's answer on this frame for the next."""
+        out = self.solver.solve_frame(positions, orientations, valid, holds=holds, first=first, guide=self.carried(guide))
+        self._followed = np.array(guide.start, dtype=float) if guide is not None and guide.follow else None
+        return out
+
     def solve(
         self,
         positions: np.ndarray,
@@ -186,7 +222,7 @@ class FrameRetargeter:
         positions = self._follow_pelvis(positions)
         aimed = positions  # the targets the solver is given (streaming: shifted onto the planted feet)
         if self.planting is None or labels is None:
-            q, iterations, level = solver.solve_frame(positions, orientations, valid, first=first, guide=guide)
+            q, iterations, level = self._solve_guided(positions, orientations, valid, None, guide, first)
         else:
             if first:  # converge on the targets alone, then plant the feet where they are
                 solver.solve_frame(positions, orientations, valid, first=True)
@@ -196,7 +232,7 @@ class FrameRetargeter:
             holds = ContactHolds(
                 tuple(tasks), tuple(hard), self.planting.clearance_sites(), self.planting.clearance_bodies()
             )
-            q, iterations, level = solver.solve_frame(shifted, orientations, valid, holds=holds, guide=guide)
+            q, iterations, level = self._solve_guided(shifted, orientations, valid, holds, guide)
             aimed = shifted
         self._measure_lag(aimed, valid)
         self.frame += 1

@@ -263,7 +263,7 @@ def _rss_stage_worker(argv: list[str], stub: bool, every: float = 0.02) -> None:
     import physmocap.ik.frame as frame_mod
 
     if stub:
-        def solve(self, positions, orientations, valid, labels=None):
+        def solve(self, positions, orientations, valid, labels=None, guide=None):
             self.frame += 1
             return frame_mod.FrameResult(np.array(self.character.model.qpos0), 1, 0, 0.0)
 

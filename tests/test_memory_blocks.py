@@ -85,6 +85,43 @@ def test_targets_built_in_temporary_files_are_exact(walk, humanoid, monkeypatch)
     assert _same(spilled.valid, held.valid)
 
 
+def test_actor_rotations_and_toe_tips_kept_column_by_column_are_exact(walk, monkeypatch):
+    """The actor's world rotations and extra joints (a rigid foot's toe tips) kept in temporary
+    files laid out column by column (a column mapped in while read): the same values as in memory."""
+    import physmocap.spill as spill_mod
+    from physmocap.spill import is_spilled
+
+    motion, joints, _ = walk
+    idx, turning, extra = np.array([joints["pelvis"], joints["left_knee"]]), [joints["pelvis"], joints["left_wrist"]], [3]
+    held = targets_mod._ActorKinematics(motion, idx, turning, None, None, extra=extra)
+    monkeypatch.setattr(spill_mod, "SPILL_BYTES", 1)
+    monkeypatch.setattr(targets_mod, "BLOCK_FRAMES", 5)
+    spilled = targets_mod._ActorKinematics(motion, idx, turning, None, None, extra=extra)
+    for name in ("rotations", "extra"):
+        mine, theirs = getattr(spilled, name), getattr(held, name)
+        assert mine.keys() == theirs.keys()
+        for j, column in mine.items():
+            assert is_spilled(column) and _same(column, theirs[j]) and column.shape == (motion.num_frames, column.shape[1])
+    spilled.release()
+
+
+def test_robot_targets_built_in_temporary_files_are_exact(walk, monkeypatch):
+    """The robot (rigid feet: the toe tips read, the toe-line correction) with every array of
+    build_targets spilled and tiny blocks: the same targets as in memory."""
+    import physmocap.spill as spill_mod
+
+    motion, joints, contacts = walk
+    robot = load_character("robot")
+    held = build_targets(motion, joints, robot, floor=contacts.floor)
+    assert held.calibration.foot_tips, "the robot's feet are rigid"
+    monkeypatch.setattr(spill_mod, "SPILL_BYTES", 1)
+    monkeypatch.setattr(spill_mod, "BLOCK_ROWS", 7)
+    monkeypatch.setattr(targets_mod, "BLOCK_FRAMES", 5)
+    spilled = build_targets(motion, joints, robot, floor=contacts.floor)
+    for name in ("positions", "orientations", "valid", "has_orientation"):
+        assert np.array_equal(getattr(spilled, name), getattr(held, name)), name
+
+
 def test_targets_from_given_kinematics_match_the_motions(walk, humanoid):
     motion, joints, contacts = walk
     own = build_targets(motion, joints, humanoid, floor=contacts.floor)

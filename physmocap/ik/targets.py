@@ -525,8 +525,10 @@ class _ActorKinematics:
         # pages let go once written
         self.positions = spilled_empty((F, len(idx), 3), by_column=True)
         rotational = motion.is_rotational and (kinematics is None or kinematics[1] is not None)
-        self.rotations = {j: np.empty((F, 4)) for j in turning} if rotational else None
-        self.extra = {j: np.empty((F, 3)) for j in extra or ()}
+        # the rotations and the extra joints' positions likewise, column by column: a reader
+        # maps in the columns it reads (and lets them go with release(self.store))
+        self.store, self.rotations = _columns(F, turning, 4) if rotational else (None, None)
+        self.extra_store, self.extra = _columns(F, extra or [], 3)
         for s in range(0, F, BLOCK_FRAMES):
             e = min(F, s + BLOCK_FRAMES)
             pos, rot = self._block(s, e)
@@ -535,7 +537,13 @@ class _ActorKinematics:
                 out[s:e] = pos[:, j]
             for j, out in (self.rotations or {}).items():
                 out[s:e] = rot[:, j]
-            release(self.positions)
+            for array in (self.positions, self.store, self.extra_store):
+                release(array)
+
+    def release(self) -> None:
+        """Unmap the pages read so far of every spilled array held (their data stay)."""
+        for array in (self.positions, self.store, self.extra_store):
+            release(array)
 
     def _block(self, s: int, e: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Levelled ``(positions (n, J, 3), rotations (n, J, 4) or None)`` of frames ``[s, e)``."""
@@ -570,18 +578,46 @@ def orientation_array(columns: dict[int, np.ndarray], frames: int, n: int) -> np
     return out
 
 
-def _column_store(columns: dict[int, np.ndarray], frames: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-    """``(store, column -> store[:, k])``: ``columns`` (``(frames, 4)`` each) copied into one
-    array laid out column by column, in a temporary file for a long clip
-    (:func:`~physmocap.spill.spilled_empty`; the pages written let go): the same values, of
-    which a reader maps in only the columns it reads until :func:`~physmocap.spill.release`."""
-    store = spilled_empty((frames, len(columns), 4), by_column=True)
-    out = {}
-    for k, (i, q) in enumerate(columns.items()):
-        store[:, k] = q
-        out[i] = store[:, k]
-        release(store)
-    return store, out
+def _columns(frames: int, keys: list[int], width: int) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """``(store, key -> store[:, k])``: one ``(frames, width)`` column per key (zeros, each
+    C-contiguous), in one array laid out column by column, in a temporary file for a long
+    clip (:func:`~physmocap.spill.spilled_empty`): a reader maps in only the columns it
+    reads until :func:`~physmocap.spill.release`."""
+    store = spilled_empty((frames, len(keys), width), by_column=True)
+    return store, {key: store[:, k] for k, key in enumerate(keys)}
+
+
+def _continuous_signs(q: np.ndarray) -> np.ndarray:
+    """``q`` (``(F, 4)`` x-y-z-w), in place, each quaternion negated where needed so that
+    consecutive frames' dot products are not negative (the same rotations)."""
+    d = np.sum(q[1:] * q[:-1], axis=-1)
+    flip = np.cumsum(d < 0) % 2 == 1
+    q[1:][flip] *= -1.0
+    return q
+
+
+class _ColumnStore:
+    """Whole-clip ``(F, 4)`` columns kept as they are finished in one array laid out column by
+    column, in a temporary file for a long clip (:func:`~physmocap.spill.spilled_empty`): a
+    reader maps in only the columns it reads until :meth:`release`.  Every :meth:`keep` takes
+    a new column (an earlier one may still be read under another name), up to ``columns``."""
+
+    def __init__(self, frames: int, columns: int) -> None:
+        self.array = spilled_empty((frames, columns, 4), by_column=True)
+        self.used = 0
+
+    def keep(self, q: np.ndarray) -> np.ndarray:
+        """A new column holding ``q`` (``(F, 4)``; the same values, C-contiguous), the pages
+        written let go."""
+        out = self.array[:, self.used]
+        self.used += 1
+        out[:] = q
+        self.release()
+        return out
+
+    def release(self) -> None:
+        """Unmap the pages read or written so far (:func:`~physmocap.spill.release`; the data stay)."""
+        release(self.array)
 
 
 def _rigid_foot_tips(motion: Motion, joint_indices: dict[str, int], character, pset: set[str],
@@ -764,9 +800,12 @@ def build_targets(
     toe_turn: dict[str, np.ndarray] = {}  # side -> (F, 4) a rigid foot's toe-line correction
     if not motion.is_rotational and source_orientations is None:
         source_orientations = _positional_orientations(S, col, pset, char_pts)
-    for c in opt.oriented:
-        if c not in pset or not movable.get(c, True):
-            continue  # e.g. a wrist site on the forearm body of a robot without wrists
+    # each finished column is kept in ``held`` (a long clip's in a temporary file: a column
+    # mapped in while read), the actor's columns it read let go
+    candidates = [c for c in opt.oriented if c in pset and movable.get(c, True)]
+    held = _ColumnStore(F, len(candidates) + 1)  # and the chest's, turned with the neck below
+    for c in candidates:
+        actor.release()
         i = col[c]
         q_c0 = rest_c[c][1]
         if motion.is_rotational and rot_all is not None:
@@ -810,34 +849,37 @@ def build_targets(
                 continue
             Q[i] = quat_mul(R_a, quat_mul(quat_conj(np.asarray(R_a0)), q_c0))
             has_q[i] = True
-    # keep quaternion signs continuous over frames (nicer for users; SE3 does not care)
-    for q in Q.values():
-        d = np.sum(q[1:] * q[:-1], axis=-1)
-        flip = np.cumsum(d < 0) % 2 == 1
-        q[1:][flip] *= -1.0
-    held, Q = _column_store(Q, F)  # a long clip's in a temporary file: a column mapped in while read
+        if i in Q:  # signs kept continuous over frames (nicer for users; SE3 does not care)
+            Q[i] = held.keep(_continuous_signs(Q[i]))
+    actor.release()
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
     # Q(t) R_c0^-1 where an orientation target exists.
+    # (kept as they are made, a long clip's in a temporary file: a column mapped in while read)
     delta: dict[str, np.ndarray] = {}
+    turned = _ColumnStore(F, len(RIGID_PARENTS) + 2)  # and the chest's carrier, and the neck's turn
     for seg in RIGID_PARENTS:
         if seg in pset and has_q[col[seg]]:
-            delta[seg] = quat_mul(Q[col[seg]], quat_conj(rest_c[seg][1]))
+            delta[seg] = turned.keep(quat_mul(Q[col[seg]], quat_conj(rest_c[seg][1])))
         elif motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
             A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-            delta[seg] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+            delta[seg] = turned.keep(quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw))))
+        actor.release()
+        held.release()
     if "chest" not in delta:  # the upper torso turns with the highest source torso joint
         for seg in TORSO_CARRIERS:
             if motion.is_rotational and rot_all is not None and seg in joint_indices and seg in pset:
                 A = _rest_alignment(seg, pset, calib_pts, char_pts, yaw)
-                delta["chest"] = quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+                delta["chest"] = turned.keep(
+                    quat_mul(rot_all[joint_indices[seg]], _relative_to_pose(pose_rot, seg, quat_mul(A, yaw)))
+                )
                 break
             if seg in delta:
                 delta["chest"] = delta[seg]
                 break
 
-    rot_all = actor.rotations = None  # read no more: let go before the positions are built
+    rot_all = actor.rotations = actor.store = None  # read no more: let go before the positions are built
     # --- positions: root, then rigid children and limb chains in canonical order
     # Root: anchored on the midpoint of the hip joint centres where both are known
     # (vendors put their "pelvis" joint anywhere between the hips and the waist;
@@ -867,7 +909,7 @@ def build_targets(
     off = char_pts["pelvis"] - anchor_c0
     T[:, ip] = anchor + (quat_apply(pelvis_delta, off) if pelvis_delta is not None else off)
     for c in present:
-        for array in (S, T, held):  # the columns read for the previous joint
+        for array in (S, T, held.array, turned.array):  # the columns read for the previous joint
             release(array)
         if c == "pelvis":
             continue
@@ -892,10 +934,10 @@ def build_targets(
             # target and the shoulders it carries agree with the trunk line
             fix = quat_between(walked - T[:, j], T[:, i] - T[:, j])
             if has_q[j]:
-                Q[j] = quat_mul(fix, Q[j])
+                Q[j] = held.keep(quat_mul(fix, Q[j]))
             carrier = p if p in delta else ("chest" if "chest" not in pset else None)
             if carrier is not None and carrier in delta:
-                delta[carrier] = quat_mul(fix, delta[carrier])
+                delta[carrier] = turned.keep(quat_mul(fix, delta[carrier]))
             continue
         length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])
@@ -935,7 +977,7 @@ def build_targets(
             limb_twists=twists,
         )
     release(S)
-    del delta  # let go before the orientations and positions are laid out frame by frame
+    del delta, turned  # let go before the orientations and positions are laid out frame by frame
     orientations = orientation_array(Q, F, N)
     del Q, held
     return Targets(

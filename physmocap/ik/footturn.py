@@ -56,7 +56,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..rotations import Rotation, quat_apply, quat_conj, quat_mul
+from ..rotations import quat_apply, quat_conj, quat_mul
 
 
 def wrap_angle(a: float) -> float:
@@ -219,7 +219,3 @@ class HeadingFollower:
             out[side] = -float(np.clip(excess, -limit, limit))
         return out
 
-
-def matrix_to_xyzw(rotation: np.ndarray) -> np.ndarray:
-    """x-y-z-w quaternion of a ``(3, 3)`` rotation matrix."""
-    return Rotation.from_matrix(np.asarray(rotation, dtype=float).reshape(3, 3)).as_quat()

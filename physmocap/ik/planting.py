@@ -50,7 +50,7 @@ from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..errors import OptionError
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
-from .footturn import HeadingFollower, matrix_to_xyzw
+from .footturn import HeadingFollower
 from .targets import character_rest_frames
 from .tasks import SitePositionTask
 
@@ -796,19 +796,17 @@ class Planting:
 
     def _heading_follower(self, character) -> HeadingFollower:
         """The :class:`~.footturn.HeadingFollower` of this character's feet (offline planting)."""
-        model = character.model
         data = character.rest_data()
+        rest = character_rest_frames(character)
         feet = {}
-        for s, side in enumerate(("left", "right")):
+        for side in ("left", "right"):
             ks = np.array(self._side_sites[side], dtype=int)
             if side not in self.feet or ks.size < 2:
                 continue
-            ia, it, ra, rt, _ = self.feet[side]
+            ia, it = self.feet[side][:2]
             rest_sites = np.array([data.site_xpos[self.locks.tasks[k].site_id] for k in ks])
-            ankle = character.tracked[self.names[ia]]
-            ankle_rest = matrix_to_xyzw(ankle.rotation(model, data))
-            ankle_toe = None if ia == it else (
-                character.tracked[self.names[it]].position(model, data) - ankle.position(model, data))
+            ankle_pos, ankle_rest = rest[self.names[ia]]
+            ankle_toe = None if ia == it else rest[self.names[it]][0] - ankle_pos
             feet[side] = (ia, it, ks, rest_sites, ankle_rest, ankle_toe)
         opt = self.options
         legs = {side: spec[:3] for side, spec in self.lengths.items() if side in feet}

@@ -53,7 +53,7 @@ import numpy as np
 
 from ..spill import release
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -89,6 +89,19 @@ def ease_weights(
         w[t > end] = 0.0
     return w
 
+
+
+def eased_mask(mask: np.ndarray, ease_frames: int) -> np.ndarray:
+    """``(F,)`` 1 on the frames of ``mask (F,)``, eased in before and out after each of its
+    intervals (:func:`ease_weights`, the ramps outside), overlapping ramps by their maximum;
+    each interval's weights are computed over its own ramps' frames only (an hour-long
+    clip's thousands of intervals)."""
+    mask = np.asarray(mask, dtype=bool)
+    w = np.zeros(len(mask))
+    for s, e in contact_intervals(mask):
+        a, b = max(0, s - ease_frames - 1), min(len(mask), e + ease_frames + 2)
+        np.maximum(w[a:b], ease_weights(b - a, s - a, e - a, ease_frames), out=w[a:b])
+    return w
 
 @dataclass(frozen=True)
 class FootPlan:

@@ -37,7 +37,7 @@ from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
-from .footplan import BODY_PART_JOINTS, contact_intervals, ease_weights, plant_body_contacts, planted_positions
+from .footplan import BODY_PART_JOINTS, eased_mask, plant_body_contacts, planted_positions
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .rigidfoot import level_roll
@@ -363,17 +363,10 @@ def plan_targets(
 
 def _toes_only_weights(labels: dict[str, np.ndarray], side: str, fps: float, ease_time: float) -> np.ndarray:
     """``(F,)`` 1 on the frames where only ``side``'s toes are labelled (heel up), eased in
-    before and out after each such interval over ``ease_time`` seconds (:func:`~.footplan.ease_weights`)."""
-    toe, heel = labels.get(f"{side}_toe"), labels.get(f"{side}_heel")
-    if toe is None:
-        return np.zeros(len(next(iter(labels.values()))))
-    only = np.asarray(toe, dtype=bool) & ~(np.zeros_like(toe, dtype=bool) if heel is None else np.asarray(heel, dtype=bool))
-    w = np.zeros(len(only))
-    k = int(round(ease_time * fps))
-    for s, e in contact_intervals(only):  # each interval's ramps over its own frames only
-        a, b = max(0, s - k - 1), min(len(only), e + k + 2)
-        np.maximum(w[a:b], ease_weights(b - a, s - a, e - a, k), out=w[a:b])
-    return w
+    before and out after each such interval over ``ease_time`` seconds (:func:`~.footplan.eased_mask`)."""
+    F = len(next(iter(labels.values())))
+    toe, heel = (np.asarray(labels.get(f"{side}_{p}", np.zeros(F, dtype=bool)), dtype=bool) for p in ("toe", "heel"))
+    return eased_mask(toe & ~heel, int(round(ease_time * fps)))
 
 
 def spill_targets(targets: Targets) -> None:

@@ -111,6 +111,9 @@ def test_a_rolled_foot_is_levelled_about_its_forward_axis(yaw, roll):
              * Rotation.from_quat(rest)).as_quat()
     assert np.allclose(level_roll(steep[None], rest, np.ones(1))[0], steep)
     assert LEVEL_PITCH_FULL < LEVEL_PITCH_NONE
+    many = np.array([q, steep, q, q, steep])
+    w = np.array([1.0, 1.0, 0.3, 0.0, 0.5])
+    assert np.array_equal(level_roll(many, rest, w, block=2), level_roll(many, rest, w))  # block by block
 
 
 def test_a_rigid_foot_rolls_over_its_edge_not_a_corner():

@@ -76,7 +76,7 @@ LEVEL_PITCH_FULL = np.radians(45.0)
 LEVEL_PITCH_NONE = np.radians(75.0)
 
 
-def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndarray) -> np.ndarray:
+def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndarray, block: int = 65536) -> np.ndarray:
     r"""``(F, 4)`` ankle orientation targets turned about the foot's forward axis until its
     lateral axis is horizontal, by ``weights (F,)`` (0: unchanged, 1: level).
 
@@ -95,9 +95,19 @@ def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndar
         orientations: ``(F, 4)`` x-y-z-w ankle orientation targets.
         rest_quat: ``(4,)`` the ankle frame's rest orientation.
         weights: ``(F,)`` in [0, 1].
+        block: Frames computed at a time (a long clip's temporaries stay bounded).
     """
     q = np.asarray(orientations, dtype=float)
-    R = quat_mul(q, quat_conj(np.asarray(rest_quat, dtype=float)))
+    w = np.asarray(weights, dtype=float)
+    out = np.empty_like(q)
+    for s in range(0, len(q), block):
+        out[s : s + block] = _level_roll(q[s : s + block], np.asarray(rest_quat, dtype=float), w[s : s + block])
+    return out
+
+
+def _level_roll(q: np.ndarray, rest_quat: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """:func:`level_roll` of one block of frames."""
+    R = quat_mul(q, quat_conj(rest_quat))
     f = quat_apply(R, np.broadcast_to([1.0, 0.0, 0.0], q[:, :3].shape))
     lat = quat_apply(R, np.broadcast_to([0.0, 1.0, 0.0], q[:, :3].shape))
     up = np.cross(f, lat)[:, 2]
@@ -105,6 +115,6 @@ def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndar
     phi = np.where(np.abs(phi) > np.pi / 2.0, phi - np.sign(phi) * np.pi, phi)  # the smaller turn
     pitch = np.arcsin(np.clip(np.abs(f[:, 2]), 0.0, 1.0))
     x = np.clip((LEVEL_PITCH_NONE - pitch) / (LEVEL_PITCH_NONE - LEVEL_PITCH_FULL), 0.0, 1.0)
-    half = 0.5 * np.asarray(weights, dtype=float) * x * x * (3.0 - 2.0 * x) * phi
+    half = 0.5 * weights * x * x * (3.0 - 2.0 * x) * phi
     C = np.concatenate([f * np.sin(half)[:, None], np.cos(half)[:, None]], axis=1)
     return quat_mul(C, q)

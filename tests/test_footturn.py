@@ -140,3 +140,17 @@ def test_without_orientations_the_heading_comes_from_the_toe():
     positions, _ = _targets(np.radians(30.0))
     assert f.target_heading("left", positions, None, None) == pytest.approx(
         f.target_heading("left", *_targets(np.radians(30.0)), None))
+
+
+def test_a_foot_whose_contact_sites_are_stacked_is_not_turned():
+    """Heel and toe sites at one spot give two held points no heading: no follower for it."""
+    import dataclasses
+
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("humanoid")
+    stacked = dataclasses.replace(ch, contacts={"left": ("left_heel", "left_heel"), "right": ch.contacts["right"]})
+    names = tuple(ch.tracked)
+    planting = Planting(stacked, names, FPS, anchored=False, has_orientation=np.ones(len(names), dtype=bool))
+    assert set(planting._turner.feet) == {"right"}

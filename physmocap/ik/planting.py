@@ -182,6 +182,10 @@ MAX_TRANSITION_SIGMA = 1.0
 #: degrees a frame on the PyMO walk; the stream does not turn its holds yet.)
 HEADING_PITCH = np.radians(60.0)
 
+#: Metres: a foot whose first and last contact sites lie closer than this horizontally in the
+#: rest pose has no heading to turn its holds by (:class:`~.footturn.HeadingFollower`).
+MIN_HEADING_SPAN = 0.02
+
 
 def _smooth(x: float) -> float:
     """Smoothstep on [0, 1]."""
@@ -805,6 +809,8 @@ class Planting:
                 continue
             ia, it = self.feet[side][:2]
             rest_sites = np.array([data.site_xpos[self.locks.tasks[k].site_id] for k in ks])
+            if np.hypot(*(rest_sites[-1, :2] - rest_sites[0, :2])) < MIN_HEADING_SPAN:
+                continue  # heel and toe sites stacked: two held points give it no heading
             ankle_pos, ankle_rest = rest[self.names[ia]]
             ankle_toe = None if ia == it else rest[self.names[it]][0] - ankle_pos
             feet[side] = (ia, it, ks, rest_sites, ankle_rest, ankle_toe)

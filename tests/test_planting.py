@@ -296,3 +296,70 @@ def test_a_lost_toe_target_does_not_let_a_streamed_toe_go():
     faster = positions.copy()
     faster[toe, 0] += 0.02  # 2.4 m/s between two tracked frames: the actor's toe is off
     assert not planting._toes_moving(faster, labels, valid)["left_toe"]
+
+
+def test_a_rigid_foot_tipped_onto_a_corner_is_held_on_that_corner():
+    """FootPlanter._follow_contact: a rigid foot rolling over its front edge is held at its
+    pivot site while the edge is level; tipped onto one corner (an ankle roll at its limit),
+    it is held on that corner where it rests, so it turns about the corner instead of
+    dragging it (the robot's toe-offs on the PyMO walk dragged the corner 1-3 mm a frame);
+    a foot still coming down is not tipped."""
+    import mujoco
+
+    from physmocap.ik.planting import PlanHints, Planting
+    from physmocap.ik.tasks import BodyPointTask, SitePositionTask
+    from physmocap.models import load_character
+    from physmocap.models.geometry import character_geoms, geom_z_extent
+
+    ch = load_character("robot")
+    model = ch.model
+    planting = Planting(ch, list(ch.rest_positions()), 120.0, anchored=False)
+    locks = planting.locks
+    toe = locks.sites.index(ch.contacts["right"][-1])
+    foot = int(model.site(locks.sites[toe]).bodyid[0])
+    geoms = [g for g in character_geoms(model, collision_only=True) if model.geom_bodyid[g] == foot]
+    data = ch.rest_data()
+
+    def pose(pitch: float, roll: float, lift: float = 0.0) -> float:
+        """The rest pose with the right ankle turned, lowered onto the floor (+ ``lift``)."""
+        mujoco.mju_copy(data.qpos, ch.rest_data().qpos)
+        data.qpos[model.joint("r_ankle_pitch").qposadr[0]] = pitch
+        data.qpos[model.joint("r_ankle_roll").qposadr[0]] = roll
+        mujoco.mj_kinematics(model, data)
+        low = min(geom_z_extent(model, data, g)[0] for g in geoms)
+        data.qpos[2] += lift - low
+        mujoco.mj_kinematics(model, data)
+        return low
+
+    flags = np.zeros(len(locks.sites), dtype=bool)
+    flags[toe] = True
+    pivoting = flags.copy()
+    hints = PlanHints(rolling=np.zeros_like(flags), holdable=np.ones_like(flags), pivoting=pivoting)
+
+    def hold():
+        _, hard, _ = locks.update(flags, data, hints)
+        (task,) = [t for t in hard if getattr(t, "site_id", None) == model.site(locks.sites[toe]).id
+                   or getattr(t, "body", None) == foot]
+        return task
+
+    pose(0.0, 0.0)  # flat: held at the site
+    assert isinstance(hold(), SitePositionTask)
+    pose(np.radians(8.0), 0.0)  # heel up, front edge level on the floor: still the site
+    assert isinstance(hold(), SitePositionTask)
+    pose(np.radians(8.0), np.radians(15.0))  # tipped onto one corner
+    task = hold()
+    assert isinstance(task, BodyPointTask)
+    corner = task.point(data)
+    assert abs(corner[2]) < 1e-6  # the corner it stands on
+    assert np.allclose(task.target[:2], corner[:2])
+    site = data.site_xpos[model.site(locks.sites[toe]).id]
+    assert site[2] > 0.005  # its pivot site is off the floor
+    assert hold() is task and np.allclose(task.target[:2], corner[:2])  # held where it rests
+    pose(np.radians(8.0), 0.0)  # level again: back on the site, where it is
+    task = hold()
+    assert isinstance(task, SitePositionTask)
+    assert np.allclose(task.target[:2], data.site_xpos[task.site_id, :2])
+    pose(np.radians(8.0), np.radians(15.0))
+    assert isinstance(hold(), BodyPointTask)
+    pose(np.radians(8.0), np.radians(15.0), lift=0.004)  # tipped, but off the floor: the site
+    assert isinstance(hold(), SitePositionTask)

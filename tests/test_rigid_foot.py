@@ -116,11 +116,15 @@ def test_a_rolled_foot_is_levelled_about_its_forward_axis(yaw, roll):
     assert np.array_equal(level_roll(many, rest, w, block=2), level_roll(many, rest, w))  # block by block
 
 
-def test_a_rigid_foot_rolls_over_its_edge_not_a_corner():
-    """Before: the robot's foot followed the PyMO actor's foot turning 10-30 degrees about
-    its long axis at toe-off and tipped onto one corner of its front edge, which slid as the
-    roll grew: foot slip 1.53 cm/s.  Its roll is now levelled while only its toes are down."""
+@pytest.mark.parametrize("clip", ["pymo_walk.bvh", "cmu_05_10_dance_spins.bvh"])
+def test_a_rigid_foot_rolls_over_its_edge_not_a_corner(clip):
+    """Issue 9: planted feet slip under 1 cm/s.  Before: the robot's foot followed the PyMO
+    actor's foot turning 10-30 degrees about its long axis at toe-off and tipped onto one
+    corner of its front edge, which slid as the roll grew: foot slip 1.53 cm/s.  Its roll
+    is now levelled while only its toes are down (1.12; the dance 1.21), and where its ankle
+    roll cannot level it (at its limit) the foot is held on the corner it tips onto
+    (planting.FootPlanter._follow_contact): 0.21 and 0.31."""
     from physmocap.metrics.fidelity import trajectory_fidelity
 
-    _, traj = retargeted("pymo_walk.bvh", "robot")
-    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 1.3
+    _, traj = retargeted(clip, "robot")
+    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 0.6

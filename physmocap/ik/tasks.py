@@ -12,7 +12,7 @@ import mink
 import mujoco
 import numpy as np
 
-__all__ = ["SitePositionTask", "SitesPositionTask"]
+__all__ = ["SitePositionTask", "SitesPositionTask", "BodyPointTask"]
 
 
 class SitePositionTask(mink.Task):
@@ -106,3 +106,50 @@ class SitesPositionTask(mink.Task):
         for i, sid in enumerate(self.site_ids):
             mujoco.mj_jacSite(self.model, data, self._jac[3 * i : 3 * i + 3], None, sid)
         return self._jac
+
+
+class BodyPointTask(mink.Task):
+    r"""World-frame position of a point fixed on a body (a foot's corner it stands on).
+
+    The point is :math:`x(q) = p_b(q) + R_b(q)\,\ell` for the body's world position
+    :math:`p_b`, rotation :math:`R_b` and the point's body coordinates :math:`\ell`
+    (metres); error :math:`e(q) = x(q) - x^*` on the regulated world axes and Jacobian
+    :math:`\partial x / \partial q` (MuJoCo's ``mj_jac`` at that point).  The same rows
+    as :class:`SitePositionTask`, for a point no site marks.
+    """
+
+    def __init__(self, model: mujoco.MjModel, body: int, cost=1.0, gain: float = 1.0,
+                 axes: tuple[int, ...] = (0, 1, 2)) -> None:
+        """
+        Args:
+            model: The MuJoCo model.
+            body: Body id.
+            cost: Cost per metre, scalar or one per axis in ``axes``.
+            gain: Task gain (1 = dead-beat).
+            axes: World axes regulated.
+        """
+        self.axes = tuple(int(a) for a in axes)
+        self.k = len(self.axes)
+        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
+        self.model = model
+        self.body = int(body)
+        #: the point in the body's frame (metres)
+        self.local = np.zeros(3)
+        self.target = np.zeros(3)
+        self._jacp = np.zeros((3, model.nv))
+        self.cost[:] = cost
+
+    def set_target(self, target: np.ndarray) -> None:
+        self.target = np.array(target, dtype=float)
+
+    def point(self, data: mujoco.MjData) -> np.ndarray:
+        """``(3,)`` the point's world position in the pose of ``data`` (kinematics run)."""
+        return data.xpos[self.body] + data.xmat[self.body].reshape(3, 3) @ self.local
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        return (self.point(configuration.data) - self.target)[list(self.axes)]
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        data = configuration.data
+        mujoco.mj_jac(self.model, data, self._jacp, None, self.point(data), self.body)
+        return self._jacp[list(self.axes)].copy()

@@ -73,6 +73,14 @@ def _smoothstep(x: float) -> float:
     return x * x * (3.0 - 2.0 * x)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:math:`a \\times b` of two 3-vectors, component by component on Python floats (the same
+    products and differences as ``np.cross``, without its overhead on one pair)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[float, float]:
     r"""Where a leg's knee points and how bent it is.
 
@@ -82,7 +90,7 @@ def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[fl
     (radians; 0 for a straight leg, or a leg whose plane is nearly horizontal, which has
     no such direction)."""
     thigh, shank = knee - hip, ankle - knee
-    n = np.cross(thigh, shank)
+    n = _cross(thigh, shank)
     norm = float(np.linalg.norm(n))
     if norm < 1e-12:
         return 0.0, 0.0
@@ -118,6 +126,7 @@ class _Foot:
         self.toe = toe
         #: x-y-z-w rest orientation of the ankle's frame
         self.ankle_rest = ankle_rest
+        self._ankle_rest_inverse = quat_conj(ankle_rest)
         #: rest heading of the reference vector against the ankle-to-toe vector's (None: no toe)
         self.toe_offset = None if rest_ankle_toe is None else wrap_angle(
             _heading(self.reference) - _heading(rest_ankle_toe))
@@ -155,7 +164,7 @@ class HeadingFollower:
         foot = self.feet[side]
         ok = valid is None or bool(valid[foot.ankle])
         if ok and orientations is not None and self.has_orientation[foot.ankle]:
-            q = quat_mul(orientations[foot.ankle], quat_conj(foot.ankle_rest))
+            q = quat_mul(orientations[foot.ankle], foot._ankle_rest_inverse)
             v = quat_apply(q, foot.reference)
             offset = 0.0
         elif ok and foot.toe_offset is not None and (valid is None or bool(valid[foot.toe])):
@@ -214,8 +223,8 @@ class HeadingFollower:
             self._previous[side] = aim
             change = 0.0 if previous is None else abs(wrap_angle(aim - previous))
             e = wrap_angle(held - aim)
-            excess = e - float(np.clip(e, -self.free, self.free))
+            excess = e - min(max(e, -self.free), self.free)  # what np.clip does, on floats
             limit = change + self.step_rate
-            out[side] = -float(np.clip(excess, -limit, limit))
+            out[side] = -min(max(excess, -limit), limit)
         return out
 

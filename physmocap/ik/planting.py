@@ -816,7 +816,11 @@ class Planting:
             feet[side] = (ia, it, ks, rest_sites, ankle_rest, ankle_toe)
         opt = self.options
         legs = {side: spec[:3] for side, spec in self.lengths.items() if side in feet}
-        self._leg_frames = {side: tuple(character.tracked[self.names[i]] for i in legs[side]) for side in legs}
+        model = character.model
+        # side -> its hip's, knee's and ankle's frames as (is a site, id), resolved once
+        self._leg_frames = {side: tuple((f.kind == "site", f.object_id(model))
+                                        for f in (character.tracked[self.names[i]] for i in legs[side]))
+                            for side in legs}
         return HeadingFollower(self._has_orientation, feet, self.locks.fps, opt.pivot_threshold,
                                opt.heading_rate, HEADING_PITCH, legs)
 
@@ -824,8 +828,8 @@ class Planting:
                     data: mujoco.MjData) -> None:
         """Turn each foot's holds towards its target heading (:class:`~.footturn.HeadingFollower`,
         :meth:`FootPlanter.turn`)."""
-        model = self.character.model
-        legs = {side: np.array([f.position(model, data) for f in frames]) for side, frames in self._leg_frames.items()}
+        legs = {side: np.array([data.site_xpos[i] if site else data.xpos[i] for site, i in frames])
+                for side, frames in self._leg_frames.items()}
         turns = self._turner.turns(positions, orientations, valid, self.locks.locked, self.locks.anchor, legs)
         for s, side in enumerate(("left", "right")):
             if turns.get(side, 0.0) != 0.0:

@@ -263,6 +263,11 @@ class FootPlanter:
         #: sites whose hold is soft on this frame: a foot turning about another held site
         #: (:meth:`turn`; a hard hold turned with the plan could be out of the leg's reach)
         self.turning = np.zeros(n, dtype=bool)
+        self._site_ids = np.array([t.site_id for t in self.tasks], dtype=int)
+        #: per site, the other sites of its foot (its possible partners in a hold)
+        self._others = (self.feet[:, None] == self.feet[None, :]) & ~np.eye(n, dtype=bool)
+        #: per foot, its sites
+        self._foot_sites = [(int(f), self.feet == f) for f in np.unique(self.feet)]
 
     def _anchor_for(self, k: int, xy: np.ndarray) -> np.ndarray:
         r"""Where site ``k``, now at ``xy``, is held from this frame on.
@@ -359,7 +364,7 @@ class FootPlanter:
         hard: list[SitePositionTask] = []
         if not opt.plant:
             return soft, hard, engaged
-        z = np.array([data.site_xpos[t.site_id, 2] for t in self.tasks]) - self.floor
+        z = data.site_xpos[self._site_ids, 2] - self.floor
         vz = np.zeros(n) if self._prev_z is None else z - self._prev_z
         self._prev_z = z
         for k, task in enumerate(self.tasks):
@@ -369,7 +374,7 @@ class FootPlanter:
             rolling = hints is not None and bool(hints.rolling[k])
             pivoting = hints is not None and hints.pivoting is not None and bool(hints.pivoting[k])
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
-            partner = self.locked & (self.feet == self.feet[k]) & (np.arange(n) != k)
+            partner = self.locked & self._others[k]
             if partner.any() and not rolling and not pivoting:  # a foot already held: its further holds, without look-ahead
                 rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
@@ -403,8 +408,7 @@ class FootPlanter:
                 task.set_target(np.array([0.0, 0.0, z_goal]))
                 soft.append(task)
             self.labelled[k] = flags[k]
-        for f in np.unique(self.feet):
-            mine = self.feet == f
+        for f, mine in self._foot_sites:
             if self.free[mine].all():  # the foot swings: its sites land afresh
                 self.landed[mine] = False
                 self.landing[f] = 0

@@ -120,6 +120,8 @@ class _Foot:
     def __init__(self, ankle: int, toe: int, sites: np.ndarray, rest_sites: np.ndarray,
                  ankle_rest: np.ndarray, rest_ankle_toe: np.ndarray | None) -> None:
         self.sites = sites
+        #: site index -> its position in ``sites``
+        self.order = {int(k): i for i, k in enumerate(sites)}
         self.rest_sites = rest_sites
         self.reference = rest_sites[-1] - rest_sites[0]
         self.ankle = ankle
@@ -152,6 +154,7 @@ class HeadingFollower:
         self.has_orientation = np.asarray(has_orientation, dtype=bool)
         #: side -> target indices of hip, knee and ankle
         self.legs = dict(legs or {})
+        self._leg_rows = {side: np.array(leg, dtype=int) for side, leg in self.legs.items()}
         self.feet = {side: _Foot(*spec) for side, spec in feet.items()}
         self.free = float(free)
         self.step_rate = float(rate) / float(fps)
@@ -182,7 +185,7 @@ class HeadingFollower:
         foot = self.feet[side]
         i, j = int(held[0]), int(held[-1])
         a = anchors[j] - anchors[i]
-        ri, rj = (int(np.flatnonzero(foot.sites == k)[0]) for k in (i, j))
+        ri, rj = foot.order[i], foot.order[j]
         pair = foot.rest_sites[rj] - foot.rest_sites[ri]
         return wrap_angle(_heading(a) - _heading(pair) + _heading(foot.reference))
 
@@ -194,10 +197,10 @@ class HeadingFollower:
         heading sets its knee plane: :math:`\\psi_t + (h - \\psi_c)` with :math:`\\psi` the
         knee planes' headings, :func:`knee_plane`, and :math:`h` the held heading), blended in
         as the knees bend from :data:`BEND_FROM` to :data:`BEND_FULL`."""
-        leg = self.legs.get(side)
-        if leg is None or leg_now is None or (valid is not None and not bool(np.all(valid[list(leg)]))):
+        leg = self._leg_rows.get(side)
+        if leg is None or leg_now is None or (valid is not None and not bool(valid[leg].all())):
             return foot_heading
-        psi_t, bend_t = knee_plane(*positions[list(leg)])
+        psi_t, bend_t = knee_plane(*positions[leg])
         psi_c, bend_c = knee_plane(*leg_now)
         w = LEG_SHARE * _smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
         knee = wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading)

@@ -264,6 +264,8 @@ class FootPlanter:
         #: (:meth:`turn`; a hard hold turned with the plan could be out of the leg's reach)
         self.turning = np.zeros(n, dtype=bool)
         self._site_ids = np.array([t.site_id for t in self.tasks], dtype=int)
+        #: per site, the sites of its foot it has a rest distance to (a rigid foot's)
+        self._rest_partners = None if rest_distances is None else np.isfinite(rest_distances)
         #: per site, the other sites of its foot (its possible partners in a hold)
         self._others = (self.feet[:, None] == self.feet[None, :]) & ~np.eye(n, dtype=bool)
         #: per foot, its sites
@@ -376,7 +378,7 @@ class FootPlanter:
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
             partner = self.locked & self._others[k]
             if partner.any() and not rolling and not pivoting:  # a foot already held: its further holds, without look-ahead
-                rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
+                rigid = self._rest_partners is not None and bool((partner & self._rest_partners[k]).any())
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
             # A lock starts when a labelled site touches down (a labelled site still in

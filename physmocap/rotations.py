@@ -176,20 +176,32 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
     return np.concatenate([-q[..., :3], q[..., 3:4]], axis=-1)
 
 
+def _parts(x: np.ndarray) -> list:
+    """Components of ``x`` along its last axis: Python floats for a single vector (the same
+    IEEE products and sums as numpy's, without numpy's overhead on every 0-d operation),
+    else views ``x[..., i]``."""
+    return x.tolist() if x.ndim == 1 else [x[..., i] for i in range(x.shape[-1])]
+
+
+def _joined(parts: list, single: bool) -> np.ndarray:
+    """The components of :func:`_parts` stacked back along the last axis."""
+    return np.array(parts) if single else np.stack(parts, axis=-1)
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` of xyzw quaternions, broadcasting (rotation ``Ra @ Rb``)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
+    ax, ay, az, aw = _parts(a)
+    bx, by, bz, bw = _parts(b)
+    return _joined(
         [
             aw * bx + ax * bw + ay * bz - az * by,
             aw * by - ax * bz + ay * bw + az * bx,
             aw * bz + ax * by - ay * bx + az * bw,
             aw * bw - ax * bx - ay * by - az * bz,
         ],
-        axis=-1,
+        a.ndim == 1 and b.ndim == 1,
     )
 
 
@@ -198,18 +210,18 @@ def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
     # v' = v + w t + u x t with t = 2 u x v (components written out: np.cross is slow)
-    ux, uy, uz, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    ux, uy, uz, w = _parts(q)
+    vx, vy, vz = _parts(v)
     tx = 2.0 * (uy * vz - uz * vy)
     ty = 2.0 * (uz * vx - ux * vz)
     tz = 2.0 * (ux * vy - uy * vx)
-    return np.stack(
+    return _joined(
         [
             vx + w * tx + (uy * tz - uz * ty),
             vy + w * ty + (uz * tx - ux * tz),
             vz + w * tz + (ux * ty - uy * tx),
         ],
-        axis=-1,
+        q.ndim == 1 and v.ndim == 1,
     )
 
 

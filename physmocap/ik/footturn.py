@@ -73,6 +73,14 @@ def _smoothstep(x: float) -> float:
     return x * x * (3.0 - 2.0 * x)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:math:`a \\times b` of two 3-vectors, component by component on Python floats (the same
+    products and differences as ``np.cross``, without its overhead on one pair)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[float, float]:
     r"""Where a leg's knee points and how bent it is.
 
@@ -82,7 +90,7 @@ def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[fl
     (radians; 0 for a straight leg, or a leg whose plane is nearly horizontal, which has
     no such direction)."""
     thigh, shank = knee - hip, ankle - knee
-    n = np.cross(thigh, shank)
+    n = _cross(thigh, shank)
     norm = float(np.linalg.norm(n))
     if norm < 1e-12:
         return 0.0, 0.0
@@ -112,12 +120,15 @@ class _Foot:
     def __init__(self, ankle: int, toe: int, sites: np.ndarray, rest_sites: np.ndarray,
                  ankle_rest: np.ndarray, rest_ankle_toe: np.ndarray | None) -> None:
         self.sites = sites
+        #: site index -> its position in ``sites``
+        self.order = {int(k): i for i, k in enumerate(sites)}
         self.rest_sites = rest_sites
         self.reference = rest_sites[-1] - rest_sites[0]
         self.ankle = ankle
         self.toe = toe
         #: x-y-z-w rest orientation of the ankle's frame
         self.ankle_rest = ankle_rest
+        self._ankle_rest_inverse = quat_conj(ankle_rest)
         #: rest heading of the reference vector against the ankle-to-toe vector's (None: no toe)
         self.toe_offset = None if rest_ankle_toe is None else wrap_angle(
             _heading(self.reference) - _heading(rest_ankle_toe))
@@ -143,6 +154,7 @@ class HeadingFollower:
         self.has_orientation = np.asarray(has_orientation, dtype=bool)
         #: side -> target indices of hip, knee and ankle
         self.legs = dict(legs or {})
+        self._leg_rows = {side: np.array(leg, dtype=int) for side, leg in self.legs.items()}
         self.feet = {side: _Foot(*spec) for side, spec in feet.items()}
         self.free = float(free)
         self.step_rate = float(rate) / float(fps)
@@ -155,7 +167,7 @@ class HeadingFollower:
         foot = self.feet[side]
         ok = valid is None or bool(valid[foot.ankle])
         if ok and orientations is not None and self.has_orientation[foot.ankle]:
-            q = quat_mul(orientations[foot.ankle], quat_conj(foot.ankle_rest))
+            q = quat_mul(orientations[foot.ankle], foot._ankle_rest_inverse)
             v = quat_apply(q, foot.reference)
             offset = 0.0
         elif ok and foot.toe_offset is not None and (valid is None or bool(valid[foot.toe])):
@@ -173,7 +185,7 @@ class HeadingFollower:
         foot = self.feet[side]
         i, j = int(held[0]), int(held[-1])
         a = anchors[j] - anchors[i]
-        ri, rj = (int(np.flatnonzero(foot.sites == k)[0]) for k in (i, j))
+        ri, rj = foot.order[i], foot.order[j]
         pair = foot.rest_sites[rj] - foot.rest_sites[ri]
         return wrap_angle(_heading(a) - _heading(pair) + _heading(foot.reference))
 
@@ -185,10 +197,10 @@ class HeadingFollower:
         heading sets its knee plane: :math:`\\psi_t + (h - \\psi_c)` with :math:`\\psi` the
         knee planes' headings, :func:`knee_plane`, and :math:`h` the held heading), blended in
         as the knees bend from :data:`BEND_FROM` to :data:`BEND_FULL`."""
-        leg = self.legs.get(side)
-        if leg is None or leg_now is None or (valid is not None and not bool(np.all(valid[list(leg)]))):
+        leg = self._leg_rows.get(side)
+        if leg is None or leg_now is None or (valid is not None and not bool(valid[leg].all())):
             return foot_heading
-        psi_t, bend_t = knee_plane(*positions[list(leg)])
+        psi_t, bend_t = knee_plane(*positions[leg])
         psi_c, bend_c = knee_plane(*leg_now)
         w = LEG_SHARE * _smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
         knee = wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading)
@@ -214,8 +226,8 @@ class HeadingFollower:
             self._previous[side] = aim
             change = 0.0 if previous is None else abs(wrap_angle(aim - previous))
             e = wrap_angle(held - aim)
-            excess = e - float(np.clip(e, -self.free, self.free))
+            excess = e - min(max(e, -self.free), self.free)  # what np.clip does, on floats
             limit = change + self.step_rate
-            out[side] = -float(np.clip(excess, -limit, limit))
+            out[side] = -min(max(excess, -limit), limit)
         return out
 

@@ -282,6 +282,13 @@ class FootPlanter:
         #: sites whose hold is soft on this frame: a foot turning about another held site
         #: (:meth:`turn`; a hard hold turned with the plan could be out of the leg's reach)
         self.turning = np.zeros(n, dtype=bool)
+        self._site_ids = np.array([t.site_id for t in self.tasks], dtype=int)
+        #: per site, the sites of its foot it has a rest distance to (a rigid foot's)
+        self._rest_partners = None if rest_distances is None else np.isfinite(rest_distances)
+        #: per site, the other sites of its foot (its possible partners in a hold)
+        self._others = (self.feet[:, None] == self.feet[None, :]) & ~np.eye(n, dtype=bool)
+        #: per foot, its sites
+        self._foot_sites = [(int(f), self.feet == f) for f in np.unique(self.feet)]
 
     def _anchor_for(self, k: int, xy: np.ndarray) -> np.ndarray:
         r"""Where site ``k``, now at ``xy``, is held from this frame on.
@@ -424,7 +431,7 @@ class FootPlanter:
         hard: list[SitePositionTask] = []
         if not opt.plant:
             return soft, hard, engaged
-        z = np.array([data.site_xpos[t.site_id, 2] for t in self.tasks]) - self.floor
+        z = data.site_xpos[self._site_ids, 2] - self.floor
         vz = np.zeros(n) if self._prev_z is None else z - self._prev_z
         self._prev_z = z
         for k, task in enumerate(self.tasks):
@@ -434,9 +441,9 @@ class FootPlanter:
             rolling = hints is not None and bool(hints.rolling[k])
             pivoting = hints is not None and hints.pivoting is not None and bool(hints.pivoting[k])
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
-            partner = self.locked & (self.feet == self.feet[k]) & (np.arange(n) != k)
+            partner = self.locked & self._others[k]
             if partner.any() and not rolling and not pivoting:  # a foot already held: its further holds, without look-ahead
-                rigid = self.rest_distances is not None and np.any(partner & np.isfinite(self.rest_distances[k]))
+                rigid = self._rest_partners is not None and bool((partner & self._rest_partners[k]).any())
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
             # A lock starts when a labelled site touches down (a labelled site still in
@@ -473,8 +480,7 @@ class FootPlanter:
                 task.set_target(np.array([0.0, 0.0, z_goal]))
                 soft.append(task)
             self.labelled[k] = flags[k]
-        for f in np.unique(self.feet):
-            mine = self.feet == f
+        for f, mine in self._foot_sites:
             if self.free[mine].all():  # the foot swings: its sites land afresh
                 self.landed[mine] = False
                 self.landing[f] = 0
@@ -900,7 +906,11 @@ class Planting:
             feet[side] = (ia, it, ks, rest_sites, ankle_rest, ankle_toe)
         opt = self.options
         legs = {side: spec[:3] for side, spec in self.lengths.items() if side in feet}
-        self._leg_frames = {side: tuple(character.tracked[self.names[i]] for i in legs[side]) for side in legs}
+        model = character.model
+        # side -> its hip's, knee's and ankle's frames as (is a site, id), resolved once
+        self._leg_frames = {side: tuple((f.kind == "site", f.object_id(model))
+                                        for f in (character.tracked[self.names[i]] for i in legs[side]))
+                            for side in legs}
         return HeadingFollower(self._has_orientation, feet, self.locks.fps, opt.pivot_threshold,
                                opt.heading_rate, HEADING_PITCH, legs)
 
@@ -908,8 +918,8 @@ class Planting:
                     data: mujoco.MjData) -> None:
         """Turn each foot's holds towards its target heading (:class:`~.footturn.HeadingFollower`,
         :meth:`FootPlanter.turn`)."""
-        model = self.character.model
-        legs = {side: np.array([f.position(model, data) for f in frames]) for side, frames in self._leg_frames.items()}
+        legs = {side: np.array([data.site_xpos[i] if site else data.xpos[i] for site, i in frames])
+                for side, frames in self._leg_frames.items()}
         turns = self._turner.turns(positions, orientations, valid, self.locks.locked, self.locks.anchor, legs)
         for s, side in enumerate(("left", "right")):
             if turns.get(side, 0.0) != 0.0:

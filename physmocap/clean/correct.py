@@ -4,13 +4,14 @@ A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its off
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
-it and its first good one after it by whichever of three estimates rebuilds the joint's
-own good motion next to the span best (:func:`_bridge`): a cubic Hermite curve in rotation
-space, leaving and arriving at the joint's own speed, the joint's motion in the windows
-of the clip where the whole body moves most like it does around the span
+it and its first good one after it by whichever of five estimates rebuilds the joint's
+own good motion next to the span best, or their blend (:func:`_bridge`): a cubic Hermite
+curve in rotation space, leaving and arriving at the joint's own speed, the joint's motion in
+the windows of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
-what it was doing), or its other side's motion, reflected, in the windows where the body
-mirrored left to right moves most like it (half a stride away in a walk).  Where a point
+what it was doing), its other side's motion, reflected, in the windows where the body
+mirrored left to right moves most like it (half a stride away in a walk), or its pose or its
+steps regressed on the other joints' rotations (:class:`.regress.Regression`).  Where a point
 below the joint stands on the floor next to the span, the bridge is turned so that it goes
 on standing there while the rest of the limb can reach it (:func:`_on_contact`: a frozen
 thigh keeps its foot planted).  At the clip's ends the nearest good rotation is held.  A
@@ -944,7 +945,8 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" or "mirrored" (:class:`_Matcher`), or "blend of ..." where several of those
+    "matched" or "mirrored" (:class:`_Matcher`), "regressed pose" or "regressed steps"
+    (:class:`.regress.Regression`), or "blend of ..." where several of those
     were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
     ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"

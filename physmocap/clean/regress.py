@@ -12,7 +12,9 @@ features, :math:`\bar y` the targets' mean and :math:`n` the training frames,
 
 .. math::  W = (Z^\top Z + \lambda n I)^{-1} Z^\top (Y - \bar y), \qquad \hat y(t) = z(t) W + \bar y
 
-(:math:`\lambda` = ``CleanOptions.regress_ridge``).  Two targets give two estimates:
+(:math:`\lambda` chosen for each target among ``CleanOptions.regress_ridge`` times
+:data:`RIDGE_FACTORS` by the pseudo-gaps, :meth:`Regression.choose_ridge`).  Two targets give
+two estimates:
 
 * *regressed pose*: :math:`j`'s rotation matrix (9 entries), the prediction projected onto
   the rotations (the nearest one, by SVD), its mismatch with the good rotations at both ends
@@ -177,6 +179,8 @@ class Regression:
         first frames are ``gaps`` (``n`` frames each; :func:`.correct._pseudo_gaps`): the
         one whose estimate rebuilds the joint's good rotations there with the least summed
         squared angle, per target (pose and steps)."""
+        if not gaps:
+            return
         err = np.zeros((len(self.ridges), 2))
         for a in gaps:
             found = self._bridges(a, a + n - 1)

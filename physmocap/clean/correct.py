@@ -354,6 +354,7 @@ def _bridge(
         return cubic, "cubic"
     F, n = len(R), e - s + 1
     regression = Regression(R, matcher.M, matcher.animated, matcher.bad, j, s, e, ridge)
+    kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
 
     def estimates(a: int, b: int, hidden: np.ndarray | None) -> list[np.ndarray | None]:
         """Every estimate but the cubic of frames ``a..b`` (``hidden``: more frames not to use)."""
@@ -361,7 +362,6 @@ def _bridge(
         regressed = regression.estimates(a, b)
         return found + (list(regressed) if regressed is not None else [None, None])
 
-    kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
     names = [name for name in BRIDGES if name != "mirrored" or matcher.mirrors]
     err = np.zeros(len(names))
     tested = np.zeros(len(names), dtype=bool)

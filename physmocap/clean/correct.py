@@ -4,13 +4,14 @@ A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its off
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
-it and its first good one after it by whichever of three estimates rebuilds the joint's
-own good motion next to the span best (:func:`_bridge`): a cubic Hermite curve in rotation
-space, leaving and arriving at the joint's own speed, the joint's motion in the windows
-of the clip where the whole body moves most like it does around the span
+it and its first good one after it by whichever of five estimates rebuilds the joint's
+own good motion next to the span best, or their blend (:func:`_bridge`): a cubic Hermite
+curve in rotation space, leaving and arriving at the joint's own speed, the joint's motion in
+the windows of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
-what it was doing), or its other side's motion, reflected, in the windows where the body
-mirrored left to right moves most like it (half a stride away in a walk).  Where a point
+what it was doing), its other side's motion, reflected, in the windows where the body
+mirrored left to right moves most like it (half a stride away in a walk), or its pose or its
+steps regressed on the other joints' rotations (:class:`.regress.Regression`).  Where a point
 below the joint stands on the floor next to the span, the bridge is turned so that it goes
 on standing there while the rest of the limb can reach it (:func:`_on_contact`: a frozen
 thigh keeps its foot planted).  At the clip's ends the nearest good rotation is held.  A
@@ -41,9 +42,13 @@ from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
 from .positional import twin as positional_twin, twin_pairs
+from .regress import Regression, spread_mismatch
 
-__all__ = ["blend_shares", "correct_glitches"]
+__all__ = ["BRIDGES", "blend_shares", "correct_glitches"]
 
+
+#: The rotational bridges :func:`_bridge` chooses among (and averages), as the report names them.
+BRIDGES = ("cubic", "matched", "mirrored", "regressed pose", "regressed steps")
 
 #: Glitch kinds that are repaired (the others are reported only).
 REPAIRED = {
@@ -244,9 +249,7 @@ class _Matcher:
             inc += -v @ self.reflect if mirrored else v  # a rotation vector reflected: -M v
         step = Rotation.from_rotvec(inc / len(picks)).as_quat()
         est = quat_mul(np.broadcast_to(self.R[s - 1, j], step.shape), step)
-        miss = Rotation.from_quat(quat_mul(quat_conj(est[-1]), self.R[e + 1, j])).as_rotvec()
-        frac = (np.arange(1, n + 1) / (n + 1))[:, None]
-        return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
+        return spread_mismatch(est, self.R[e + 1, j])
 
 
 def _glitched(motion: Motion, glitches: list[Glitch]) -> np.ndarray:
@@ -328,48 +331,59 @@ def blend_shares(corrected: str) -> dict[str, float]:
 
 
 def _bridge(
-    R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0
+    R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0, ridge: float = 0.01
 ) -> tuple[np.ndarray, str]:
-    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from three estimates,
+    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from five estimates,
     the Hermite curve, the matched motion and the mirrored matched motion
-    (:class:`_Matcher`), judged on the joint's own good motion next to the span: each
-    rebuilds the ``n = e - s + 1`` frames just before the span (leaving one frame between)
-    and just after it as if they were glitched too (:func:`_pseudo_gaps`), its error there
-    the sum of squared rotation errors.  The estimates within ``blend`` times the best one's
-    error are averaged (in the tangent space at the best one), weighted by the inverse of
-    their errors: where two rebuild the joint's motion about as well, the test cannot tell
+    (:class:`_Matcher`), and the joint's pose and its steps regressed on the other joints'
+    rotations (:class:`.regress.Regression`, ridge ``ridge``), judged on the joint's own good
+    motion next to the span: each rebuilds the ``n = e - s + 1`` frames just before the span
+    (leaving one frame between) and just after it as if they were glitched too
+    (:func:`_pseudo_gaps`), its error there the sum of squared rotation errors (infinite
+    where it cannot be built on one of them).  The estimates within ``blend`` times the best
+    one's error are averaged (in the tangent space at the best one), weighted by the inverse
+    of their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
-    and how: the estimate's name ("cubic", "matched" or "mirrored"), or where several were
-    averaged their names and weights (:func:`_blend_name`: "blend of mirrored 62% + matched
-    38%")."""
+    and how: the estimate's name ("cubic", "matched", "mirrored", "regressed pose" or
+    "regressed steps"), or where several were averaged their names and weights
+    (:func:`_blend_name`: "blend of mirrored 62% + matched 38%")."""
     from ..rotations import quat_conj, quat_mul
 
     cubic = _hermite(R[:, j], s - 1, e + 1)
     if matcher is None:
         return cubic, "cubic"
     F, n = len(R), e - s + 1
+    regression = Regression(R, matcher.M, matcher.animated, matcher.bad, j, s, e, ridge)
     kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
-    err = np.zeros(1 + len(kinds))
-    tested = np.zeros(1 + len(kinds), dtype=bool)
-    for a in _pseudo_gaps(s, e, F):
+
+    def estimates(a: int, b: int, hidden: np.ndarray | None) -> list[np.ndarray | None]:
+        """Every estimate but the cubic of frames ``a..b`` (``hidden``: more frames not to use)."""
+        found = [matcher.bridge(j, a, b, hidden, mirrored) for mirrored in kinds]
+        regressed = regression.estimates(a, b)
+        return found + (list(regressed) if regressed is not None else [None, None])
+
+    names = [name for name in BRIDGES if name != "mirrored" or matcher.mirrors]
+    err = np.zeros(len(names))
+    tested = np.zeros(len(names), dtype=bool)
+    gaps = _pseudo_gaps(s, e, F)
+    regression.choose_ridge(gaps, n)
+    for a in gaps:
         b = a + n - 1
         hidden = np.zeros(F, bool)
         hidden[a : b + 1] = True
         truth = R[a : b + 1, j]
         err[0] += np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2)
-        for i, mirrored in enumerate(kinds):
-            matched = matcher.bridge(j, a, b, hidden, mirrored)
-            if matched is None:
-                err[1 + i] = np.inf
+        for i, est in enumerate(estimates(a, b, hidden), start=1):
+            if est is None:
+                err[i] = np.inf
                 continue
-            err[1 + i] += np.sum(_angle(matched, truth) ** 2)
-            tested[1 + i] = True
+            err[i] += np.sum(_angle(est, truth) ** 2)
+            tested[i] = True
     err[1:][~tested[1:]] = np.inf
     if not np.isfinite(err[1:]).any():
         return cubic, "cubic"
-    found = [cubic] + [matcher.bridge(j, s, e, None, mirrored) for mirrored in kinds]
+    found = [cubic] + estimates(s, e, None)
     err = np.array([x if q is not None else np.inf for x, q in zip(err, found)])
-    names = ["cubic"] + ["mirrored" if mirrored else "matched" for mirrored in kinds]
     best = int(np.argmin(err))
     near = [i for i in range(len(err)) if np.isfinite(err[i]) and err[i] <= blend * err[best]]
     if len(near) < 2:
@@ -630,7 +644,7 @@ def _repair_rotation(
         if fixed is not None:
             return fixed, "offset removed"
     if 0 <= a and b < F:
-        return _bridge(R, j, g.start, g.end, matcher, opt.blend_ratio)
+        return _bridge(R, j, g.start, g.end, matcher, opt.blend_ratio, opt.regress_ridge)
     held = R[a, j] if a >= 0 else R[b, j]
     return np.repeat(held[None], n, axis=0), "held"
 
@@ -931,7 +945,8 @@ def correct_glitches(
 ) -> tuple[Motion, list[Glitch]]:
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
-    "matched" or "mirrored" (:class:`_Matcher`), or "blend of ..." where several of those
+    "matched" or "mirrored" (:class:`_Matcher`), "regressed pose" or "regressed steps"
+    (:class:`.regress.Regression`), or "blend of ..." where several of those
     were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
     ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"

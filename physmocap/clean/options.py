@@ -110,10 +110,16 @@ class CleanOptions:
         match_windows: How many best-matching windows of the clip lend their motion
             (averaged) to the matched bridge (and as many windows of the body mirrored left
             to right to the mirrored one).
-        blend_ratio: The bridges (cubic, matched, mirrored) whose error at rebuilding the
+        blend_ratio: The bridges (cubic, matched, mirrored, regressed) whose error at rebuilding the
             joint's own motion next to the span is within this many times the best one's
             (summed squared degrees) are averaged, weighted by the inverse of that error; 1
             keeps the best alone where it is strictly best.
+        regress_ridge: Ridge penalty of the regressed bridges (a bridged joint's pose and its
+            steps regressed on the other joints' rotations and their velocities, fitted on the
+            clip's good frames, :mod:`physmocap.clean.regress`), per training frame, on
+            features standardised to unit variance: small enough to follow the body (0.001 and
+            0.1 remove about as much of the benchmark's frozen joints' error), large enough
+            to keep hundreds of correlated channels from fitting noise.
         contact_speed: A point below a bridged joint (its lowest, a toe or a heel) stands on
             the floor on a good frame next to the span where it moves slower than this
             (metres per second) ...
@@ -158,6 +164,7 @@ class CleanOptions:
     match_own_weight: float = _opt(5.0, "ratio")
     match_windows: int = _opt(3, "count")
     blend_ratio: float = _opt(3.0, "ratio")
+    regress_ridge: float = _opt(0.01, "ratio")
     contact_speed: float = _opt(0.2, "m/s")
     contact_height: float = _opt(0.1, "m")
     contact_radius: float = _opt(0.1, "m")

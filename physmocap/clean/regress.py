@@ -1,0 +1,204 @@
+r"""A bridged joint's motion regressed on the rest of the body, learned from the clip itself.
+
+Under a frozen joint the other joints keep moving, and in most captures they say much about
+what the lost one was doing (a knee bends with the other leg's swing, the hips' turn, the
+foot's roll).  :class:`Regression` fits, over the clip's frames where joint :math:`j` is good,
+a ridge regression of :math:`j`'s motion on a feature vector :math:`x(t)`: the rotation
+matrices of every other animated joint (9 entries each) and their central differences
+:math:`(R_k(t+1) - R_k(t-1)) / 2`, the joints glitched anywhere on the span or next to it left
+out, the frames where a joint kept in is glitched (or its neighbours are) left out of the fit.
+Features are standardised over the training frames; with :math:`Z` the standardised
+features, :math:`\bar y` the targets' mean and :math:`n` the training frames,
+
+.. math::  W = (Z^\top Z + \lambda n I)^{-1} Z^\top (Y - \bar y), \qquad \hat y(t) = z(t) W + \bar y
+
+(:math:`\lambda` chosen for each target among ``CleanOptions.regress_ridge`` times
+:data:`RIDGE_FACTORS` by the pseudo-gaps, :meth:`Regression.choose_ridge`).  Two targets give
+two estimates:
+
+* *regressed pose*: :math:`j`'s rotation matrix (9 entries), the prediction projected onto
+  the rotations (the nearest one, by SVD), its mismatch with the good rotations at both ends
+  of the span (a rotation vector in the joint's frame at each end) faded linearly to zero
+  across it, so the bridge joins both ends exactly;
+* *regressed steps*: :math:`j`'s frame-to-frame turn :math:`\log(q(t-1)^{-1} q(t))`,
+  integrated from the last good rotation, the mismatch left at the first good one spread
+  linearly over the span (as the matched bridge's is).
+
+The fit is held as sums over its frames (:math:`n`, :math:`\sum x`, :math:`\sum x x^\top`,
+:math:`\sum x y^\top`, :math:`\sum y`), accumulated a block of frames at a time, so a
+pseudo-gap (:func:`.correct._pseudo_gaps`) is left out of it by taking its frames' terms off
+rather than by fitting again: both estimates of a pseudo-gap are built exactly as those of
+the span, from the clip without the frames they rebuild.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..rotations import Rotation, quat_conj, quat_mul
+from .detect import _angle
+
+__all__ = ["Regression", "spread_mismatch"]
+
+#: Frames whose features are built at once (the fit's sums are accumulated block by block).
+BLOCK_FRAMES = 4096
+#: The ridge penalties tried, as factors of ``CleanOptions.regress_ridge``.
+RIDGE_FACTORS = (0.1, 1.0, 10.0)  # the default, 1.0, in the middle
+#: Added to each feature's standard deviation (a channel that never moves stays finite).
+_EPS = 1e-6
+
+
+def spread_mismatch(est: np.ndarray, target: np.ndarray) -> np.ndarray:
+    r"""``est (n + 2, 4)`` from a good rotation to a predicted one at the far end, with the
+    mismatch at the far end, :math:`\log(\hat q_{n+1}^{-1} q)` (``target``), spread linearly
+    over it in the joint's frame; returns the ``n`` inner rotations."""
+    n = len(est) - 2
+    miss = Rotation.from_quat(quat_mul(quat_conj(est[-1]), target)).as_rotvec()
+    frac = (np.arange(1, n + 1) / (n + 1))[:, None]
+    return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
+
+
+def _faded(pred: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    r"""``pred (n + 2, 4)`` on the span and its two good ends, its mismatch with the good
+    rotations ``first`` and ``last``, :math:`r_0 = \log(\hat q_0^{-1} q_0)` and
+    :math:`r_1 = \log(\hat q_{n+1}^{-1} q_{n+1})`, faded linearly across it:
+    :math:`\hat q_i \exp((1 - w_i) r_0 + w_i r_1)`, :math:`w_i = i / (n + 1)`; returns the ``n``
+    inner rotations."""
+    n = len(pred) - 2
+    r0 = Rotation.from_quat(quat_mul(quat_conj(pred[0]), first)).as_rotvec()
+    r1 = Rotation.from_quat(quat_mul(quat_conj(pred[-1]), last)).as_rotvec()
+    w = (np.arange(1, n + 1) / (n + 1))[:, None]
+    return quat_mul(pred[1:-1], Rotation.from_rotvec((1 - w) * r0 + w * r1).as_quat())
+
+
+def _nearest_rotation(Y: np.ndarray) -> np.ndarray:
+    """``(n, 4)``: the rotations nearest (Frobenius) the ``(n, 9)`` matrices ``Y``."""
+    U, _, Vt = np.linalg.svd(Y.reshape(-1, 3, 3))
+    U[:, :, -1] *= np.linalg.det(U @ Vt)[:, None]
+    return Rotation.from_matrix(U @ Vt).as_quat()
+
+
+class Regression:
+    """Joint ``j``'s motion regressed on the other joints' (module docstring), for a span
+    ``s..e`` of ``R (F, J, 4)``; ``M (F, A, 9)`` the rotation matrices of the ``animated``
+    joints, ``bad (F, J)`` the glitched (frame, joint) pairs; the ridge penalty :math:`\\lambda`
+    is chosen among ``ridge`` times :data:`RIDGE_FACTORS` (:meth:`choose_ridge`)."""
+
+    def __init__(
+        self, R: np.ndarray, M: np.ndarray, animated: list[int], bad: np.ndarray, j: int, s: int, e: int, ridge: float
+    ) -> None:
+        F = len(R)
+        self.q, self.M = R[:, j], M
+        self.ridges = [ridge * f for f in RIDGE_FACTORS]
+        self.chosen = [len(RIDGE_FACTORS) // 2] * 2  # indices into self.ridges, pose and steps
+        self._done: dict[tuple[int, int], list[tuple[np.ndarray, np.ndarray]] | None] = {}
+        self.cols = [i for i, k in enumerate(animated) if k != j and not bad[max(0, s - 1) : e + 2, k].any()]
+        used = bad[:, [animated[i] for i in self.cols]].any(axis=1)
+        near = used.copy()
+        near[1:] |= used[:-1]
+        near[:-1] |= used[1:]
+        known = ~bad[:, j]
+        self.usable = ~near & known
+        self.usable[1:] &= known[:-1]  # a step needs the frame before
+        self.usable[[0, F - 1]] = False
+        Y = self._targets(np.arange(F))
+        self.sums = self._sums(np.flatnonzero(self.usable), Y)
+        self._Y = Y
+
+    def _features(self, t: np.ndarray) -> np.ndarray:
+        """``(len(t), 18 C)``: the kept joints' rotation matrices on frames ``t`` and their
+        central differences (one-sided at the clip's ends)."""
+        F = len(self.M)
+        now = self.M[t][:, self.cols].reshape(len(t), -1)
+        up = self.M[np.minimum(t + 1, F - 1)][:, self.cols].reshape(len(t), -1)
+        down = self.M[np.maximum(t - 1, 0)][:, self.cols].reshape(len(t), -1)
+        return np.concatenate([now, 0.5 * (up - down)], axis=1)
+
+    def _targets(self, t: np.ndarray) -> np.ndarray:
+        """``(len(t), 12)``: joint ``j``'s rotation matrix on frames ``t`` (9) and its turn from
+        the frame before, a rotation vector in its own frame (3; zero on frame 0)."""
+        q = self.q
+        pose = Rotation.from_quat(q[t]).as_matrix().reshape(len(t), 9)
+        prev = q[np.maximum(t - 1, 0)]
+        step = Rotation.from_quat(quat_mul(quat_conj(prev), q[t])).as_rotvec()
+        return np.concatenate([pose, step], axis=1)
+
+    def _sums(self, t: np.ndarray, Y: np.ndarray) -> list:
+        """``[n, sum x, sum x x^T, sum x y^T, sum y]`` over frames ``t``, a block at a time."""
+        d = 18 * len(self.cols)
+        out = [0, np.zeros(d), np.zeros((d, d)), np.zeros((d, Y.shape[1])), np.zeros(Y.shape[1])]
+        for b0 in range(0, len(t), BLOCK_FRAMES):
+            tb = t[b0 : b0 + BLOCK_FRAMES]
+            X, y = self._features(tb), Y[tb]
+            out[0] += len(tb)
+            out[1] += X.sum(axis=0)
+            out[2] += X.T @ X
+            out[3] += X.T @ y
+            out[4] += y.sum(axis=0)
+        return out
+
+    def _predict(self, left_out: np.ndarray, at: np.ndarray, ridges: list[float]) -> list[np.ndarray] | None:
+        """``(len(at), 12)`` targets predicted on frames ``at`` by the fit without the frames
+        ``left_out``, one per ridge penalty of ``ridges``; None with fewer training frames
+        than 10."""
+        drop = left_out[self.usable[left_out]]
+        n, sx, sxx, sxy, sy = (a - b for a, b in zip(self.sums, self._sums(drop, self._Y)))
+        if n < 10 or not self.cols:
+            return None
+        mu, ym = sx / n, sy / n
+        C = sxx / n - np.outer(mu, mu)
+        sd = np.sqrt(np.maximum(np.diag(C), 0.0)) + _EPS
+        Cz, Cy = C / np.outer(sd, sd), (sxy / n - np.outer(mu, ym)) / sd[:, None]
+        Z = (self._features(at) - mu) / sd
+        return [Z @ np.linalg.solve(Cz + lam * np.eye(len(mu)), Cy) + ym for lam in ridges]
+
+    def _bridges(self, a: int, b: int) -> list[tuple[np.ndarray, np.ndarray]] | None:
+        """``[(pose, steps)]`` per ridge penalty of ``self.ridges``: joint ``j`` on frames
+        ``a..b`` (:meth:`estimates`), kept for the next call with the same frames; None where
+        it cannot be fitted."""
+        if (a, b) in self._done:
+            return self._done[a, b]
+        F = len(self.q)
+        preds = None
+        if a >= 1 and b + 1 < F:
+            preds = self._predict(np.arange(a - 1, min(F, b + 3)), np.arange(a - 1, b + 2), self.ridges)
+        out = None
+        if preds is not None:
+            out = []
+            for pred in preds:
+                pose = _faded(_nearest_rotation(pred[:, :9]), self.q[a - 1], self.q[b + 1])
+                est = [self.q[a - 1]]
+                for v in Rotation.from_rotvec(pred[1:, 9:]).as_quat():  # the steps into a .. b + 1
+                    est.append(quat_mul(est[-1], v))
+                out.append((pose, spread_mismatch(np.array(est), self.q[b + 1])))
+        self._done[a, b] = out
+        return out
+
+    def choose_ridge(self, gaps: list[int], n: int) -> None:
+        """Each estimate's ridge penalty chosen among ``self.ridges`` by the pseudo-gaps whose
+        first frames are ``gaps`` (``n`` frames each; :func:`.correct._pseudo_gaps`): the
+        one whose estimate rebuilds the joint's good rotations there with the least summed
+        squared angle, per target (pose and steps)."""
+        if not gaps:
+            return
+        err = np.zeros((len(self.ridges), 2))
+        for a in gaps:
+            found = self._bridges(a, a + n - 1)
+            if found is None:
+                return
+            truth = self.q[a : a + n]
+            for i, pair in enumerate(found):
+                err[i] += [np.sum(_angle(est, truth) ** 2) for est in pair]
+        self.chosen = [int(k) for k in np.argmin(err, axis=0)]
+
+    def estimates(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(pose, steps)``, each ``(b - a + 1, 4)``: joint ``j`` on frames ``a..b`` (the span,
+        or a pseudo-gap of good frames) regressed by its pose and by its steps, each with its
+        chosen ridge penalty (:meth:`choose_ridge`; the middle one of ``self.ridges`` until
+        then), fitted without frames ``a - 1 .. b + 2`` (the frames rebuilt, the ends they
+        join, and the step into the first good frame after); None where the fit has too few
+        frames or the frames ``a - 1`` and ``b + 1`` are not both in the clip."""
+        found = self._bridges(a, b)
+        if found is None:
+            return None
+        return found[self.chosen[0]][0], found[self.chosen[1]][1]

@@ -15,6 +15,9 @@ combined by :class:`Planting`:
     (within ``engage_height`` of the floor) until it has lifted clear again
     (``engage_height + release_margin``), label or not, so a foot rises before
     it moves: that is what keeps the stance-band speed near zero;
+  - offline, a rigid foot tipped onto one corner of its edge is held on that corner
+    (:meth:`FootPlanter._follow_contact`), and a hold let go while its site is still
+    labelled eases out over ``ease_time`` (:meth:`FootPlanter._ease_out`);
   - sites of a foot that is neither labelled nor held get a swing clearance
     (a hard inequality, :class:`~physmocap.ik.limits.FloorLimit`), so a swing
     foot does not skim, and slide within, the stance band.
@@ -429,7 +432,7 @@ class FootPlanter:
         in_contact: Mapping[str, bool] | np.ndarray,
         data: mujoco.MjData,
         hints: "PlanHints | None" = None,
-    ) -> tuple[list[SitePositionTask], list[SitePositionTask], np.ndarray]:
+    ) -> tuple[list[SitePositionTask], list[SitePositionTask | BodyPointTask], np.ndarray]:
         """Advance one frame.
 
         A site is *engaged* (held horizontally by a hard equality) from the
@@ -440,6 +443,9 @@ class FootPlanter:
         ``release_margin``), so a foot rises before it moves, as a planted foot
         does.  Labelled sites are pulled down onto the floor by a soft height
         task.  A swing foot that skims the floor without a label is not held.
+        Offline (``hints`` given), a rigid foot tipped onto a corner is held on that
+        corner (:meth:`_follow_contact`), and a hold let go while its site is still
+        labelled eases out as a soft task (:meth:`_ease_out`).
 
         Args:
             in_contact: Per site, whether it is labelled in contact on this frame
@@ -460,7 +466,7 @@ class FootPlanter:
         n = len(self.sites)
         engaged = np.zeros(n, dtype=bool)
         soft: list[SitePositionTask] = []
-        hard: list[SitePositionTask] = []
+        hard: list[SitePositionTask | BodyPointTask] = []
         if not opt.plant:
             return soft, hard, engaged
         z = data.site_xpos[self._site_ids, 2] - self.floor
@@ -967,7 +973,7 @@ class Planting:
     def step(
         self, positions: np.ndarray, labels: Mapping[str, bool], data: mujoco.MjData, first: bool = False,
         valid: np.ndarray | None = None, orientations: np.ndarray | None = None,
-    ) -> tuple[np.ndarray, list[SitePositionTask], list[SitePositionTask], np.ndarray]:
+    ) -> tuple[np.ndarray, list[SitePositionTask], list[SitePositionTask | BodyPointTask], np.ndarray]:
         """Shifted targets ``(N, 3)``, soft tasks, equality constraints, and the
         foot offsets ``(2, 2)`` (left, right); ``valid`` ``(N,)``: which targets are tracked
         on this frame (None: all); ``orientations`` ``(N, 4)`` x-y-z-w: the targets'

@@ -268,11 +268,6 @@ class FootPlanter:
         self.locked = np.zeros(n, dtype=bool)
         self.age = np.zeros(n, dtype=int)
         self.labelled = np.zeros(n, dtype=bool)
-        #: per site, frames left of its released hold's ease-out (:meth:`_ease_out`)
-        self.fading = np.zeros(n, dtype=int)
-        self.fade_frames = max(1, int(round(opt.ease_time * fps)))
-        #: per site, its released hold eased out as a soft task (:meth:`_ease_out`)
-        self.fade = [SitePositionTask(model, s, cost=0.0, axes=(0, 1)) for s in self.sites]
         #: sites neither labelled nor held this frame (they get the swing clearance)
         self.free = np.zeros(n, dtype=bool)
         #: sites that have been down since their foot last swung (a heel lifting off over its
@@ -368,32 +363,6 @@ class FootPlanter:
             self.anchor[k, :2] = patch[:2]
             self.on_corner[k] = True
 
-    def _ease_out(self, k: int, labelled: bool, soft: list) -> None:
-        r"""Ease out the hold of site ``k``, let go on this frame or earlier, while it is labelled.
-
-        Offline a hold ends at its label's end, where the last pass smooths the change
-        (:mod:`.transitions`), or earlier, where the site lifts out of its band while
-        still labelled (a foot's ball rising as it rolls over its toes).  There it used
-        to let go at once, and what it held back caught up in a frame: the CMU walk
-        humanoid's right toes extended 35 degrees in three frames, two of them at the
-        toe joint's velocity cap (frame 414).  The site is now held softly at its anchor,
-        cost :math:`c_{xy}\,(1 - \operatorname{smoothstep}(i / (N + 1)))` on the
-        :math:`i`-th frame after, :math:`N` the frames within ``ease_time``, and not at
-        all once its label ends.  A corner hold (:meth:`_follow_contact`) is let go at once.
-        ``soft``: this frame's soft tasks, appended to.
-        """
-        task = self.fade[k]
-        if self.locked[k] and labelled and not self.on_corner[k]:
-            self.fading[k] = self.fade_frames
-            task.set_target(self.anchor[k])
-        if self.fading[k] > 0 and labelled:
-            share = 1.0 - _smooth(1.0 - self.fading[k] / (self.fade_frames + 1))
-            task.set_cost(self.options.cost_xy * share)
-            soft.append(task)
-            self.fading[k] -= 1
-        else:
-            self.fading[k] = 0
-
     def turn(self, foot: int, angle: float) -> None:
         r"""Turn the holds of ``foot`` by ``angle`` radians about the vertical axis.
 
@@ -420,7 +389,6 @@ class FootPlanter:
     def reset(self) -> None:
         self.locked[:] = False
         self.on_corner[:] = False
-        self.fading[:] = 0
         self.labelled[:] = False
         self.landed[:] = False
         self.landing[:] = self.clearance_frames + 1
@@ -502,8 +470,6 @@ class FootPlanter:
                 # a foot turning about another held point: this one held softly (FootPlanter.turn)
                 (soft if self.turning[k] else hard).append(hold)
             else:
-                if hints is not None:
-                    self._ease_out(k, bool(flags[k]), soft)
                 self.locked[k] = False
                 self.on_corner[k] = False
             self.free[k] = not flags[k] and not engaged[k]

@@ -16,8 +16,7 @@ combined by :class:`Planting`:
     (``engage_height + release_margin``), label or not, so a foot rises before
     it moves: that is what keeps the stance-band speed near zero;
   - offline, a rigid foot tipped onto one corner of its edge is held on that corner
-    (:meth:`FootPlanter._follow_contact`), and a hold let go while its site is still
-    labelled eases out over ``ease_time`` (:meth:`FootPlanter._ease_out`);
+    (:meth:`FootPlanter._follow_contact`);
   - sites of a foot that is neither labelled nor held get a swing clearance
     (a hard inequality, :class:`~physmocap.ik.limits.FloorLimit`), so a swing
     foot does not skim, and slide within, the stance band.
@@ -412,8 +411,7 @@ class FootPlanter:
         does.  Labelled sites are pulled down onto the floor by a soft height
         task.  A swing foot that skims the floor without a label is not held.
         Offline (``hints`` given), a rigid foot tipped onto a corner is held on that
-        corner (:meth:`_follow_contact`), and a hold let go while its site is still
-        labelled eases out as a soft task (:meth:`_ease_out`).
+        corner (:meth:`_follow_contact`).
 
         Args:
             in_contact: Per site, whether it is labelled in contact on this frame

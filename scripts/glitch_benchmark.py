@@ -514,8 +514,9 @@ def rotational(args: argparse.Namespace) -> None:
         pi, _, f = _prf(count[t][0], count[t][1] - own_fp[t], count[t][2])
         b, a, n, w, touched, worse, rom, bo, ao = err[t]
         rb, ra = np.sqrt(b / max(1, n)) * 100, np.sqrt(a / max(1, n)) * 100
-        out = 1 - np.sqrt(ao / max(1e-24, bo))  # the share removed off the clip's own repaired frames
-        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f} {worse:5d}/{touched:<6d} {rom:10d} {out:7.1%}")
+        # the share removed off the clip's own repaired frames (n/a where none are left)
+        out = f"{1 - np.sqrt(ao / bo):7.1%}" if bo > 0 else f"{'n/a':>7s}"
+        print(f"{t:11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {count[t][0] + count[t][2]:6d} {faint_total[t]:9d} {rb:10.2f} {ra:8.2f} {1 - ra / max(1e-12, rb):7.1%} {w:9.2f} {worse:5d}/{touched:<6d} {rom:10d} {out}")
     p, r, f = _prf(*tot)
     pi, _, f = _prf(tot[0], tot[1] - sum(own_fp.values()), tot[2])
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")

@@ -12,17 +12,20 @@ in 5 frames as it lifted).
 
 .. math::
 
-    \tau = -\operatorname{clip}\bigl(e - \operatorname{clip}(e, -f, f),\;
-            -(|\Delta\psi| + \omega/F),\; |\Delta\psi| + \omega/F\bigr)
+    \tau = \operatorname{clip}\bigl(-(e - \operatorname{clip}(e, -f, f)),\;
+            \min(0, \Delta\psi) - \omega/F,\; \max(0, \Delta\psi) + \omega/F\bigr)
 
 where :math:`f` is the dead band (``PlantOptions.pivot_threshold``: a capture's
 drift of a degree or two does not swivel the foot), :math:`\Delta\psi` the aim's
-own change since the previous frame (a pivot on a planted foot is followed at once,
-however fast; so is the aim's knee part, below, wobble included: low-passed or only
+own signed change since the previous frame (a pivot on a planted foot is followed at once,
+however fast, in its own direction; so is the aim's knee part, below, wobble included: low-passed or only
 followed at the rate, it left the foot off its free pose when a point let go, and the
 dance's foot slip rose again, 0.98 -> 1.14 cm/s) and :math:`\omega` the rate (rad/s,
 ``PlantOptions.heading_rate``) at which an error already there when the foot was
-caught (a landing off the target's heading) is taken out, :math:`F` the frame rate.
+caught (a landing off the target's heading) is taken out, :math:`F` the frame rate.  (The
+bound was once :math:`\pm(|\Delta\psi| + \omega/F)`: an aim wobbling by a degree either way
+about a fixed heading then took a landing's error out twice as fast, the foot swivelling on
+the floor.)
 
 Headings (radians, about world Z):
 
@@ -167,7 +170,8 @@ class HeadingFollower:
         foot = self.feet[side]
         ok = valid is None or bool(valid[foot.ankle])
         if ok and orientations is not None and self.has_orientation[foot.ankle]:
-            q = quat_mul(orientations[foot.ankle], foot._ankle_rest_inverse)
+            q = np.asarray(orientations[foot.ankle], dtype=float)
+            q = quat_mul(q / np.linalg.norm(q), foot._ankle_rest_inverse)
             v = quat_apply(q, foot.reference)
             offset = 0.0
         elif ok and foot.toe_offset is not None and (valid is None or bool(valid[foot.toe])):
@@ -175,7 +179,7 @@ class HeadingFollower:
             offset = foot.toe_offset
         else:
             return None
-        if np.hypot(v[0], v[1]) < self.min_level * np.linalg.norm(v):
+        if np.hypot(v[0], v[1]) <= self.min_level * np.linalg.norm(v):  # too steep, or no length
             return None
         return wrap_angle(_heading(v) + offset)
 
@@ -204,7 +208,7 @@ class HeadingFollower:
         psi_c, bend_c = knee_plane(*leg_now)
         w = LEG_SHARE * _smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
         knee = wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading)
-        if w == 0.0 or abs(knee) > MAX_KNEE_TURN:  # beyond it: a knee bending the other way from the actor's
+        if not (w > 0.0 and abs(knee) <= MAX_KNEE_TURN):  # beyond it: a knee bending the other way (or lost)
             return foot_heading
         return wrap_angle(foot_heading + w * knee)
 
@@ -224,10 +228,12 @@ class HeadingFollower:
             held = self.held_heading(side, held_sites, anchors)
             aim = self.reference(side, target, held, positions, valid, (legs_now or {}).get(side))
             self._previous[side] = aim
-            change = 0.0 if previous is None else abs(wrap_angle(aim - previous))
+            change = 0.0 if previous is None else wrap_angle(aim - previous)
             e = wrap_angle(held - aim)
             excess = e - min(max(e, -self.free), self.free)  # what np.clip does, on floats
-            limit = change + self.step_rate
-            out[side] = -min(max(excess, -limit), limit)
+            # the aim's own turn at once, in its own direction; besides, step_rate either way (an
+            # aim wobbling about a fixed heading does not hurry a landing's error out)
+            low, high = min(0.0, change) - self.step_rate, max(0.0, change) + self.step_rate
+            out[side] = min(max(-excess, low), high)
         return out
 

@@ -98,6 +98,7 @@ def level_roll(orientations: np.ndarray, rest_quat: np.ndarray, weights: np.ndar
         block: Frames computed at a time (a long clip's temporaries stay bounded).
     """
     q = np.asarray(orientations, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)  # the formulas below need unit quaternions
     w = np.asarray(weights, dtype=float)
     out = np.empty_like(q)
     for s in range(0, len(q), block):

@@ -95,11 +95,14 @@ def test_leaving_frames_out_of_the_fit_equals_fitting_without_them(walk, monkeyp
     train[left_out] = False
     t = np.flatnonzero(train)
     X, Y = reg._features(t), reg._targets(t)
-    mu, sd = X.mean(axis=0), X.std(axis=0) + regress._EPS
-    Z = (X - mu) / sd
+    mu, sd = X.mean(axis=0), X.std(axis=0)
+    k = sd > regress.MIN_SPREAD  # still channels left out
+    mu, sd = mu[k], sd[k]
+    Z = (X[:, k] - mu) / sd
+    at_z = (np.clip(reg._features(at), reg.low, reg.high)[:, k] - mu) / sd  # clipped to the fitted range
     for lam, a, b in zip(ridges, got, blocked):
         W = np.linalg.solve(Z.T @ Z + lam * len(t) * np.eye(Z.shape[1]), Z.T @ (Y - Y.mean(axis=0)))
-        direct = ((reg._features(at) - mu) / sd) @ W + Y.mean(axis=0)
+        direct = at_z @ W + Y.mean(axis=0)
         np.testing.assert_allclose(a, direct, atol=1e-6)
         np.testing.assert_allclose(b, direct, atol=1e-6)
 
@@ -123,3 +126,41 @@ def test_regressed_bridges_join_both_ends(walk):
         steps = _angle(path[1:], path[:-1])
         own = _angle(R[300:349, j], R[299:348, j]).max()
         assert steps[0] <= 2 * own and steps[-1] <= 2 * own, (steps[0], steps[-1], own)
+
+
+@pytest.mark.parametrize("noise", [0.0, 1e-7])
+def test_a_channel_still_on_every_fitted_frame_does_not_steer_the_fit(walk, noise):
+    """A joint held still all clip (to within capture noise) but turning once, around a frozen
+    knee, was standardised by its near-zero spread into features of 1e5-1e6 there: the regressed
+    bridges came out 90-100 degrees off and the knee's repair 8-19 degrees (1 without the
+    turn).  Such channels are now left out of the fit and the features clipped to their fitted
+    range (regress.MIN_SPREAD, Regression._ranges)."""
+    from physmocap.clean.correct import _matcher, _pseudo_gaps
+    from physmocap.clean.detect import _angle
+    from physmocap.clean.regress import Regression
+
+    R = np.array(walk.rotations, copy=True)
+    F, names = len(R), walk.skeleton.names
+    h, j = names.index("LeftHand"), names.index("RightLeg")
+    rv = np.tile([0.2, 0.1, 0.3], (F, 1)) + noise * np.random.default_rng(1).standard_normal((F, 3))
+    rv[:, 1] += 0.8 * np.clip(1 - np.abs(np.arange(F) - 324) / 26, 0, None)  # turns around the span only
+    R[:, h] = Rotation.from_rotvec(rv).as_quat()
+    truth = R[300:348, j].copy()
+    R[300:348, j] = R[299, j]
+    m = dataclasses.replace(walk, rotations=R)
+    glitches = [Glitch("frozen", "RightLeg", 300, 347, 1.0)]
+    matcher = _matcher(m, glitches, CleanOptions(), canonical_joints(m))
+    reg = Regression(R, matcher.M, matcher.animated, matcher.bad, j, 300, 347, 0.01)
+    reg.choose_ridge(_pseudo_gaps(300, 347, F), 48)
+    for est in reg.estimates(300, 347):
+        assert np.sqrt(np.mean(_angle(est, truth) ** 2)) < 5.0  # degrees
+
+
+@pytest.mark.parametrize("ridge", [1e-17, 1e308])
+def test_a_ridge_the_fit_cannot_use_is_refused(ridge):
+    """Valid-looking ridges crashed the fit (a singular matrix at 1e-16, an overflow at 1e308);
+    they are refused with the option's bounds."""
+    from physmocap.errors import OptionError
+
+    with pytest.raises(OptionError, match="regress_ridge must be in"):
+        CleanOptions(regress_ridge=ridge)

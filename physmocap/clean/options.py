@@ -187,6 +187,16 @@ class CleanOptions:
         if not self.blend_ratio >= 1.0:
             raise OptionError(f"clean option blend_ratio must be at least 1 (the best estimate's error times it), "
                               f"got {self.blend_ratio!r}")
+        if not MIN_RIDGE <= self.regress_ridge <= MAX_RIDGE:
+            # the fit's matrix is only as well conditioned as the ridge makes it (constant and
+            # duplicated channels); a ridge so large it overflows fits nothing
+            raise OptionError(f"clean option regress_ridge must be in [{MIN_RIDGE:g}, {MAX_RIDGE:g}], "
+                              f"got {self.regress_ridge!r}")
+
+
+#: Bounds of ``CleanOptions.regress_ridge`` (per training frame, on standardised features).
+MIN_RIDGE = 1e-8
+MAX_RIDGE = 1e4
 
 
 def option_unit(name: str) -> str:

@@ -7,7 +7,8 @@ a ridge regression of :math:`j`'s motion on a feature vector :math:`x(t)`: the r
 matrices of every other animated joint (9 entries each) and their central differences
 :math:`(R_k(t+1) - R_k(t-1)) / 2`, the joints glitched anywhere on the span or next to it left
 out, the frames where a joint kept in is glitched (or its neighbours are) left out of the fit.
-Features are standardised over the training frames; with :math:`Z` the standardised
+Features are standardised over the training frames (and clipped to their range there where
+they are predicted from: the fit is never extrapolated); with :math:`Z` the standardised
 features, :math:`\bar y` the targets' mean and :math:`n` the training frames,
 
 .. math::  W = (Z^\top Z + \lambda n I)^{-1} Z^\top (Y - \bar y), \qquad \hat y(t) = z(t) W + \bar y
@@ -44,18 +45,18 @@ __all__ = ["Regression", "spread_mismatch"]
 BLOCK_FRAMES = 4096
 #: The ridge penalties tried, as factors of ``CleanOptions.regress_ridge``.
 RIDGE_FACTORS = (0.1, 1.0, 10.0)  # the default, 1.0, in the middle
-#: Added to each feature's standard deviation (a channel that never moves stays finite).
-_EPS = 1e-6
+#: Standard deviation over the fitted frames (rotation-matrix entries, and their per-frame
+#: changes) below which a feature is left out of the fit: a joint still there to within
+#: capture noise (a joint turning 0.1 rad/s at 120 Hz changes its entries by about 1e-3 a frame).
+MIN_SPREAD = 1e-5
 
 
 def spread_mismatch(est: np.ndarray, target: np.ndarray) -> np.ndarray:
     r"""``est (n + 2, 4)`` from a good rotation to a predicted one at the far end, with the
     mismatch at the far end, :math:`\log(\hat q_{n+1}^{-1} q)` (``target``), spread linearly
-    over it in the joint's frame; returns the ``n`` inner rotations."""
-    n = len(est) - 2
-    miss = Rotation.from_quat(quat_mul(quat_conj(est[-1]), target)).as_rotvec()
-    frac = (np.arange(1, n + 1) / (n + 1))[:, None]
-    return quat_mul(est[1:-1], Rotation.from_rotvec(frac * miss).as_quat())
+    over it in the joint's frame; returns the ``n`` inner rotations (:func:`_faded` with no
+    mismatch at the start)."""
+    return _faded(est, est[0], target)
 
 
 def _faded(pred: np.ndarray, first: np.ndarray, last: np.ndarray) -> np.ndarray:
@@ -104,15 +105,17 @@ class Regression:
         Y = self._targets(np.arange(F))
         self.sums = self._sums(np.flatnonzero(self.usable), Y)
         self._Y = Y
+        self.low, self.high = self._ranges(np.flatnonzero(self.usable))
 
     def _features(self, t: np.ndarray) -> np.ndarray:
         """``(len(t), 18 C)``: the kept joints' rotation matrices on frames ``t`` and their
         central differences (one-sided at the clip's ends)."""
         F = len(self.M)
         now = self.M[t][:, self.cols].reshape(len(t), -1)
-        up = self.M[np.minimum(t + 1, F - 1)][:, self.cols].reshape(len(t), -1)
-        down = self.M[np.maximum(t - 1, 0)][:, self.cols].reshape(len(t), -1)
-        return np.concatenate([now, 0.5 * (up - down)], axis=1)
+        hi, lo = np.minimum(t + 1, F - 1), np.maximum(t - 1, 0)
+        up = self.M[hi][:, self.cols].reshape(len(t), -1)
+        down = self.M[lo][:, self.cols].reshape(len(t), -1)
+        return np.concatenate([now, (up - down) / np.maximum(hi - lo, 1)[:, None]], axis=1)
 
     def _targets(self, t: np.ndarray) -> np.ndarray:
         """``(len(t), 12)``: joint ``j``'s rotation matrix on frames ``t`` (9) and its turn from
@@ -137,6 +140,17 @@ class Regression:
             out[4] += y.sum(axis=0)
         return out
 
+    def _ranges(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(low, high)``: each feature's least and greatest value over frames ``t`` (the fit's),
+        a block at a time; features are clipped to them where predicted (:meth:`_predict`)."""
+        d = 18 * len(self.cols)
+        low, high = np.full(d, np.inf), np.full(d, -np.inf)
+        for b0 in range(0, len(t), BLOCK_FRAMES):
+            X = self._features(t[b0 : b0 + BLOCK_FRAMES])
+            np.minimum(low, X.min(axis=0), out=low)
+            np.maximum(high, X.max(axis=0), out=high)
+        return low, high
+
     def _predict(self, left_out: np.ndarray, at: np.ndarray, ridges: list[float]) -> list[np.ndarray] | None:
         """``(len(at), 12)`` targets predicted on frames ``at`` by the fit without the frames
         ``left_out``, one per ridge penalty of ``ridges``; None with fewer training frames
@@ -147,10 +161,21 @@ class Regression:
             return None
         mu, ym = sx / n, sy / n
         C = sxx / n - np.outer(mu, mu)
-        sd = np.sqrt(np.maximum(np.diag(C), 0.0)) + _EPS
-        Cz, Cy = C / np.outer(sd, sd), (sxy / n - np.outer(mu, ym)) / sd[:, None]
-        Z = (self._features(at) - mu) / sd
-        return [Z @ np.linalg.solve(Cz + lam * np.eye(len(mu)), Cy) + ym for lam in ridges]
+        sd = np.sqrt(np.maximum(np.diag(C), 0.0))
+        # a channel (nearly) still on every fitted frame carries no information, only its noise
+        # standardised up: left out of the fit
+        k = np.flatnonzero(sd > MIN_SPREAD)
+        if not k.size:
+            return None
+        mu, sd, C = mu[k], sd[k], C[np.ix_(k, k)]
+        Cz, Cy = C / np.outer(sd, sd), (sxy[k] / n - np.outer(mu, ym)) / sd[:, None]
+        # not extrapolated: a channel that moves on these frames far beyond its range on the
+        # fitted ones (a hand held still all clip, lifted once) would steer the fit
+        Z = (np.clip(self._features(at)[:, k], self.low[k], self.high[k]) - mu) / sd
+        try:
+            return [Z @ np.linalg.solve(Cz + lam * np.eye(len(k)), Cy) + ym for lam in ridges]
+        except np.linalg.LinAlgError:  # a singular fit: no estimate (the other bridges stand)
+            return None
 
     def _bridges(self, a: int, b: int) -> list[tuple[np.ndarray, np.ndarray]] | None:
         """``[(pose, steps)]`` per ridge penalty of ``self.ridges``: joint ``j`` on frames

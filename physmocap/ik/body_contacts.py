@@ -37,6 +37,7 @@ import numpy as np
 from ..errors import OptionError
 from ..options import check_fields
 from .contacts import ContactDetector, ContactOptions, FloorPlane, central_velocity
+from .easing import smoothstep
 
 __all__ = ["BODY_PARTS", "BodyContactOptions", "detect_body_contacts", "body_part_points", "BodyContactStream", "BodyContactAnchor", "release_kneeling_feet"]
 
@@ -166,11 +167,6 @@ def detect_body_contacts(
     return out
 
 
-def _smooth(x: float) -> float:
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
-
-
 class BodyContactStream:
     """Causal knee, hand and pelvis contact detection, one frame at a time (streaming).
 
@@ -257,7 +253,7 @@ class BodyContactAnchor:
                 self._age = 0
             self._age += 1
             full = np.array([*(self.anchor - x[:2]), self.floor - x[2]])
-            w = _smooth(self._age / self.onset)
+            w = smoothstep(self._age / self.onset)
             self.offset = (1.0 - w) * self.offset + w * full if self._age < self.onset else full
             self._fade_left = 0
             return self.offset.copy()
@@ -267,7 +263,7 @@ class BodyContactAnchor:
             self._fade_left = self.release
         if self._fade_left > 0:
             self._fade_left -= 1
-            self.offset = self._fade_from * _smooth(self._fade_left / self.release)
+            self.offset = self._fade_from * smoothstep(self._fade_left / self.release)
         else:
             self.offset = np.zeros(3)
         return self.offset.copy()

@@ -52,6 +52,7 @@ from typing import Mapping
 import numpy as np
 
 from ..spill import release
+from .easing import smoothstep
 
 __all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
@@ -81,8 +82,7 @@ def ease_weights(
     s0 = start + ease_frames if inside[0] else start
     e0 = end - ease_frames if inside[1] else end
     gap = np.maximum(s0 - t, 0.0) + np.maximum(t - e0, 0.0)
-    x = np.clip(1.0 - gap / (ease_frames + 1), 0.0, 1.0)
-    w = x * x * (3.0 - 2.0 * x)
+    w = smoothstep(1.0 - gap / (ease_frames + 1))
     if inside[0]:
         w[t < start] = 0.0
     if inside[1]:

@@ -60,6 +60,7 @@ from typing import Sequence
 import numpy as np
 
 from ..rotations import quat_apply, quat_conj, quat_mul
+from .easing import smoothstep
 
 
 def wrap_angle(a: float) -> float:
@@ -69,11 +70,6 @@ def wrap_angle(a: float) -> float:
 
 def _heading(v: np.ndarray) -> float:
     return float(np.arctan2(v[1], v[0]))
-
-
-def _smoothstep(x: float) -> float:
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -206,7 +202,7 @@ class HeadingFollower:
             return foot_heading
         psi_t, bend_t = knee_plane(*positions[leg])
         psi_c, bend_c = knee_plane(*leg_now)
-        w = LEG_SHARE * _smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
+        w = LEG_SHARE * smoothstep((min(bend_t, bend_c) - BEND_FROM) / (BEND_FULL - BEND_FROM))
         knee = wrap_angle(psi_t + wrap_angle(held - psi_c) - foot_heading)
         if not (w > 0.0 and abs(knee) <= MAX_KNEE_TURN):  # beyond it: a knee bending the other way (or lost)
             return foot_heading

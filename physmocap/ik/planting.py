@@ -52,6 +52,7 @@ from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..errors import OptionError
 from ..options import check_fields
 from .footplan import FOOT_JOINTS, RigidFoot, ToeContact, knee_between
+from .easing import smoothstep
 from .footturn import HeadingFollower
 from .targets import character_rest_frames
 from .tasks import BodyPointTask, SitePositionTask
@@ -197,12 +198,6 @@ HEADING_PITCH = np.radians(60.0)
 #: Metres: a foot whose first and last contact sites lie closer than this horizontally in the
 #: rest pose has no heading to turn its holds by (:class:`~.footturn.HeadingFollower`).
 MIN_HEADING_SPAN = 0.02
-
-
-def _smooth(x: float) -> float:
-    """Smoothstep on [0, 1]."""
-    x = min(max(x, 0.0), 1.0)
-    return x * x * (3.0 - 2.0 * x)
 
 
 @dataclass(frozen=True)
@@ -476,7 +471,7 @@ class FootPlanter:
             if flags[k] and not rolling and not lifting:
                 # pulled onto the floor, the pull ramping in over onset_time
                 self.age[k] = self.age[k] + 1 if self.labelled[k] else 0
-                ramp = _smooth((self.age[k] + 1) / self.onset_frames)
+                ramp = smoothstep((self.age[k] + 1) / self.onset_frames)
                 task.set_cost(opt.cost_z * ramp)
                 # descend at most max_descent_speed: a foot labelled down while still in
                 # the air lands over a few frames instead of slamming down in one
@@ -506,7 +501,7 @@ class FootPlanter:
         reversed at up to 1000 deg/s: the Unitree G1 on the PyMO walk.)
         """
         n = int(self.landing[foot])
-        return 1.0 - _smooth(n / (self.clearance_frames + 1)) if n else 1.0
+        return 1.0 - smoothstep(n / (self.clearance_frames + 1)) if n else 1.0
 
 
 class FootAnchor:
@@ -583,7 +578,7 @@ class FootAnchor:
                 self._fade_left = self.release_frames
             if self._fade_left > 0:
                 self._fade_left -= 1
-                new = base + self._fade_from * _smooth(self._fade_left / self.release_frames)
+                new = base + self._fade_from * smoothstep(self._fade_left / self.release_frames)
             else:
                 new = base.copy()
             self._was_held = False

@@ -12,6 +12,7 @@ joint is not clipped.
 
 from __future__ import annotations
 
+import argparse
 import re
 import sys
 from pathlib import Path
@@ -67,11 +68,24 @@ def joint_speeds(path: Path) -> list[tuple[str, float, float, float, float]]:
 
 
 def main(argv: list[str]) -> int:
-    paths = [Path(a) for a in argv] or sorted(SHARED.glob("*.bvh"))
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("bvh", nargs="*", type=Path, help="BVH files (default: every .bvh in ../shared/data)")
+    args = ap.parse_args(argv)
+    from physmocap.errors import PhysmocapError
+
+    paths = args.bvh or sorted(SHARED.glob("*.bvh"))
+    if not paths:
+        print(f"joint_speeds: no BVH given and none in {SHARED}", file=sys.stderr)
+        return 2
     for path in paths:
+        try:
+            rows = joint_speeds(path)
+        except PhysmocapError as exc:
+            print(f"joint_speeds: {exc}", file=sys.stderr)
+            return 1
         print(f"\n{path.name}")
         print(f"  {'joint':<16} {'median':>8} {'p99.9':>8} {'max':>8} {'limit':>8}   (deg/s)")
-        for name, med, p999, mx, limit in joint_speeds(path):
+        for name, med, p999, mx, limit in rows:
             flag = "  <-- above" if p999 > limit else ""
             print(f"  {name:<16} {med:8.0f} {p999:8.0f} {mx:8.0f} {limit:8.0f}{flag}")
     return 0

@@ -78,6 +78,23 @@ def test_frozen_joint_is_found(walk):
     assert len(mine) == 1 and mine[0].start == 300 and mine[0].end == 329
 
 
+def test_a_knee_clamped_straight_in_a_one_stride_clip_is_not_frozen_but_a_freeze_there_is(walk):
+    """CMU's solver holds each knee at the identity (straight) through every stance: in the
+    whole clip each knee holds it in several runs, in a clip cut to one stride the right knee
+    holds it once, and only the left knee's runs say it is a clamp.  A real freeze next to
+    it (another value, held while the body moves) is still found."""
+    stride = walk.slice_frames(1, 1 + int(1.5 * walk.fps))
+    j = _joint(stride, "RightLeg")
+    held = np.all(stride.rotations[1:, j] == stride.rotations[:-1, j], axis=1)
+    assert held.sum() >= 0.1 * stride.fps  # the clamp is there, and long enough to be taken for a freeze
+    _, report = clean(stride)
+    assert not [g for g in report.glitches if g.kind == "frozen"]
+    frames = list(range(120, 150))
+    _, report = clean(_with(stride, _joint(stride, "LeftLeg"), frames, hold=True))
+    mine = [g for g in report.glitches if g.kind == "frozen"]
+    assert [(g.joint, g.start, g.end) for g in mine] == [("LeftLeg", 120, 149)]
+
+
 def test_fast_real_motion_at_low_rates_is_not_a_glitch(walk):
     low = walk.resample(30.0)
     _, report = clean(low)

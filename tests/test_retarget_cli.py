@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import warnings
 
 import numpy as np
 import pytest
@@ -190,3 +191,62 @@ def test_bvh_output_options_without_a_bvh_output_are_said_to_be_ignored(tmp_path
 
     with pytest.warns(UserWarning, match="--units applies to BVH outputs only"):
         assert main(["retarget", "example", "--start", "1", "--end", "12", "-o", str(tmp_path / "x.npz"), "--units", "cm"]) == 0
+
+
+def _flipped_walk(tmp_path):
+    """The bundled walk's first 1.5 s, and the same with the left thigh flipped 180 degrees
+    about the hip's lateral axis on 6 frames (a capture flip: the leg swung up through the
+    pelvis and back), both written as BVH."""
+    from scipy.spatial.transform import Rotation
+
+    from physmocap.export.bvh import write_bvh
+    from physmocap.sources import load_motion
+
+    motion = load_motion("example")
+    motion = motion.slice_frames(1, 1 + int(1.5 * motion.fps))
+    clean_path, flipped_path = tmp_path / "walk.bvh", tmp_path / "flipped.bvh"
+    write_bvh(motion, clean_path)
+    j = motion.skeleton.index("LeftUpLeg")
+    rot = motion.rotations.copy()
+    flip = Rotation.from_rotvec([np.pi, 0.0, 0.0])
+    rot[80:86, j] = (flip * Rotation.from_quat(rot[80:86, j])).as_quat()
+    write_bvh(motion.replace(rotations=rot), flipped_path)
+    return clean_path, flipped_path
+
+
+def test_clean_repairs_a_flip_in_the_source_before_retargeting(tmp_path):
+    """``retarget --clean`` follows the repaired source: the flipped thigh's frames come out
+    near the unglitched clip's retarget, where without it the hip swings to follow the flip;
+    the repair is named in a warning."""
+    clean_path, flipped_path = _flipped_walk(tmp_path)
+    outs = {}
+    for name, src, extra in (("ref", clean_path, []), ("raw", flipped_path, []), ("fixed", flipped_path, ["--clean"])):
+        out = tmp_path / f"{name}.npz"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            assert main(["retarget", str(src), "-o", str(out), "--quiet", "--start", "0", *extra]) == 0
+        outs[name] = np.load(out)["qpos"]
+        said = [str(w.message) for w in caught if "--clean" in str(w.message)]
+        assert said == ([] if name != "fixed" else [
+            f"{flipped_path}: --clean repaired 1 capture glitch(es) before retargeting (flip LeftUpLeg 80-85)"
+        ])
+    from physmocap.models import load_character
+
+    model = load_character("humanoid").model
+    hip = [int(model.joint(n).qposadr[0]) for n in ("left_hip_flexion", "left_hip_adduction", "left_hip_rotation")]
+    window = slice(78, 92)
+    raw = np.abs(outs["raw"][window][:, hip] - outs["ref"][window][:, hip]).max()
+    fixed = np.abs(outs["fixed"][window][:, hip] - outs["ref"][window][:, hip]).max()
+    assert raw > np.radians(30.0)  # the glitch reaches the character without --clean
+    assert fixed < np.radians(5.0) and fixed < raw / 10
+
+
+def test_clean_leaves_a_clip_without_glitches_byte_identical(tmp_path, capsys):
+    clean_path, _ = _flipped_walk(tmp_path)
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    assert main(["retarget", str(clean_path), "-o", str(a), "--quiet", "--start", "0", "--no-plant"]) == 0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main(["retarget", str(clean_path), "-o", str(b), "--quiet", "--start", "0", "--no-plant", "--clean"]) == 0
+    assert not [w for w in caught if "--clean" in str(w.message)]  # a one-stride walk: no knee clamp taken for a freeze
+    assert np.array_equal(np.load(a)["qpos"], np.load(b)["qpos"])

@@ -29,7 +29,7 @@ numbering) and a severity (degrees or metres).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -352,31 +352,43 @@ def _novelty(span: np.ndarray, elsewhere: np.ndarray) -> float:
     return float(np.median(np.degrees(2.0 * np.arccos(np.clip(dots, 0.0, 1.0)))))
 
 
+def _held_runs(values: np.ndarray) -> tuple[list[tuple[int, int]], list[tuple]]:
+    """``(runs, held)``: the ``[first, last]`` frames of every run of at least two frames over
+    which ``values (F, k)`` stay exactly the same, and the value each run holds (rounded to 1e-9,
+    as a hashable tuple)."""
+    same = np.zeros(len(values), dtype=bool)
+    same[1:] = np.all(values[1:] == values[:-1], axis=1)
+    d = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+    runs = [(s - 1, e) for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]  # run's first frame too
+    return runs, [tuple(np.round(values[a], 9)) for a, _ in runs]
+
+
 def _frozen(
-    values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float
+    values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float,
+    twin_held: Sequence[tuple] = (),
 ) -> list[Glitch]:
     """Runs where a joint's ``values (F, k)`` (a rotation, or a position) stay exactly the same
     while the body moves (``moving (F,)``), or that end with the joint catching up: its first
     ``step (F,)`` after the run (degrees or metres per frame) ``jump_ratio`` times its median
     step over the ``context_time`` after (a joint that really stops starts again smoothly;
     one whose value stopped updating jumps to where it had got to; steps below ``still``, per
-    frame, count as that: the capture's noise floor)."""
+    frame, count as that: the capture's noise floor).
+
+    A value held in several separate runs, by the joint or by its other side (``twin_held``:
+    the values :func:`_held_runs` finds on the twin joint), is a limit the capture's solver
+    clamps to (CMU's knees at full extension, the identity, in every stance), not a freeze: a
+    clip cut to one stride has one such run of each knee, and the two knees hold the same value."""
     F = len(values)
-    same = np.zeros(F, dtype=bool)
-    same[1:] = np.all(values[1:] == values[:-1], axis=1)
-    half = max(2, int(round(opt.context_time * fps)))
-    if same[1:].all():  # never animated: not a glitch
+    if F < 2 or np.all(values[1:] == values[:-1]):  # never animated: not a glitch
         return []
+    half = max(2, int(round(opt.context_time * fps)))
     shortest = max(3, int(round(opt.frozen_time * fps)))
-    d = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
-    runs = [(s - 1, e) for s, e in zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1)]  # run's first frame too
-    # A value the joint holds in several separate runs is a limit the capture's solver clamps
-    # to (CMU's knees at full extension in every stance), not a freeze.
-    held = [tuple(np.round(values[a], 9)) for a, _ in runs]
+    runs, held = _held_runs(values)
+    clamps = list(held) + list(twin_held)
     out = []
     for (start, e), v in zip(runs, held):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if held.count(v) > 1 or not inside or e - start + 1 < shortest:
+        if clamps.count(v) > 1 or not inside or e - start + 1 < shortest:
             continue
         later = step[e + 2 : e + 2 + half]
         later = later[np.isfinite(later)]
@@ -453,8 +465,12 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
             glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
         # the body moves on a frame where the median joint moves
         moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
+        from .positional import twin_pairs  # positional imports this module
+
+        twin = dict(p for a, b in twin_pairs(motion, ji) for p in ((a, b), (b, a)))
         for j in animated:
-            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps)
+            twin_held = _held_runs(R[:, twin[j]])[1] if j in twin else ()
+            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps, twin_held)
     if motion.positions is not None:
         from .positional import positional_glitches
 

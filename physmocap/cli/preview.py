@@ -95,8 +95,10 @@ def _load(args: argparse.Namespace):
         if not args.source:
             return preview_input(traj)
         from ..sources import load_motion
+        from .retarget import cleaned_source
 
-        return preview_input_with_source(traj, load_motion(args.source, min_frames=1), args.start, args.profile, args.source_map)
+        source = cleaned_source(load_motion(args.source, min_frames=1), args)
+        return preview_input_with_source(traj, source, args.start, args.profile, args.source_map)
     if args.source:
         raise OptionError("--source is for a trajectory .npz input; a motion file is its own source")
     from .retarget import retarget_from_args

@@ -30,9 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the source's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
-    from .retarget import add_marker_read_options
+    from .retarget import add_clean_option, add_marker_read_options
 
     add_marker_read_options(p)  # a marker source is read as the retarget read it
+    add_clean_option(p)  # and cleaned as it cleaned it
     p.add_argument(
         "--start", type=int, default=None,
         help="source frame the trajectory starts at (retarget --start; default: stored in the file, else 0)"
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     motion = None
     joint_indices = None
     src = _source_path(args, traj.source)
-    from .retarget import marker_read_options
+    from .retarget import cleaned_source, marker_read_options
 
     marker_opts = marker_read_options(args, src)  # refused without a marker source
     if src is not None:
@@ -87,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
         opts = {"units": args.in_units} if args.in_units else {}
         opts.update(marker_opts)
-        motion = load_motion(src, min_frames=1, **opts)
+        motion = cleaned_source(load_motion(src, min_frames=1, **opts), args)
         # as retarget does: cut at the source's rate (--start is a source frame), then resample
         if args.start >= motion.num_frames:
             raise OptionError(f"--start {args.start} is past the source's {motion.num_frames} frames", path=src)

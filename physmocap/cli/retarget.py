@@ -43,6 +43,7 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
     add_marker_read_options(p)
+    add_clean_option(p)
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
     p.add_argument("--end", type=int, help="last source frame (exclusive)")
     p.add_argument("--fps", type=float, help="resample the source to this frame rate first")
@@ -81,6 +82,37 @@ def add_marker_read_options(p: argparse.ArgumentParser) -> None:
                    "actor solved from them (the default; see physmocap solve): faster, but no rigid actor skeleton "
                    "and no joint ranges before the character's")
     add_marker_solve_options(p, prefix="marker-")
+
+
+def add_clean_option(p: argparse.ArgumentParser) -> None:
+    """``--clean``: repair the source's capture glitches before retargeting (shared by the
+    commands that retarget and by ``report``, which must compare with the source the retarget
+    followed)."""
+    p.add_argument(
+        "--clean",
+        action="store_true",
+        help="repair the source's capture glitches first (flips, spikes, frozen joints...: physmocap clean with "
+        "its defaults, on the whole file); the repairs are listed on stderr",
+    )
+
+
+def cleaned_source(motion, args: argparse.Namespace):
+    """``motion`` with its capture glitches repaired when ``args.clean`` is set
+    (:func:`physmocap.clean.clean` with default options, on the whole file, before any
+    ``--start``/``--end`` cut or resampling), each repair named in one warning; ``motion``
+    itself otherwise."""
+    if not getattr(args, "clean", False):
+        return motion
+    from ..clean import clean
+    from ..errors import warn
+
+    fixed, report = clean(motion, mapping=getattr(args, "source_map", None))
+    repaired = [g for g in report.glitches if g.corrected]
+    if repaired:
+        listed = "; ".join(f"{g.kind} {g.joint} {g.start}" + (f"-{g.end}" if g.end != g.start else "") for g in repaired[:8])
+        more = f"; and {len(repaired) - 8} more" if len(repaired) > 8 else ""
+        warn(f"{motion.source}: --clean repaired {len(repaired)} capture glitch(es) before retargeting ({listed}{more})")
+    return fixed
 
 
 def add_bvh_output_options(p: argparse.ArgumentParser) -> None:
@@ -278,7 +310,7 @@ def retarget_from_args(args: argparse.Namespace):
     config = config_from_args(args)
     read_opts = {"units": args.in_units} if args.in_units else {}
     read_opts.update(marker_read_options(args))
-    motion = load_motion(args.input, min_frames=1, **read_opts)
+    motion = cleaned_source(load_motion(args.input, min_frames=1, **read_opts), args)
     character = load_character(args.character, args.map)
     return retarget(
         motion,

@@ -179,6 +179,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             model=ch.model,
             qpos=traj.qpos,
             velocity_limits=getattr(ch, "velocity_limits", None),
+            velocity_groups=getattr(ch, "velocity_groups", ()),
         ).as_dict()
     return {
         "format": REPORT_FORMAT,

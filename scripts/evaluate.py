@@ -59,7 +59,7 @@ def main() -> int:
             fl = metrics.character_flat_feet(traj, traj.contacts)
             pen = metrics.penetration(ch.model, traj.qpos)["max_mm"]
             lim = metrics.joint_limit_violations(ch.model, traj.qpos)["count"]
-            vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits)["count"]
+            vel = metrics.velocity_violations(ch.model, traj.qpos, traj.fps, ch.velocity_limits, groups=ch.velocity_groups)["count"]
             trk = metrics.tracking_errors(traj, metrics.outside_stance_mask(traj))["key_joints_mean_cm"]
             selfpen = metrics.self_penetration(ch, traj.qpos)["max_mm"]
             print(

@@ -208,9 +208,9 @@ def test_fidelity_from_spilled_joint_columns_is_exact(traj, monkeypatch):
 
 def test_saturation_in_blocks_is_exact(traj, monkeypatch):
     ch = traj.character
-    whole = fidelity_mod.saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits)
+    whole = fidelity_mod.saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
     monkeypatch.setattr(fidelity_mod, "BLOCK_FRAMES", 5)
-    assert np.array_equal(fidelity_mod.saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits), whole)
+    assert np.array_equal(fidelity_mod.saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups), whole)
 
 
 @pytest.mark.parametrize(("up", "units"), [("Y", "m"), ("Z", "cm")])

@@ -172,7 +172,7 @@ def test_toes_leave_the_floor_without_swinging_at_their_velocity_cap():
     _, traj = retargeted("cmu_12_01_walk.bvh", "humanoid")
     ch = traj.character
     limits = ch.velocity_limits
-    sat = saturation_matrix(ch.model, traj.qpos, traj.fps, limits)
+    sat = saturation_matrix(ch.model, traj.qpos, traj.fps, limits, ch.velocity_groups)
     names = list(limits)
     for side in ("left", "right"):
         share = float(sat[:, names.index(f"{side}_toe_extension")].mean())

@@ -9,6 +9,8 @@ QP's step :math:`\\Delta q` (tangent space) satisfies :math:`G \\Delta q \\le h`
   ``v_max * dt`` instead, which would let several iterations add up.
 * :class:`FloorLimit` keeps the lowest point of every geom of the character
   (and every declared contact site) above the floor plane ``z = floor``.
+* :class:`GroupStepLimit` bounds the frame-to-frame turn of a body moved by several
+  hinges at one point (a ball joint written as hinges) along each hinge's axis.
 * :class:`RootStepLimit` bounds the free root's motion per frame.
 * :class:`SelfCollisionLimit` keeps limb geoms out of each other.
 """
@@ -23,8 +25,9 @@ import numpy as np
 
 from ..models.geometry import geom_candidates
 from ..models.geometry import is_visual_only
+from ..models.hinge_groups import GroupIndex
 
-__all__ = ["FrameStepLimit", "FloorLimit", "GeomCandidates", "PointJacobians", "RootStepLimit", "SelfCollisionLimit"]
+__all__ = ["FrameStepLimit", "FloorLimit", "GroupStepLimit", "group_box_speeds", "GeomCandidates", "PointJacobians", "RootStepLimit", "SelfCollisionLimit"]
 
 
 class PointJacobians:
@@ -302,6 +305,143 @@ class GeomCandidates:
         idx = np.flatnonzero(is_min)
         first[self.owner[idx[::-1]]] = idx[::-1]
         return z_low, pts[first]
+
+
+def group_box_speeds(velocities: Mapping[str, float], groups: Sequence[Sequence[str]]) -> dict[str, float]:
+    """``velocities`` with each grouped hinge's limit raised to the largest of its group: the
+    :class:`FrameStepLimit` box that keeps a grouped hinge's rate sane where
+    :class:`GroupStepLimit` leaves it free (the rates that cancel at a gimbal lock)."""
+    out = dict(velocities)
+    for g in groups:
+        top = max(float(velocities[n]) for n in g)
+        for n in g:
+            out[n] = top
+    return out
+
+
+class GroupStepLimit(mink.Limit):
+    r"""Frame-to-frame turn of a hinge group's body bounded along each hinge's axis
+    (:mod:`physmocap.models.hinge_groups`).
+
+    For each group, with :math:`d = q - q^{prev}` its hinges' step from the previous frame,
+    :math:`M = A^T A` the Gram matrix of their world axes at the current iterate and
+    :math:`b_i = \dot q_i^{max} T - \epsilon` (frame interval :math:`T`, margin
+    :math:`\epsilon`):
+
+    .. math::
+
+        -b \;\le\; M (d + \Delta q) \;\le\; b
+
+    as the rows :math:`M \Delta q \le \max(b - M d, 0)` and :math:`-M \Delta q \le
+    \max(b + M d, 0)` (a body left outside the band by a relaxed step may only come
+    back).  :math:`(M d)_i` is the body's turn along hinge :math:`i`'s axis, linearised at
+    the iterate; where the axes are at right angles it is the hinge's own step.  Call
+    :meth:`set_previous` once per frame.
+
+    The solver adds the rows only to an iteration whose step without them would cross a
+    bound (:meth:`crossed`): the QP's answer is the same (rows a solution satisfies change
+    nothing) and most iterations are far from every group's bound.  :meth:`project` makes
+    the bound hold on the frame's final pose, not only linearised.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        groups: Sequence[Sequence[str]],
+        velocities: Mapping[str, float],
+        frame_interval: float,
+        shrink: float = 1e-6,
+    ) -> None:
+        """
+        Args:
+            model: The character's MuJoCo model.
+            groups: Hinge names, group by group (``Character.velocity_groups``).
+            velocities: Joint name -> velocity limit (rad/s), positive.
+            frame_interval: Seconds between two frames of the motion.
+            shrink: Margin (rad) taken off each bound (as :class:`FrameStepLimit`).
+        """
+        self.index = GroupIndex(model, groups, velocities)
+        self.bound = [v * float(frame_interval) - float(shrink) for v in self.index.vmax]
+        self.q_prev: np.ndarray | None = None
+        rows = sum(len(j) for j in self.index.joints)
+        self._G = np.zeros((2 * rows, model.nv))
+        self._h = np.zeros(2 * rows)
+        # every grouped hinge's qpos address, group after group, and where each group starts
+        self._qadr = np.concatenate(self.index.qposadr) if len(self.index) else np.zeros(0, dtype=int)
+        self._dadr = np.concatenate(self.index.dofadr) if len(self.index) else np.zeros(0, dtype=int)
+        sizes = [len(j) for j in self.index.joints]
+        self._starts = np.cumsum([0, *sizes[:-1]]).astype(int)
+        self._least = np.array([float(b.min()) for b in self.bound])
+
+    def set_previous(self, q_prev: np.ndarray | None) -> None:
+        """The previous frame's solution (None disables the limit, e.g. on frame 0)."""
+        self.q_prev = None if q_prev is None else np.array(q_prev, dtype=float)
+        self._prev = None if q_prev is None else self.q_prev[self._qadr]
+
+    def crossed(self, configuration: mink.Configuration, v: np.ndarray) -> bool:
+        r"""Whether the step ``v`` (tangent, ``(nv,)``) from the current iterate takes some
+        group past its bound, linearised as the rows are: :math:`|M (d + \Delta q)|_i > b_i`.
+        Only groups whose step sums to their smallest bound or more are checked exactly
+        (:math:`|(M d)_i| \le \sum_j |d_j|`, the axes being unit vectors)."""
+        if self.q_prev is None or not len(self.index):
+            return False
+        data = configuration.data
+        d = data.qpos[self._qadr] + v[self._dadr] - self._prev
+        spread = np.add.reduceat(np.abs(d), self._starts)
+        if not (spread > self._least).any():
+            return False
+        for k in np.flatnonzero(spread > self._least):
+            n = len(self.index.joints[k])
+            dk = d[self._starts[k] : self._starts[k] + n]
+            if np.any(np.abs(self.index.gram(data, k) @ dk) > self.bound[k]):
+                return True
+        return False
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # bounds are in motion time, not the QP's step
+        if self.q_prev is None or not len(self.index):
+            return mink.Constraint()
+        data, G, h = configuration.data, self._G, self._h
+        q = data.qpos
+        r = 0
+        for k, b in enumerate(self.bound):
+            qa, dofs = self.index.qposadr[k], self.index.dofadr[k]
+            n = len(qa)
+            M = self.index.gram(data, k)
+            s = M @ (q[qa] - self.q_prev[qa])
+            G[r : r + n, dofs] = M
+            G[r + n : r + 2 * n, dofs] = -M
+            h[r : r + n] = np.maximum(b - s, 0.0)
+            h[r + n : r + 2 * n] = np.maximum(b + s, 0.0)
+            r += 2 * n
+        return mink.Constraint(G=G, h=h)
+
+    def project(self, model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, rounds: int = 8) -> np.ndarray:
+        r"""``q`` with each group's step from the previous frame scaled down until
+        :math:`|M(q) d| \le b` holds at ``q`` itself, not only linearised at the last
+        iterate (the QP's last step can leave a group up to a few per cent over; scaling
+        the step towards the previous frame keeps the joint ranges and the boxes).
+        ``data`` is scratch (its ``qpos`` and kinematics are overwritten)."""
+        if self.q_prev is None or not len(self.index):
+            return q
+        d = np.abs(q[self._qadr] - self.q_prev[self._qadr])
+        if not np.any(np.add.reduceat(d, self._starts) > self._least):
+            return q  # every |(M d)_i| <= sum_j |d_j| is within its bound: no kinematics needed
+        q = np.array(q, dtype=float)
+        for _ in range(rounds):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            over = False
+            for k, b in enumerate(self.bound):
+                qa = self.index.qposadr[k]
+                d = q[qa] - self.q_prev[qa]
+                ratio = float(np.max(np.abs(self.index.gram(data, k) @ d) / b))
+                if ratio > 1.0:
+                    q[qa] = self.q_prev[qa] + d * ((1.0 - 1e-9) / ratio)
+                    over = True
+            if not over:
+                break
+        return q
 
 
 class FloorLimit(mink.Limit):

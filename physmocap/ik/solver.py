@@ -49,7 +49,7 @@ import qpsolvers
 from ..errors import OptionError
 from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
-from .limits import FloorLimit, FrameStepLimit, RootStepLimit, SelfCollisionLimit
+from .limits import FloorLimit, FrameStepLimit, GroupStepLimit, RootStepLimit, SelfCollisionLimit, group_box_speeds
 from .qp import QP, QPBuilder, WarmSolver
 from .tasks import SitePositionTask, SitesPositionTask
 from .targets import weight_of
@@ -259,7 +259,10 @@ class FrameSolver:
         self._q_prev2: np.ndarray | None = None
         self._converged = (False, False)  # whether the two previous frames' iterations converged
         self.config_limit = mink.ConfigurationLimit(model, gain=opt.limit_gain)
-        self.step_limit = FrameStepLimit(model, character.velocity_limits, 1.0 / fps)
+        groups = tuple(getattr(character, "velocity_groups", ()))
+        self.step_limit = FrameStepLimit(model, group_box_speeds(character.velocity_limits, groups), 1.0 / fps)
+        #: a ball joint written as hinges: its body's turn along each axis (None: no group)
+        self.group_limit = GroupStepLimit(model, groups, character.velocity_limits, 1.0 / fps) if groups else None
         self.root_limit = RootStepLimit(model, 1.0 / fps)
         self._trust = np.full(model.nv, float(opt.trust_region))
         contact_sites = [model.site(s).id for side in character.contacts.values() for s in side]
@@ -402,9 +405,9 @@ class FrameSolver:
         those that are general rows (floor, self-collision)."""
         opt = self.options
         boxes: list = [self.root_limit]
+        general: list[mink.Limit] = []
         if level <= 2 and opt.velocity_limits and self.q_prev is not None:
             boxes.append(self.step_limit)
-        general: list[mink.Limit] = []
         if level <= 3 and opt.floor:
             general.append(self.floor_limit)
         if level <= 3 and self.self_limit is not None and not self._first:
@@ -462,19 +465,27 @@ class FrameSolver:
             tasks += self._constraints
         damping = opt.damping if level < 4 else max(opt.damping, 1e-2)
         boxes, general = self._limits(level)
-        problem = self._builder.build(
-            self.configuration,
-            tasks,
-            damping,
-            posture=self._postures(),
-            trust=self._trust,
-            config_limit=self.config_limit,
-            boxes=boxes,
-            limits=general,
-            constraints=constraints,
-        )
+
+        def build(limits: list[mink.Limit]) -> QP:
+            return self._builder.build(
+                self.configuration,
+                tasks,
+                damping,
+                posture=self._postures(),
+                trust=self._trust,
+                config_limit=self.config_limit,
+                boxes=boxes,
+                limits=limits,
+                constraints=constraints,
+            )
+
+        problem = build(general)
+        v = self._solve(problem)
+        if self.step_limit in boxes and self.group_limit is not None and self.group_limit.crossed(self.configuration, v):
+            problem = build([*general, self.group_limit])  # the same QP with the hinge groups' rows
+            v = self._solve(problem)
         self._qp = problem if constraints and opt.second_order_correction else None
-        return self._solve(problem)
+        return v
 
     def _settle_from_rest(self) -> None:
         """First stage of frame 0: converge with a strong pull towards the rest pose.
@@ -732,6 +743,8 @@ class FrameSolver:
         self._first = bool(first)
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
+        if self.group_limit is not None:
+            self.group_limit.set_previous(self.q_prev)
         self.root_limit.set_previous(self.q_prev)
         self._prediction = None
         self._predict()
@@ -770,6 +783,8 @@ class FrameSolver:
             lo, hi = self.step_limit.step_bounds()
             qa = self.step_limit.qposadr
             q[qa] = np.clip(q[qa], lo - self.step_limit.shrink, hi + self.step_limit.shrink)
+            if self.group_limit is not None:
+                q = self.group_limit.project(self.model, self.configuration.data, q)
         self.configuration.update(q)
         self._com_stale = False
         self._q_prev2 = self.q_prev

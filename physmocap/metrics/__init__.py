@@ -30,6 +30,8 @@ None, which the JSON report writes as ``null``.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import mujoco
 import numpy as np
 
@@ -94,16 +96,20 @@ def joint_limit_violations(model: mujoco.MjModel, qpos: np.ndarray, tol: float =
 
 
 def velocity_violations(
-    model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float], tol: float = 1e-6
+    model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float], tol: float = 1e-6,
+    groups: Sequence[Sequence[str]] = (),
 ) -> dict:
-    """Frame-to-frame joint speeds against velocity limits (rad/s)."""
+    """Frame-to-frame joint speeds against velocity limits (rad/s; a hinge of one of
+    ``groups``: its body's angular speed along its axis,
+    :func:`~physmocap.models.hinge_groups.joint_speeds`); ``tol`` in rad (m) per frame."""
+    from ..models.hinge_groups import joint_speeds
+
     kinds = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
     names = [n for n in limits if int(model.jnt_type[model.joint(n).id]) in kinds]
     if qpos.shape[0] < 2 or not names:
         return {"count": 0, "peak_speed": 0.0, "peak_ratio": 0.0}
-    adr = np.array([model.joint(n).qposadr[0] for n in names])
     vmax = np.array([limits[n] for n in names])
-    speed = np.abs(np.diff(qpos[:, adr], axis=0)) * fps
+    speed = joint_speeds(model, qpos, fps, names, [g for g in groups if all(n in names for n in g)], limits)
     over = speed > vmax + tol * fps
     return {
         "count": int(over.sum()),
@@ -273,7 +279,9 @@ def trajectory_metrics(traj, contacts=None) -> dict:
         "fps": traj.fps,
         "non_finite": int(np.sum(~np.isfinite(traj.qpos))),
         "joint_limits": joint_limit_violations(model, traj.qpos),
-        "velocity": velocity_violations(model, traj.qpos, traj.fps, traj.character.velocity_limits),
+        "velocity": velocity_violations(
+            model, traj.qpos, traj.fps, traj.character.velocity_limits, groups=getattr(traj.character, "velocity_groups", ())
+        ),
         "penetration": penetration(model, traj.qpos),
         "self_penetration": self_penetration(traj.character, traj.qpos),
         "smoothness": smoothness(model, traj.qpos, traj.fps),

@@ -324,28 +324,35 @@ def vertical_speed_p99(z: np.ndarray, fps: float) -> float | None:
     return float(np.percentile(np.abs(np.gradient(z) * fps), 99))
 
 
-def saturation_matrix(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float]) -> np.ndarray:
+def saturation_matrix(
+    model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float], groups: Sequence[Sequence[str]] = ()
+) -> np.ndarray:
     """``(F-1, J)`` bool: joint ``j`` (in ``limits`` order) moves at :data:`SATURATION_RATIO`
     of its velocity limit or faster on transition ``t -> t+1`` (speeds in rad/s or m/s,
-    computed :data:`BLOCK_FRAMES` transitions at a time)."""
+    computed :data:`BLOCK_FRAMES` transitions at a time); a hinge of one of ``groups`` (the
+    character's ``velocity_groups``) by its body's angular speed along its axis, the speed the
+    solver bounds (:func:`~physmocap.models.hinge_groups.joint_speeds`)."""
+    from ..models.hinge_groups import joint_speeds
+
     F = qpos.shape[0]
     if F < 2 or not limits:
         return np.zeros((max(F - 1, 0), len(limits)), dtype=bool)
-    adr = np.array([int(model.joint(n).qposadr[0]) for n in limits])
-    vmax = np.array([limits[n] for n in limits], dtype=float)
+    names = list(limits)
+    vmax = np.array([limits[n] for n in names], dtype=float)
     out = np.empty((F - 1, len(limits)), dtype=bool)
     for s in range(0, F - 1, BLOCK_FRAMES):
         e = min(F - 1, s + BLOCK_FRAMES)
-        speed = np.abs(np.diff(qpos[s : e + 1, adr], axis=0)) * fps
-        out[s:e] = speed >= SATURATION_RATIO * vmax
+        out[s:e] = joint_speeds(model, qpos[s : e + 1], fps, names, groups, limits) >= SATURATION_RATIO * vmax
         release(qpos)
     return out
 
 
-def velocity_saturation(model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float]) -> np.ndarray:
+def velocity_saturation(
+    model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: dict[str, float], groups: Sequence[Sequence[str]] = ()
+) -> np.ndarray:
     """Indices ``t`` of transitions ``t -> t+1`` on which some hinge/slide joint moves at
-    :data:`SATURATION_RATIO` of its velocity limit or faster."""
-    return np.flatnonzero(np.any(saturation_matrix(model, qpos, fps, limits), axis=1))
+    :data:`SATURATION_RATIO` of its velocity limit or faster (:func:`saturation_matrix`)."""
+    return np.flatnonzero(np.any(saturation_matrix(model, qpos, fps, limits, groups), axis=1))
 
 
 #: A collision geom whose lowest point is within this of the floor rests on it (metres).
@@ -598,6 +605,7 @@ def fidelity(
     velocity_limits: dict[str, float] | None = None,
     floor_contact: bool = True,
     feet: Mapping[str, Sequence[int]] | None = None,
+    velocity_groups: Sequence[Sequence[str]] = (),
 ) -> Fidelity:
     """All fidelity figures from the actor's and the character's joint centres.
 
@@ -612,6 +620,8 @@ def fidelity(
             (:func:`geom_floor_contact`; the slowest figure).
         feet: Foot name -> the character's body ids of that foot, for the slip of whole
             feet (:func:`~physmocap.models.geometry.foot_bodies`; None: each body alone).
+        velocity_groups: The character's ``velocity_groups`` (hinges whose limits bound
+            their body's angular speed along their axes), for the saturation count.
     """
     seg = segment_direction_errors(actor, character)
     segments = {}
@@ -643,7 +653,7 @@ def fidelity(
     worst_joint, worst_share = None, 0.0
     transitions = max(1, (qpos.shape[0] - 1) if qpos is not None else 1)
     if model is not None and qpos is not None and velocity_limits:
-        matrix = saturation_matrix(model, qpos, fps, velocity_limits)
+        matrix = saturation_matrix(model, qpos, fps, velocity_limits, velocity_groups)
         sat = np.flatnonzero(np.any(matrix, axis=1))
         if matrix.size and matrix.any():
             counts = matrix.sum(axis=0)
@@ -684,6 +694,7 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     return fidelity(
         actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
         floor_contact=floor_contact, feet=foot_bodies(ch.model, ch.contacts),
+        velocity_groups=getattr(ch, "velocity_groups", ()),
     )
 
 

@@ -30,6 +30,7 @@ from ..rotations import Rotation, quat_mul, wxyz_to_xyzw, xyzw_to_wxyz
 from . import rom
 from .geometry import character_geoms, highest_z, lowest_z
 from .mapping import AXES, Mapping, TrackedFrame, implicit_mapping, read_mapping
+from .hinge_groups import hinge_groups
 from .velocity import FALLBACK_DEG_S, human_velocity_limit
 
 __all__ = [
@@ -70,6 +71,10 @@ class Character:
         joint_limits: hinge/slide joint -> ``(lo, hi)`` rad (m for slides);
             ``(-inf, inf)`` for a joint without a range.
         velocity_limits: hinge/slide joint -> speed limit, rad/s (m/s), positive.
+        velocity_groups: hinges that turn one body about one point and whose limits are
+            human joint speeds (:func:`~physmocap.models.hinge_groups.hinge_groups`): their
+            limits bound the body's angular speed along each hinge's axis, not the hinge's
+            rate (which grows without bound at a gimbal lock).
         segment_lengths: ``(parent canonical, child canonical)`` -> metres in the
             rest pose, parent = nearest mapped canonical ancestor.
         hip_height: mean height of the hip joint centres in the rest pose, m.
@@ -94,6 +99,7 @@ class Character:
     height: float
     total_mass: float
     mapping_proposed: bool = False
+    velocity_groups: tuple[tuple[str, ...], ...] = ()
     _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def rest_positions(self) -> dict[str, np.ndarray]:
@@ -394,6 +400,7 @@ def load_character(
             _joint_id(mp, model, "velocity_limits", jn)
     default_speed = mp.velocity_limits.get("default", FALLBACK_DEG_S)
     velocity_limits: dict[str, float] = {}
+    anatomical: set[str] = set()  # limits that are a human joint's angular speed
     for j in hinge_ids:
         name = model.joint(j).name
         k = math.pi / 180.0 if _is_angular(model, j) else 1.0
@@ -402,7 +409,10 @@ def load_character(
         else:
             human = human_velocity_limit(name) if _is_angular(model, j) else None
             v = human if human is not None else default_speed * k
+            if human is not None:
+                anatomical.add(name)
         velocity_limits[name] = float(v)
+    velocity_groups = hinge_groups(model, anatomical)
 
     # -- rest pose ---------------------------------------------------------------
     qpos = _rest_qpos(mp, model, root, mjcf, where)
@@ -451,6 +461,7 @@ def load_character(
         rest_qpos=qpos,
         joint_limits=joint_limits,
         velocity_limits=velocity_limits,
+        velocity_groups=velocity_groups,
         segment_lengths=segments,
         hip_height=float(np.mean(hips)),
         height=float(height),

@@ -416,14 +416,45 @@ class GroupStepLimit(mink.Limit):
             r += 2 * n
         return mink.Constraint(G=G, h=h)
 
-    def project(self, model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, rounds: int = 8) -> np.ndarray:
-        r"""``q`` with each group's step from the previous frame scaled down until
-        :math:`|M(q) d| \le b` holds at ``q`` itself, not only linearised at the last
-        iterate (the QP's last step can leave a group up to a few per cent over; scaling
-        the step towards the previous frame keeps the joint ranges and the boxes).
-        ``data`` is scratch (its ``qpos`` and kinematics are overwritten)."""
+    def project(self, model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, rounds: int = 40) -> np.ndarray:
+        r"""``q`` with each group's step from the previous frame scaled down, as little as
+        needed, until :math:`|M(q) d| \le b` holds at ``q`` itself, not only linearised at
+        the last iterate (the QP's last step can leave a group a few per cent over).
+        A group's Gram matrix depends on its own hinges alone (the axes turn together with
+        the parent), so each group's scale :math:`s \in [0, 1]` is found on its own, by
+        bisection (``rounds`` halvings, kept on the side within the bound; :math:`s = 0` is
+        the previous frame's pose); scaling towards the previous frame keeps the joint
+        ranges and the boxes.  ``data`` is scratch (its ``qpos`` and kinematics are
+        overwritten).  Returns ``q`` itself where no group is over its bound, else a new array."""
         if self.q_prev is None or not len(self.index):
             return q
+        d = np.abs(q[self._qadr] - self.q_prev[self._qadr])
+        if not np.any(np.add.reduceat(d, self._starts) > self._least):
+            return q  # every |(M d)_i| <= sum_j |d_j| is within its bound: no kinematics needed
+        q_in = q
+        q = np.array(q, dtype=float)
+        steps = [q[qa] - self.q_prev[qa] for qa in self.index.qposadr]
+
+        def over(scales: np.ndarray) -> np.ndarray:
+            for k, qa in enumerate(self.index.qposadr):
+                q[qa] = self.q_prev[qa] + scales[k] * steps[k]
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            return np.array([np.any(np.abs(self.index.gram(data, k) @ (scales[k] * steps[k])) > b)
+                             for k, b in enumerate(self.bound)])
+
+        hi = np.ones(len(self.index))
+        bad = over(hi)
+        if not bad.any():
+            return q_in
+        lo = np.where(bad, 0.0, 1.0)
+        for _ in range(rounds):
+            mid = np.where(bad, 0.5 * (lo + hi), 1.0)
+            worse = over(mid) & bad
+            hi = np.where(worse, mid, hi)
+            lo = np.where(bad & ~worse, mid, lo)
+        over(lo)  # the feasible side of every bisection
+        return q
         d = np.abs(q[self._qadr] - self.q_prev[self._qadr])
         if not np.any(np.add.reduceat(d, self._starts) > self._least):
             return q  # every |(M d)_i| <= sum_j |d_j| is within its bound: no kinematics needed

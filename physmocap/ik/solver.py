@@ -59,6 +59,10 @@ __all__ = ["SolverOptions", "ContactHolds", "FrameSolver", "RELAXATION_LEVELS"]
 #: Frame rate (Hz) at which ``SolverOptions.smoothness_cost`` is stated.
 SMOOTHNESS_RATE = 120.0
 
+#: Rounds of floor projection and hinge-group projection at the end of a frame
+#: (:meth:`FrameSolver._project_groups`).
+GROUP_FLOOR_ROUNDS = 4
+
 RELAXATION_LEVELS = (
     "all constraints",
     "contact equalities softened",
@@ -482,8 +486,14 @@ class FrameSolver:
         problem = build(general)
         v = self._solve(problem)
         if self.step_limit in boxes and self.group_limit is not None and self.group_limit.crossed(self.configuration, v):
-            problem = build([*general, self.group_limit])  # the same QP with the hinge groups' rows
-            v = self._solve(problem)
+            # the same QP with the hinge groups' rows; where the rows (degenerate at a gimbal
+            # lock) leave no solution, the step without them stands and the frame's end
+            # projection (GroupStepLimit.project) bounds the groups: no relaxation for them
+            grouped = build([*general, self.group_limit])
+            try:
+                v, problem = self._solve(grouped), grouped
+            except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                problem = build(general)
         self._qp = problem if constraints and opt.second_order_correction else None
         return v
 
@@ -509,16 +519,35 @@ class FrameSolver:
         finally:
             self.posture.set_cost(opt.posture_cost)
 
-    def _project_floor(self, level: int) -> None:
+    def _project_groups(self, q: np.ndarray, level: int) -> np.ndarray:
+        """``q`` with the hinge groups' steps within their bounds
+        (:meth:`~physmocap.ik.limits.GroupStepLimit.project`), and back above the floor
+        where scaling a group's step down lowered a body part into it: the floor projection
+        with the groups' rows, then the groups' projection again, for at most
+        :data:`GROUP_FLOOR_ROUNDS` rounds (both sets hold the previous frame's pose, and a
+        group's step is scaled, not moved, so they meet in a round or two)."""
+        out = self.group_limit.project(self.model, self.configuration.data, q)
+        if out is q or not self.options.floor:
+            return out
+        for _ in range(GROUP_FLOOR_ROUNDS):
+            self._set_q(out)
+            if self._floor_ok():
+                break
+            self._project_floor(level, extra=(self.group_limit,))
+            out = self.group_limit.project(self.model, self.configuration.data, self.configuration.data.qpos.copy())
+        return out
+
+    def _project_floor(self, level: int, extra: Sequence[mink.Limit] = ()) -> None:
         """Smallest step that puts every point back above the floor.
 
         Tasks can pull against the floor until the iterations run out; this
         solves :math:`\\min \\|\\Delta q\\|^2` under the hard constraints alone
-        (same limits as ``level``), a few times, which converges quickly.
+        (same limits as ``level``, and ``extra``), a few times, which converges quickly.
         """
         for _ in range(5):
             self._sync()
             boxes, general = self._limits(level)
+            general = [*general, *extra]
             try:
                 v = self._solve(
                     self._builder.build(
@@ -784,7 +813,7 @@ class FrameSolver:
             qa = self.step_limit.qposadr
             q[qa] = np.clip(q[qa], lo - self.step_limit.shrink, hi + self.step_limit.shrink)
             if self.group_limit is not None:
-                q = self.group_limit.project(self.model, self.configuration.data, q)
+                q = self._project_groups(q, base)
         self.configuration.update(q)
         self._com_stale = False
         self._q_prev2 = self.q_prev

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, retargeted
-from physmocap.ik.footplan import RigidFoot, planted_positions
+from physmocap.ik.footplan import RigidFoot, planted_positions, swing_flatten, turn_foot
 from physmocap.ik.rigidfoot import LEVEL_PITCH_FULL, LEVEL_PITCH_NONE, level_roll, tip_reference, toe_line_correction
 from physmocap.metrics.fidelity import saturation_matrix
 from physmocap.rotations import Rotation
@@ -128,3 +128,62 @@ def test_a_rigid_foot_rolls_over_its_edge_not_a_corner(clip):
 
     _, traj = retargeted(clip, "robot")
     assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 0.6
+
+
+def _foot_box() -> RigidFoot:
+    """A 20 cm box foot, its sole 6 cm under the ankle, 13 cm of it ahead."""
+    return RigidFoot(rest_quat=np.array([0.0, 0.0, 0.0, 1.0]), front=np.array([0.13, 0.0, -0.06]),
+                     offsets=np.array([[-0.07, 0.0, -0.06], [0.13, 0.0, -0.06]]), radii=np.zeros(2), height=0.0)
+
+
+def test_a_swing_foot_into_the_floor_is_pitched_level_just_enough_to_clear_it():
+    """A rigid foot whose swing targets, at the actor's steep toe-off pitch, dip its front edge
+    into the floor is turned towards level about its own lateral axis by the least angle that
+    clears it (the flatter branch: never steeper), its roll kept; a foot clear on its own, heel
+    down, or in contact (weight 0) is left alone; a part weight turns it part of the way
+    (issue 9: the Bandai walk's robot foot pitched 27 degrees in one frame after toe-off and
+    overshot its target by 9, switching between the two branches of the solver's trade)."""
+    foot, clearance = _foot_box(), 0.012
+    pitch = np.array([70.0, 70.0, 40.0, 70.0, -20.0, 70.0])  # positive: toe down (about +y)
+    roll = np.array([0.0, 15.0, 0.0, 0.0, 0.0, 0.0])
+    Q = Rotation.from_euler("yx", np.stack([pitch, roll], axis=1), degrees=True).as_quat()
+    ankle = np.zeros((6, 3))
+    ankle[:, 2] = [0.10, 0.10, 0.10, 0.30, 0.03, 0.10]  # frame 3 high, frame 4 heel down
+    weight = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 0.0])  # frame 5 in contact
+    turns = swing_flatten(foot, ankle, Q, weight, clearance)
+    turned = Rotation.from_quat(turns) * Rotation.from_quat(Q)
+    low = foot.toe_point(ankle, turned.as_quat())[:, 2]
+    assert np.allclose(low[:3], clearance, atol=1e-5)  # just clear: the least turn
+    assert foot.toe_point(ankle[:3], Q[:3])[:, 2].max() < 0.0  # unturned: into the floor
+    fwd = turned.apply([1.0, 0.0, 0.0])
+    fwd0 = Rotation.from_quat(Q).apply([1.0, 0.0, 0.0])
+    assert np.all(-fwd[:3, 2] < -fwd0[:3, 2])  # flatter, not steeper
+    lateral = Rotation.from_quat(Q).apply([0.0, 1.0, 0.0])
+    assert np.allclose(turned.apply([0.0, 1.0, 0.0])[:3], lateral[:3], atol=1e-9)  # about its own lateral axis
+    assert np.allclose(turns[3:], [0.0, 0.0, 0.0, 1.0])  # clear, heel down, in contact: untouched
+    half = swing_flatten(foot, ankle[:1], Q[:1], np.array([0.5]), clearance)
+    assert Rotation.from_quat(half).magnitude()[0] == pytest.approx(0.5 * Rotation.from_quat(turns[:1]).magnitude()[0])
+    # the foot's other targets turn about the ankle with it
+    toe = ankle + Rotation.from_quat(Q).apply([0.13, 0.0, -0.03])
+    moved, q = turn_foot(turns, ankle, toe[:, None], Q)
+    assert np.allclose(moved[:, 0], ankle + turned.apply([0.13, 0.0, -0.03]))
+    assert np.allclose(np.abs(np.sum(q * turned.as_quat(), axis=1)), 1.0)
+
+
+@pytest.mark.filterwarnings("ignore")
+@RETARGET_DIAGNOSTICS
+def test_a_rigid_foot_does_not_whip_after_toe_off():
+    """The bundled robot on the Bandai walk (30 fps): within five frames of a toe-off no ankle
+    pitch step is more than half its velocity cap (before: 27 degrees of 38, the foot
+    overshooting its target by 9 degrees)."""
+    _, traj = retargeted("bandai_walk.bvh", "robot")
+    model, ch = traj.character.model, traj.character
+    q = np.asarray(traj.qpos)
+    for side in ("left", "right"):
+        joint = next(n for n in ch.velocity_limits if n.startswith(side[0]) and "ankle_pitch" in n)
+        step = np.abs(np.diff(q[:, model.joint(joint).qposadr[0]]))
+        toe = np.asarray(traj.contacts.labels[f"{side}_toe"], dtype=bool)
+        offs = np.flatnonzero(toe[:-1] & ~toe[1:])
+        assert offs.size
+        worst = max(step[t : t + 6].max() for t in offs)
+        assert worst < 0.5 * ch.velocity_limits[joint] / traj.fps, (side, np.degrees(worst))

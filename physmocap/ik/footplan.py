@@ -31,7 +31,9 @@ front edge.  Its toe contact is planned by that edge (:class:`RigidFoot`: horizo
 its front contact site, vertically its lowest material point, both carried by the
 ankle's targets), and where its heel is not planned the whole foot moves by the
 edge's vertical offset, so the held edge and the targets agree through the roll
-instead of the plan holding its ball at its flat-stance height.
+instead of the plan holding its ball at its flat-stance height.  Leaving the floor, where
+the actor's toes are still bent, such a foot is pitched towards level just enough to clear
+the floor (:func:`swing_flatten`).
 
 Offsets are three-dimensional: horizontally the plant location, vertically
 the joint's stance height.  Only the foot moves (ankle, toe, toe tip; the knee is re-placed by two-bone
@@ -54,7 +56,7 @@ import numpy as np
 from ..spill import release
 from .easing import smoothstep
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -427,6 +429,87 @@ def planted_positions(
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
             release(out)
     return out, offsets
+
+
+#: Bisection steps of :func:`swing_flatten` (the turn found to :math:`2^{-20}` of the foot's pitch).
+FLATTEN_STEPS = 20
+
+
+def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray, weight: np.ndarray,
+                  clearance: float) -> np.ndarray:
+    r"""``(F, 4)`` x-y-z-w: the turns that pitch a rigid foot's targets towards level, on its
+    swing frames, just enough for the foot to clear the floor at its ankle target (the identity
+    elsewhere; applied as ``turn * orientation``, and to the foot's other targets about the
+    ankle's: :func:`turn_foot`).
+
+    On a frame where neither of its contact points is labelled the planting keeps every
+    collision geom of the foot ``clearance`` above the floor (a hard inequality).  At the actor's
+    toe-off pitch (its toes bend as they leave the floor) a rigid foot's targets dip its front
+    edge 15-40 mm into the floor (the bundled robot on the Bandai walk, 60-75 degrees toe
+    down).  The solver then trades the foot's pitch against its ankle's height, and the trade
+    has two branches: a flatter foot reaches less far below the ankle, and so does one pitched
+    past the pitch at which that reach is largest; crossing from one branch to the other the
+    foot pitched 27 degrees in one frame and overshot its target by 9.  So the foot's target is
+    turned about its own lateral axis (its roll kept) towards level by the least angle
+    :math:`\beta \in [0, |\theta|]` (:math:`\theta` its pitch) at which its lowest material
+    point (:meth:`RigidFoot.toe_point`, floor at 0 as the plan's heights) stands ``clearance``
+    up, found by bisection (:data:`FLATTEN_STEPS`; a foot too low even when level is turned level,
+    and the solver lifts it the rest of the way), then scaled by ``weight (F,)`` (0 in contact,
+    easing to 1 in the swing).  The flatter branch, on every frame: the one the solver takes
+    while the foot still clears its pitch of largest reach, so the two agree, and the leg keeps
+    the actor's pose instead of being lifted.  Only a foot pitched toe down is turned: the actor's
+    heel is the rigid foot's heel, the toes that bend are what it lacks.  ``ankle (F, 3)``
+    metres, ``orientation (F, 4)``.
+    """
+    from ..rotations import quat_apply, quat_conj, quat_mul
+
+    orientation = np.asarray(orientation, dtype=float)
+    out = np.zeros((len(orientation), 4))
+    out[:, 3] = 1.0
+    rows = np.flatnonzero(np.asarray(weight) > 0.0)
+    if clearance <= 0.0 or not rows.size:
+        return out
+    a, q, w = np.asarray(ankle, dtype=float)[rows], orientation[rows], np.asarray(weight, dtype=float)[rows]
+    R = quat_mul(q, quat_conj(foot.rest_quat))
+    f0 = _level_unit(foot.front)
+    forward = quat_apply(R, np.broadcast_to(f0, a.shape))
+    pitch = np.arcsin(np.clip(forward[:, 2], -1.0, 1.0))
+    # the foot's own lateral axis, f x up at rest: turning about it raises f and keeps the roll
+    side = quat_apply(R, np.broadcast_to(np.cross(f0, [0.0, 0.0, 1.0]), a.shape))
+
+    def turn(t: np.ndarray) -> np.ndarray:
+        """The turns ``t`` (0..1) of the way to level."""
+        half = -0.5 * t * pitch  # a foot pitched down (negative) turns up about f x up
+        return np.concatenate([side * np.sin(half)[:, None], np.cos(half)[:, None]], axis=1)
+
+    def clear(t: np.ndarray) -> np.ndarray:
+        return foot.toe_point(a, quat_mul(turn(t), q))[:, 2] >= clearance
+
+    lo, hi = np.zeros(len(rows)), np.ones(len(rows))
+    hi[clear(lo) | (pitch >= 0.0)] = 0.0  # clear as it is, or heel down: left alone
+    for _ in range(FLATTEN_STEPS):
+        mid = 0.5 * (lo + hi)
+        ok = clear(mid)
+        hi = np.where(ok, mid, hi)
+        lo = np.where(ok, lo, mid)
+    out[rows] = turn(w * hi)
+    return out
+
+
+def turn_foot(turns: np.ndarray, ankle: np.ndarray, points: np.ndarray, orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""A foot's targets turned about its ankle's: ``points (F, K, 3)`` to
+    :math:`T_a + r\,(p - T_a)` and ``orientation (F, 4)`` to :math:`r\,Q` for the turns
+    :math:`r` ``(F, 4)`` x-y-z-w (:func:`swing_flatten`); ``ankle (F, 3)`` metres."""
+    from ..rotations import quat_apply, quat_mul
+
+    a = np.asarray(ankle, dtype=float)[:, None, :]
+    return a + quat_apply(turns[:, None, :], np.asarray(points, dtype=float) - a), quat_mul(turns, orientation)
+
+
+def _level_unit(v: np.ndarray) -> np.ndarray:
+    """``v`` made horizontal and unit length (the foot's rest forward direction)."""
+    h = np.array([v[0], v[1], 0.0], dtype=float)
+    return h / max(float(np.linalg.norm(h)), 1e-12)
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,7 @@ from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
-from .footplan import BODY_PART_JOINTS, eased_mask, plant_body_contacts, planted_positions
+from .footplan import BODY_PART_JOINTS, eased_mask, plant_body_contacts, planted_positions, swing_flatten, turn_foot
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .rigidfoot import level_roll
@@ -355,10 +355,41 @@ def plan_targets(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
         planting.toe_contacts(), rigid_feet=rigid, in_place=True,
     )
+    for side, (foot, orientation) in rigid.items():  # swing feet pitched clear of the floor
+        _flatten_swing(levelled, side, foot, orientation, 1.0 - _contact_weights(labels, side, targets.fps, plant.ease_time),
+                       plant.clearance)
     if body_labels:
         plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return levelled
+
+
+def _flatten_swing(targets: Targets, side: str, foot, orientation: np.ndarray, swing: np.ndarray,
+                   clearance: float) -> None:
+    """``side``'s rigid foot targets in ``targets`` (planned, ours) pitched towards level where
+    its swing (``swing (F,)``, 0..1) would take it within ``clearance`` of the floor
+    (:func:`~.footplan.swing_flatten`): the ankle's orientation, and the foot's other joints
+    turned about the ankle with it (:func:`~.footplan.turn_foot`)."""
+    i = targets.names.index(f"{side}_ankle")
+    cols = [i] + [c for c in _foot_columns(targets.names, side) if c != i]
+    points = _get_columns(targets.positions, cols)
+    turns = swing_flatten(foot, points[:, 0], orientation, swing, clearance)
+    if np.all(turns[:, 3] == 1.0):
+        return
+    moved, turned = turn_foot(turns, points[:, 0], points[:, 1:], orientation)
+    _set_columns(targets.positions, cols[1:], moved)
+    _set_columns(targets.orientations, [i], turned[:, None])
+
+
+def _contact_weights(labels: dict[str, np.ndarray], side: str, fps: float, ease_time: float) -> np.ndarray:
+    """``(F,)`` 1 on the frames where ``side``'s heel or toes are labelled, eased in before
+    and out after each contact over ``ease_time`` seconds (:func:`~.footplan.eased_mask`, as
+    the plan's heights)."""
+    F = len(next(iter(labels.values())))
+    down = np.zeros(F, dtype=bool)
+    for part in ("heel", "toe"):
+        down |= np.asarray(labels.get(f"{side}_{part}", np.zeros(F, dtype=bool)), dtype=bool)
+    return eased_mask(down, int(round(ease_time * fps)))
 
 
 def _toes_only_weights(labels: dict[str, np.ndarray], side: str, fps: float, ease_time: float) -> np.ndarray:

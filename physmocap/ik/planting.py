@@ -969,10 +969,11 @@ class Planting:
             # the foot pitches over the edge rather than tipping onto its side (a weak pull lets
             # the pivot rise a little as the edge rolls)
             scale = self.options.pivot_cost / self.options.cost_z if self.options.cost_z > 0 else 0.0
+            # (a hold moved onto a tipped foot's resting patch marks no site: never a pivot's)
             for t in tasks:
-                if t.site_id in pivots:
+                if getattr(t, "site_id", None) in pivots:
                     t.set_cost(t.cost * scale)
-            tasks = [t for t in tasks if t.site_id not in pivots or scale > 0]
+            tasks = [t for t in tasks if getattr(t, "site_id", None) not in pivots or scale > 0]
             return out, tasks, hard, offsets
         held = {name: bool(labels.get(name, False)) for name in ("left_heel", "left_toe", "right_heel", "right_toe")}
         for site, e in zip(self.sites, engaged):

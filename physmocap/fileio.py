@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -136,10 +137,37 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[P
             os.replace(tmp, p)
         else:
             current._add(Path(tmp), p)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if not _is_write_error(exc, tmp, p):
+            raise
+        raise write_error(exc, p) from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: What an errno of a failed write means for the user, beyond its ``strerror``.
+_WRITE_HINTS = {errno.EFBIG: "beyond the size limit for one file: ulimit -f, or the file system's"}
+
+
+def _is_write_error(exc: OSError, tmp: str | os.PathLike, target: Path) -> bool:
+    """True when ``exc``, raised while writing ``tmp`` for ``target``, is about that file (it
+    names no other file): a full disk, a size limit, an I/O error..."""
+    if exc.errno is None or isinstance(exc, BrokenPipeError):
+        return False
+    return exc.filename is None or os.fspath(exc.filename) in (os.fspath(tmp), os.fspath(target))
+
+
+def write_error(exc: OSError, target: str | os.PathLike) -> OutputError:
+    """An :class:`OutputError` naming ``target`` (the final output, never its temporary
+    sibling) for the OSError ``exc`` raised while writing it (EFBIG, ENOSPC, EIO...)."""
+    reason = (exc.strerror or os.strerror(exc.errno)) if exc.errno else str(exc)
+    hint = _WRITE_HINTS.get(exc.errno)
+    detail = f"{reason} ({hint})" if hint else reason
+    return OutputError(f"not written: {detail}", path=target)
 
 
 #: The :class:`OutputSet` collecting the current run's outputs, if any.
@@ -204,10 +232,12 @@ class OutputSet:
         try:
             for k, (tmp, target) in enumerate(self._pending):
                 os.replace(tmp, target)
-        except BaseException:
+        except BaseException as exc:
             for tmp, _ in self._pending[k:]:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
+            if isinstance(exc, OSError) and _is_write_error(exc, tmp, target):
+                raise write_error(exc, target) from None
             raise
         self._pending = []
         for m in self._messages:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import os
 import resource
 import subprocess
 import sys
@@ -93,6 +96,47 @@ def test_file_too_large_is_one_line(tmp_path):
     errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
     assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
     assert not out.exists() and not list(tmp_path.glob(".*tmp*"))
+
+
+@pytest.mark.parametrize("command", [
+    ["retarget", "example", "-o", "{out}", "--qpos", "{tmp}/walk.npz", "--end", "40"],
+    ["convert", "example", "{out}"],
+    ["clean", "example", "-o", "{out}"],
+])
+def test_file_too_large_names_the_output(tmp_path, command):
+    """Over ``ulimit -f`` (Python ignores SIGXFSZ, so the write fails with EFBIG) the one error
+    line names the output being written, not a bare 'File too large', and no file is left."""
+    out = tmp_path / "big.bvh"
+    argv = [a.format(out=out, tmp=tmp_path) for a in command]
+
+    def limit():  # 16 KB per file: every output here is larger
+        resource.setrlimit(resource.RLIMIT_FSIZE, (16 * 1024, 16 * 1024))
+
+    r = subprocess.run([sys.executable, "-m", "physmocap", *argv], capture_output=True, text=True, timeout=300,
+                       preexec_fn=limit)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
+    assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert errors[0].startswith("physmocap: error: ") and "File too large" in errors[0] and "ulimit -f" in errors[0]
+    assert str(out) in errors[0] or str(tmp_path / "walk.npz") in errors[0], errors[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("code", [errno.EFBIG, errno.ENOSPC, errno.EIO])
+def test_write_errors_name_the_final_output(tmp_path, code):
+    """An OSError while a writer fills its temporary file is an OutputError naming the output
+    (never the temporary sibling), and the temporary file is gone."""
+    from physmocap.errors import OutputError
+    from physmocap.fileio import OutputSet, atomic_open
+
+    out = tmp_path / "o.json"
+    for in_set in (False, True):
+        with pytest.raises(OutputError) as info:
+            with OutputSet() if in_set else contextlib.nullcontext():
+                with atomic_open(out) as fh:
+                    fh.write("{")
+                    raise OSError(code, os.strerror(code))
+        assert str(info.value).startswith(f"{out}: not written: {os.strerror(code)}")
+        assert ".tmp" not in str(info.value) and list(tmp_path.iterdir()) == []
 
 
 def test_fuzz_smoke():
@@ -681,11 +725,12 @@ def test_quiet_prints_no_report_table(tmp_path, capsys):
 
 # --- all the outputs of one run, or none --------------------------------------------------
 def test_output_set_renames_together_or_not_at_all(tmp_path, capsys):
+    from physmocap.errors import OutputError
     from physmocap.fileio import OutputSet, announce, atomic_open, make_output_dir
 
     old = tmp_path / "a.txt"
     old.write_text("old")
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="b.txt: not written: disk full"):
         with OutputSet():
             with atomic_open(old) as fh:
                 fh.write("new")

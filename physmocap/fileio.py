@@ -52,6 +52,32 @@ def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
     return p
 
 
+def check_readable(path: str | os.PathLike, kind: str) -> Path:
+    """Fail early, with the reader's own error, if the input ``path`` (a ``kind`` such as
+    ``"mapping file"``) does not exist, is a directory or cannot be opened; nothing is read.
+    Pipes and devices are only required to exist (opening one could block)."""
+    import stat
+
+    from .errors import InputError
+
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputError(f"{kind} not found", path=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the {kind}: {exc.strerror or exc}", path=p) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(f"is a directory, expected a {kind}", path=p)
+    if stat.S_ISREG(st.st_mode):
+        try:
+            with open(p, "rb"):
+                pass
+        except OSError as exc:
+            raise InputError(f"cannot read the {kind}: {exc.strerror or exc}", path=p) from None
+    return p
+
+
 def check_output_dir(path: str | os.PathLike, what: str = "output directory") -> Path:
     """Fail early if ``path`` is not a directory files can be written into, nor one that
     can be created (its parent must exist: only the last level is made)."""

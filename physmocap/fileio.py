@@ -44,10 +44,19 @@ def _check_folder(folder: Path, target: Path, what: str) -> None:
 def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
     """Fail early, with a clear error, if ``path`` cannot be written: it is a directory,
     a part of its folder is a file, its folder does not exist, or no file can be
-    created there (permissions, read-only or virtual file systems such as ``/proc``)."""
+    created there (permissions, read-only or virtual file systems such as ``/proc``).
+    Give the path as typed: ``Path`` drops the trailing separator of ``out.bvh/``, which
+    names a directory, not a file.  An existing device or pipe is refused too (the new file
+    would be renamed over it)."""
+    raw = os.fspath(path)
     p = Path(path)
+    if isinstance(raw, str) and raw.endswith(("/", os.sep)):
+        raise OutputError(f"ends with a path separator, which names a directory; expected a file name for the {what}",
+                          path=raw)
     if p.is_dir():
         raise OutputError(f"is a directory, expected a file name for the {what}", path=p)
+    if p.exists() and not p.is_file():
+        raise OutputError(f"is not a regular file (a device or a pipe); expected a file name for the {what}", path=p)
     _check_folder(p.parent if str(p.parent) else Path("."), p, what)
     return p
 

@@ -869,3 +869,47 @@ def test_an_error_without_a_file_names_the_commands_input(tmp_path, capsys):
     assert main(["retarget", str(src), "-o", str(tmp_path / "out.bvh")]) == 2
     line = _one_line(capsys)
     assert f"{src}: cannot tell which way the skeleton faces" in line, line
+
+
+# --- an output path must name a file -----------------------------------------------------
+@pytest.mark.parametrize("argv", [
+    ["retarget", "example", "-o", "{d}/adir.bvh/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--qpos", "{d}/q.npz/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--csv", "{d}/q.csv/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--report", "{d}/r.json/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--preview", "{d}/p.gif/"],
+    ["convert", "example", "{d}/adir.bvh/"],
+    ["clean", "example", "-o", "{d}/adir.bvh/"],
+    ["preview", "example", "-o", "{d}/adir.mp4/"],
+    ["replay", "example", "-o", "{d}/r.npz/"],
+    ["replay", "example", "--stats", "{d}/s.json/"],
+    ["character", "scale", "-o", "{d}/s.xml/", "--height", "1.6"],
+    ["character", "init", "robot", "-o", "{d}/m.toml/"],
+])
+def test_an_output_ending_with_a_separator_is_refused(tmp_path, capsys, argv):
+    """``-o adir.bvh/`` names a directory: refused before any work, not written as a file
+    ``adir.bvh`` (``Path`` drops the trailing separator)."""
+    args = [a.format(d=tmp_path) for a in argv]
+    assert main(args) == 2
+    line = _one_line(capsys)
+    bad = next(a for a in args if a.endswith("/"))
+    assert line.startswith(f"physmocap: error: {bad}: ends with a path separator"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_naming_a_directory_or_a_device_is_refused(tmp_path, capsys):
+    (tmp_path / "d.bvh").mkdir()
+    assert main(["retarget", "example", "-o", str(tmp_path / "d.bvh")]) == 2
+    assert "d.bvh: is a directory" in _one_line(capsys)
+    fifo = tmp_path / "p.json"
+    os.mkfifo(fifo)  # a device or pipe would be replaced by the renamed file: refused
+    assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--report", str(fifo)]) == 2
+    assert "p.json: is not a regular file" in _one_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.bvh", "p.json"] and fifo.is_fifo()
+
+
+def test_a_manifest_output_ending_with_a_separator_is_refused(tmp_path, capsys):
+    manifest = tmp_path / "jobs.csv"
+    manifest.write_text("input,output\nexample,a.npz/\n")
+    assert main(["batch", str(manifest), "-o", str(tmp_path / "out")]) == 2
+    assert f"{manifest}:2: output 'a.npz/' ends with a path separator" in _one_line(capsys)

@@ -358,8 +358,8 @@ def run(args: argparse.Namespace) -> int:
     wanted = {"robot-csv": ".csv", "robot-npz": ".npz"}.get(args.format)
     if wanted and outputs[0].suffix.lower() != wanted:
         raise OptionError(f"--format {args.format} writes a {wanted} file", path=outputs[0])
-    for out in outputs:
-        check_writable(out)
+    for raw, out in zip([x for x in (args.output, args.qpos, args.csv) if x], outputs):
+        check_writable(raw)  # as typed: a trailing separator is refused
         if out.suffix.lower() not in WRITERS:
             raise OptionError(
                 f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",

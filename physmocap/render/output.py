@@ -40,7 +40,7 @@ def check_output(path: str | Path) -> Path:
     p = Path(path)
     if p.suffix.lower() not in SUFFIXES:
         raise OptionError(f"cannot write {p.suffix or 'files without a suffix'!r} previews; use one of {', '.join(SUFFIXES)}", path=p)
-    check_writable(p)
+    check_writable(path)
     return p
 
 

@@ -913,3 +913,49 @@ def test_a_manifest_output_ending_with_a_separator_is_refused(tmp_path, capsys):
     manifest.write_text("input,output\nexample,a.npz/\n")
     assert main(["batch", str(manifest), "-o", str(tmp_path / "out")]) == 2
     assert f"{manifest}:2: output 'a.npz/' ends with a path separator" in _one_line(capsys)
+
+
+# --- the repository's scripts ------------------------------------------------------------
+def test_lowest_deps_help_prints_usage_and_touches_nothing(tmp_path):
+    from conftest import REPO
+
+    venv = tmp_path / "venv"
+    venv.mkdir()
+    (venv / "keep").write_text("x")
+    for flag in ("-h", "--help"):
+        r = subprocess.run(["bash", str(REPO / "scripts" / "lowest_deps.sh"), flag], capture_output=True, text=True,
+                           timeout=60, env={**os.environ, "LOWEST_VENV": str(venv), "PYTHON": "false"})
+        assert r.returncode == 0 and "lowest_deps.sh tests/" in r.stdout and not r.stderr, r.stderr
+        assert (venv / "keep").read_text() == "x"
+
+
+@pytest.mark.parametrize("script", ["evaluate.py", "fidelity.py"])
+def test_scripts_refuse_a_clip_that_is_not_there(tmp_path, script):
+    """A named clip not in the data folder stops the script with status 2 before any work
+    (it used to print 'skip' and exit 0); a folder holding none of the default clips too."""
+    from conftest import REPO
+
+    (tmp_path / "walk.bvh").write_text("")
+    env = {**os.environ, "PHYSMOCAP_SHARED_DATA": str(tmp_path)}
+    run = [sys.executable, str(REPO / "scripts" / script)]
+    r = subprocess.run([*run, "--clips", "walk", "nope"], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 2 and r.stderr.strip() == f"{script[:-3]}: error: clip(s) not found in {tmp_path}: nope"
+    assert "clip" not in r.stdout
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = subprocess.run(run, capture_output=True, text=True, timeout=120,
+                       env={**env, "PHYSMOCAP_SHARED_DATA": str(empty)})
+    assert r.returncode == 2 and "none of the clips found" in r.stderr
+
+
+def test_scripts_take_a_clip_without_its_suffix(tmp_path):
+    import runpy
+
+    from conftest import REPO
+
+    clips = runpy.run_path(str(REPO / "scripts" / "_clips.py"))
+    (tmp_path / "cmu_12_01_walk.bvh").write_text("")
+    (tmp_path / "take.trc").write_text("")
+    assert clips["resolve_clips"](tmp_path, ["cmu_12_01_walk", "take.trc"], [], "x") == [
+        tmp_path / "cmu_12_01_walk.bvh", tmp_path / "take.trc"]
+    assert clips["find_clip"](tmp_path, "take") is None

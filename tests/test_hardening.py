@@ -959,3 +959,18 @@ def test_scripts_take_a_clip_without_its_suffix(tmp_path):
     assert clips["resolve_clips"](tmp_path, ["cmu_12_01_walk", "take.trc"], [], "x") == [
         tmp_path / "cmu_12_01_walk.bvh", tmp_path / "take.trc"]
     assert clips["find_clip"](tmp_path, "take") is None
+
+
+def test_shared_data_skip_names_the_folder_looked_in(tmp_path, monkeypatch):
+    import conftest
+
+    monkeypatch.setattr(conftest, "SHARED_DATA", tmp_path)
+    monkeypatch.setattr(conftest, "SHARED_DATA_ORIGIN", "from PHYSMOCAP_SHARED_DATA")
+    with pytest.raises(pytest.skip.Exception) as info:
+        conftest.shared_file("nope.bvh")
+    reason = str(info.value)
+    assert reason.endswith(f"nope.bvh not found in {tmp_path} (from PHYSMOCAP_SHARED_DATA)"), reason
+    r = subprocess.run([sys.executable, "-c", "import conftest; print(conftest.SHARED_DATA, conftest.SHARED_DATA_ORIGIN)"],
+                       capture_output=True, text=True, timeout=60, cwd=conftest.REPO / "tests",
+                       env={**os.environ, "PHYSMOCAP_SHARED_DATA": str(tmp_path)})
+    assert r.stdout.strip() == f"{tmp_path} from PHYSMOCAP_SHARED_DATA", r.stderr

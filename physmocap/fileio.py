@@ -268,11 +268,12 @@ class OutputSet:
             for k, (tmp, target) in enumerate(self._pending):
                 os.replace(tmp, target)
         except BaseException as exc:
+            failed_tmp, failed = self._pending[k]
             for tmp, _ in self._pending[k:]:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
-            if isinstance(exc, OSError) and _is_write_error(exc, tmp, target):
-                raise write_error(exc, target) from None
+            if isinstance(exc, OSError) and _is_write_error(exc, failed_tmp, failed):
+                raise write_error(exc, failed) from None
             raise
         self._pending = []
         for m in self._messages:

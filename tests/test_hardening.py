@@ -974,3 +974,25 @@ def test_shared_data_skip_names_the_folder_looked_in(tmp_path, monkeypatch):
                        capture_output=True, text=True, timeout=60, cwd=conftest.REPO / "tests",
                        env={**os.environ, "PHYSMOCAP_SHARED_DATA": str(tmp_path)})
     assert r.stdout.strip() == f"{tmp_path} from PHYSMOCAP_SHARED_DATA", r.stderr
+
+
+def test_a_failed_rename_names_its_output(tmp_path, monkeypatch):
+    """An OutputSet whose rename into place fails names that output, not the run's last one."""
+    import physmocap.fileio as fileio
+    from physmocap.errors import OutputError
+
+    real = os.replace
+
+    def failing(src, dst):
+        if str(dst).endswith("a.txt"):
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(src), str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(fileio.os, "replace", failing)
+    with pytest.raises(OutputError) as info:
+        with fileio.OutputSet():
+            for name in ("a.txt", "b.txt"):
+                with fileio.atomic_open(tmp_path / name) as fh:
+                    fh.write(name)
+    assert str(info.value) == f"{tmp_path / 'a.txt'}: not written: {os.strerror(errno.EIO)}"
+    assert list(tmp_path.iterdir()) == []

@@ -219,6 +219,9 @@ def _entry(line: int, row: dict[str, Any], manifest: Path, table: "OptionTable")
             raise InputError(f"{key} must be a path, got {value!r}", path=manifest, line=line)
     if inp is None:
         raise InputError("no input on this line", path=manifest, line=line)
+    if out is not None and out.endswith(("/", os.sep)):  # base / out would drop the separator
+        raise OptionError(f"output {out!r} ends with a path separator, which names a directory; expected a file name",
+                          path=manifest, line=line)
     output = None if out is None else base / out
     if output is not None and output.suffix.lower() not in OUTPUT_SUFFIXES:
         raise OptionError(f"output {out!r}: the suffix must be one of {', '.join(OUTPUT_SUFFIXES)}",

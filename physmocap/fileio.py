@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -43,11 +44,46 @@ def _check_folder(folder: Path, target: Path, what: str) -> None:
 def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
     """Fail early, with a clear error, if ``path`` cannot be written: it is a directory,
     a part of its folder is a file, its folder does not exist, or no file can be
-    created there (permissions, read-only or virtual file systems such as ``/proc``)."""
+    created there (permissions, read-only or virtual file systems such as ``/proc``).
+    Give the path as typed: ``Path`` drops the trailing separator of ``out.bvh/``, which
+    names a directory, not a file.  An existing device or pipe is refused too (the new file
+    would be renamed over it)."""
+    raw = os.fspath(path)
     p = Path(path)
+    if isinstance(raw, str) and raw.endswith(("/", os.sep)):
+        raise OutputError(f"ends with a path separator, which names a directory; expected a file name for the {what}",
+                          path=raw)
     if p.is_dir():
         raise OutputError(f"is a directory, expected a file name for the {what}", path=p)
+    if p.exists() and not p.is_file():
+        raise OutputError(f"is not a regular file (a device or a pipe); expected a file name for the {what}", path=p)
     _check_folder(p.parent if str(p.parent) else Path("."), p, what)
+    return p
+
+
+def check_readable(path: str | os.PathLike, kind: str) -> Path:
+    """Fail early, with the reader's own error, if the input ``path`` (a ``kind`` such as
+    ``"mapping file"``) does not exist, is a directory or cannot be opened; nothing is read.
+    Pipes and devices are only required to exist (opening one could block)."""
+    import stat
+
+    from .errors import InputError
+
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputError(f"{kind} not found", path=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the {kind}: {exc.strerror or exc}", path=p) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError(f"is a directory, expected a {kind}", path=p)
+    if stat.S_ISREG(st.st_mode):
+        try:
+            with open(p, "rb"):
+                pass
+        except OSError as exc:
+            raise InputError(f"cannot read the {kind}: {exc.strerror or exc}", path=p) from None
     return p
 
 
@@ -136,10 +172,37 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = True) -> Iterator[P
             os.replace(tmp, p)
         else:
             current._add(Path(tmp), p)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        if not _is_write_error(exc, tmp, p):
+            raise
+        raise write_error(exc, p) from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: What an errno of a failed write means for the user, beyond its ``strerror``.
+_WRITE_HINTS = {errno.EFBIG: "beyond the size limit for one file: ulimit -f, or the file system's"}
+
+
+def _is_write_error(exc: OSError, tmp: str | os.PathLike, target: Path) -> bool:
+    """True when ``exc``, raised while writing ``tmp`` for ``target``, is about that file (it
+    names no other file): a full disk, a size limit, an I/O error..."""
+    if exc.errno is None or isinstance(exc, BrokenPipeError):
+        return False
+    return exc.filename is None or os.fspath(exc.filename) in (os.fspath(tmp), os.fspath(target))
+
+
+def write_error(exc: OSError, target: str | os.PathLike) -> OutputError:
+    """An :class:`OutputError` naming ``target`` (the final output, never its temporary
+    sibling) for the OSError ``exc`` raised while writing it (EFBIG, ENOSPC, EIO...)."""
+    reason = (exc.strerror or os.strerror(exc.errno)) if exc.errno else str(exc)
+    hint = _WRITE_HINTS.get(exc.errno)
+    detail = f"{reason} ({hint})" if hint else reason
+    return OutputError(f"not written: {detail}", path=target)
 
 
 #: The :class:`OutputSet` collecting the current run's outputs, if any.
@@ -204,10 +267,13 @@ class OutputSet:
         try:
             for k, (tmp, target) in enumerate(self._pending):
                 os.replace(tmp, target)
-        except BaseException:
+        except BaseException as exc:
+            failed_tmp, failed = self._pending[k]
             for tmp, _ in self._pending[k:]:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
+            if isinstance(exc, OSError) and _is_write_error(exc, failed_tmp, failed):
+                raise write_error(exc, failed) from None
             raise
         self._pending = []
         for m in self._messages:

@@ -55,6 +55,7 @@ __all__ = [
     "write_report_json",
     "emit_report",
     "load_trajectory",
+    "root_scale",
     "tracking_targets",
 ]
 
@@ -170,7 +171,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
     if source_motion is not None and joint_indices is not None:
         from .metrics.fidelity import actor_joint_positions, character_joint_positions, fidelity, figure_joints
 
-        scale = float(getattr(traj.targets, "scale", 1.0)) if getattr(traj, "targets", None) is not None else 1.0
+        scale = root_scale(traj, source_motion, joint_indices, contacts)
         fid = fidelity(
             actor_joint_positions(source_motion, joint_indices, figure_joints()),
             character_joint_positions(traj, figure_joints()),
@@ -498,7 +499,7 @@ def _stored_targets(data: dict, frames: int, fps: float, path: Path, character=N
 
     if "target_names" not in data:
         return None
-    from .fileio import npz_array, npz_strings
+    from .fileio import npz_array, npz_number, npz_strings
 
     names = tuple(npz_strings(data["target_names"], "target_names", path))
     N = len(names)
@@ -524,7 +525,34 @@ def _stored_targets(data: dict, frames: int, fps: float, path: Path, character=N
     valid = npz_array(data["target_valid"], "target_valid", path, (frames, N), kinds="b")
     if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
         raise InputError("the stored IK targets have non-finite values", path=path)
-    return Targets(names, pos, quat, has_q, valid, fps=fps)
+    if "target_scale" not in data:  # written before the root scale was stored: the caller recomputes it
+        return Targets(names, pos, quat, has_q, valid, fps=fps, info={SCALE_UNKNOWN: str(path)})
+    scale = npz_number(data["target_scale"], "target_scale", path, *SCALE_RANGE)
+    return Targets(names, pos, quat, has_q, valid, fps=fps, scale=scale)
+
+
+#: ``Targets.info`` key set on stored targets whose root scale the file does not hold.
+SCALE_UNKNOWN = "scale_unknown"
+#: Root scales accepted in a trajectory NPZ (character leg length over the actor's).
+SCALE_RANGE = (1e-3, 1e3)
+
+
+def root_scale(traj, source_motion, joint_indices: dict[str, int], contacts=None) -> float:
+    """The root scale the retarget used (the actor's speeds are scaled by it in the fidelity
+    figures): the targets' own, 1 without targets.  A trajectory file written before the
+    scale was stored has it recomputed as a default retarget computes it
+    (:func:`tracking_targets`), with a warning: other retarget options may have set another."""
+    targets = getattr(traj, "targets", None)
+    if targets is None:
+        return 1.0
+    unknown = targets.info.pop(SCALE_UNKNOWN, None)
+    if unknown is not None:
+        from .errors import warn
+
+        targets.scale = float(tracking_targets(source_motion, joint_indices, traj.character, contacts).scale)
+        warn(f"{unknown}: the file stores no root scale (written by an older physmocap): the actor's scaled "
+             f"speeds use a default retarget's, {targets.scale:.4g}; retarget again for exact figures")
+    return float(targets.scale)
 
 
 def tracking_targets(motion, joint_indices: dict[str, int], character, contacts=None):

@@ -21,6 +21,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from _clips import resolve_clips
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
@@ -30,8 +31,10 @@ CLIPS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh", "cmu_01_01_jumps.bvh", "optitrac
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
-    ap.add_argument("--clips", nargs="+", default=CLIPS)
+    ap.add_argument("--clips", nargs="+", default=None,
+                    help="file names in the data folder, .bvh optional (default: the four the README quotes)")
     args = ap.parse_args()
+    clips = resolve_clips(DATA, args.clips, CLIPS, "evaluate")  # a named clip not there: status 2, before any work
     warnings.simplefilter("ignore")
 
     from physmocap import metrics
@@ -44,11 +47,8 @@ def main() -> int:
         f" {'hover med':>9s} {'p95':>5s} {'flat med':>8s} {'>1cm %':>6s} {'lim':>3s} {'vel':>3s} {'track cm':>8s} {'self mm':>7s}"
     )
     print(head)
-    for clip in args.clips:
-        path = DATA / clip
-        if not path.exists():
-            print(f"skip {clip}: {path} not found", file=sys.stderr)
-            continue
+    for path in clips:
+        clip = path.name
         motion = load_motion(path)
         src = metrics.source_skating(motion, map_motion(motion))["mean_cm_s"]
         for name in args.characters:

@@ -21,6 +21,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from _clips import resolve_clips
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
 
@@ -28,10 +29,12 @@ DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "da
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
-    ap.add_argument("--clips", nargs="+", default=None, help="file names in the data folder (default: every .bvh)")
+    ap.add_argument("--clips", nargs="+", default=None, help="file names in the data folder, .bvh optional (default: every .bvh)")
     ap.add_argument("--frames", type=int, default=None, help="retarget only the first N frames of each clip")
     ap.add_argument("--no-plant-ratio", action="store_true", help="also retarget with planting off for the jerk ratio")
     args = ap.parse_args()
+    every = sorted(p.name for p in DATA.glob("*.bvh"))
+    clips = resolve_clips(DATA, args.clips, every, "fidelity")  # a named clip not there: status 2, before any work
     warnings.simplefilter("ignore")
 
     from physmocap.ik.retarget import retarget
@@ -40,16 +43,12 @@ def main() -> int:
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
-    clips = args.clips or sorted(p.name for p in DATA.glob("*.bvh"))
     print(
         f"{'clip':26s} {'char':8s} {'seg med':>7s} {'worst':>14s} {'>45%':>5s} {'face med':>8s} {'p95':>5s}"
         f" {'path cm':>7s} {'max':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'1jt%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'gslip':>5s} {'scuf%':>5s}"
     )
-    for clip in clips:
-        path = DATA / clip
-        if not path.exists():
-            print(f"skip {clip}: {path} not found", file=sys.stderr)
-            continue
+    for path in clips:
+        clip = path.name
         motion = load_motion(path)
         end = args.frames
         for name in args.characters:

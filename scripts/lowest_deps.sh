@@ -9,7 +9,12 @@
 #   PYTHON=python3.10 LOWEST_VENV=/tmp/lowest scripts/lowest_deps.sh
 #
 # Package registries only (PyPI through pip); the venv is rebuilt on every run.
+# Arguments go to pytest; -h/--help first prints this text and exits (nothing deleted).
 set -euo pipefail
+if [[ "${1:-}" == "-h" || "${1:-}" == "--help" ]]; then
+    sed -n '2,/^set -euo/{/^set -euo/d;s/^# \{0,1\}//;p}' "$0"
+    exit 0
+fi
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3.10}
 VENV=${LOWEST_VENV:-/tmp/physmocap-lowest}

@@ -1,4 +1,4 @@
-"""Shared fixtures: the real recordings in ../shared/data (skipped where absent)."""
+"""Shared fixtures: the real recordings in ../shared/data, or in $PHYSMOCAP_SHARED_DATA (skipped where absent)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("PHYSMOCAP_SHARED_DATA", REPO.parent / "shared" / "data"))
+#: Where SHARED_DATA came from, for skip reasons.
+SHARED_DATA_ORIGIN = ("from PHYSMOCAP_SHARED_DATA" if "PHYSMOCAP_SHARED_DATA" in os.environ
+                      else "the default ../shared/data; set PHYSMOCAP_SHARED_DATA to the recordings' folder")
 
 SHARED_BVH = [
     "cmu_12_01_walk.bvh",
@@ -23,7 +26,7 @@ def shared_file(name: str) -> Path:
     """Path of a shared recording, or skip the test with a clear reason."""
     path = SHARED_DATA / name
     if not path.exists():
-        pytest.skip(f"real recording {name} not found: ../shared/data is absent ({SHARED_DATA})")
+        pytest.skip(f"real recording {name} not found in {SHARED_DATA} ({SHARED_DATA_ORIGIN})")
     return path
 
 

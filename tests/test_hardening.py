@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import os
 import resource
 import subprocess
 import sys
@@ -93,6 +96,47 @@ def test_file_too_large_is_one_line(tmp_path):
     errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
     assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
     assert not out.exists() and not list(tmp_path.glob(".*tmp*"))
+
+
+@pytest.mark.parametrize("command", [
+    ["retarget", "example", "-o", "{out}", "--qpos", "{tmp}/walk.npz", "--end", "40"],
+    ["convert", "example", "{out}"],
+    ["clean", "example", "-o", "{out}"],
+])
+def test_file_too_large_names_the_output(tmp_path, command):
+    """Over ``ulimit -f`` (Python ignores SIGXFSZ, so the write fails with EFBIG) the one error
+    line names the output being written, not a bare 'File too large', and no file is left."""
+    out = tmp_path / "big.bvh"
+    argv = [a.format(out=out, tmp=tmp_path) for a in command]
+
+    def limit():  # 16 KB per file: every output here is larger
+        resource.setrlimit(resource.RLIMIT_FSIZE, (16 * 1024, 16 * 1024))
+
+    r = subprocess.run([sys.executable, "-m", "physmocap", *argv], capture_output=True, text=True, timeout=300,
+                       preexec_fn=limit)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
+    assert r.returncode == 2 and len(errors) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert errors[0].startswith("physmocap: error: ") and "File too large" in errors[0] and "ulimit -f" in errors[0]
+    assert str(out) in errors[0] or str(tmp_path / "walk.npz") in errors[0], errors[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("code", [errno.EFBIG, errno.ENOSPC, errno.EIO])
+def test_write_errors_name_the_final_output(tmp_path, code):
+    """An OSError while a writer fills its temporary file is an OutputError naming the output
+    (never the temporary sibling), and the temporary file is gone."""
+    from physmocap.errors import OutputError
+    from physmocap.fileio import OutputSet, atomic_open
+
+    out = tmp_path / "o.json"
+    for in_set in (False, True):
+        with pytest.raises(OutputError) as info:
+            with OutputSet() if in_set else contextlib.nullcontext():
+                with atomic_open(out) as fh:
+                    fh.write("{")
+                    raise OSError(code, os.strerror(code))
+        assert str(info.value).startswith(f"{out}: not written: {os.strerror(code)}")
+        assert ".tmp" not in str(info.value) and list(tmp_path.iterdir()) == []
 
 
 def test_fuzz_smoke():
@@ -681,11 +725,12 @@ def test_quiet_prints_no_report_table(tmp_path, capsys):
 
 # --- all the outputs of one run, or none --------------------------------------------------
 def test_output_set_renames_together_or_not_at_all(tmp_path, capsys):
+    from physmocap.errors import OutputError
     from physmocap.fileio import OutputSet, announce, atomic_open, make_output_dir
 
     old = tmp_path / "a.txt"
     old.write_text("old")
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match="b.txt: not written: disk full"):
         with OutputSet():
             with atomic_open(old) as fh:
                 fh.write("new")
@@ -824,3 +869,130 @@ def test_an_error_without_a_file_names_the_commands_input(tmp_path, capsys):
     assert main(["retarget", str(src), "-o", str(tmp_path / "out.bvh")]) == 2
     line = _one_line(capsys)
     assert f"{src}: cannot tell which way the skeleton faces" in line, line
+
+
+# --- an output path must name a file -----------------------------------------------------
+@pytest.mark.parametrize("argv", [
+    ["retarget", "example", "-o", "{d}/adir.bvh/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--qpos", "{d}/q.npz/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--csv", "{d}/q.csv/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--report", "{d}/r.json/"],
+    ["retarget", "example", "-o", "{d}/o.bvh", "--preview", "{d}/p.gif/"],
+    ["convert", "example", "{d}/adir.bvh/"],
+    ["clean", "example", "-o", "{d}/adir.bvh/"],
+    ["preview", "example", "-o", "{d}/adir.mp4/"],
+    ["replay", "example", "-o", "{d}/r.npz/"],
+    ["replay", "example", "--stats", "{d}/s.json/"],
+    ["character", "scale", "-o", "{d}/s.xml/", "--height", "1.6"],
+    ["character", "init", "robot", "-o", "{d}/m.toml/"],
+])
+def test_an_output_ending_with_a_separator_is_refused(tmp_path, capsys, argv):
+    """``-o adir.bvh/`` names a directory: refused before any work, not written as a file
+    ``adir.bvh`` (``Path`` drops the trailing separator)."""
+    args = [a.format(d=tmp_path) for a in argv]
+    assert main(args) == 2
+    line = _one_line(capsys)
+    bad = next(a for a in args if a.endswith("/"))
+    assert line.startswith(f"physmocap: error: {bad}: ends with a path separator"), line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_naming_a_directory_or_a_device_is_refused(tmp_path, capsys):
+    (tmp_path / "d.bvh").mkdir()
+    assert main(["retarget", "example", "-o", str(tmp_path / "d.bvh")]) == 2
+    assert "d.bvh: is a directory" in _one_line(capsys)
+    fifo = tmp_path / "p.json"
+    os.mkfifo(fifo)  # a device or pipe would be replaced by the renamed file: refused
+    assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--report", str(fifo)]) == 2
+    assert "p.json: is not a regular file" in _one_line(capsys)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.bvh", "p.json"] and fifo.is_fifo()
+
+
+def test_a_manifest_output_ending_with_a_separator_is_refused(tmp_path, capsys):
+    manifest = tmp_path / "jobs.csv"
+    manifest.write_text("input,output\nexample,a.npz/\n")
+    assert main(["batch", str(manifest), "-o", str(tmp_path / "out")]) == 2
+    assert f"{manifest}:2: output 'a.npz/' ends with a path separator" in _one_line(capsys)
+
+
+# --- the repository's scripts ------------------------------------------------------------
+def test_lowest_deps_help_prints_usage_and_touches_nothing(tmp_path):
+    from conftest import REPO
+
+    venv = tmp_path / "venv"
+    venv.mkdir()
+    (venv / "keep").write_text("x")
+    for flag in ("-h", "--help"):
+        r = subprocess.run(["bash", str(REPO / "scripts" / "lowest_deps.sh"), flag], capture_output=True, text=True,
+                           timeout=60, env={**os.environ, "LOWEST_VENV": str(venv), "PYTHON": "false"})
+        assert r.returncode == 0 and "lowest_deps.sh tests/" in r.stdout and not r.stderr, r.stderr
+        assert (venv / "keep").read_text() == "x"
+
+
+@pytest.mark.parametrize("script", ["evaluate.py", "fidelity.py"])
+def test_scripts_refuse_a_clip_that_is_not_there(tmp_path, script):
+    """A named clip not in the data folder stops the script with status 2 before any work
+    (it used to print 'skip' and exit 0); a folder holding none of the default clips too."""
+    from conftest import REPO
+
+    (tmp_path / "walk.bvh").write_text("")
+    env = {**os.environ, "PHYSMOCAP_SHARED_DATA": str(tmp_path)}
+    run = [sys.executable, str(REPO / "scripts" / script)]
+    r = subprocess.run([*run, "--clips", "walk", "nope"], capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 2 and r.stderr.strip() == f"{script[:-3]}: error: clip(s) not found in {tmp_path}: nope"
+    assert "clip" not in r.stdout
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = subprocess.run(run, capture_output=True, text=True, timeout=120,
+                       env={**env, "PHYSMOCAP_SHARED_DATA": str(empty)})
+    assert r.returncode == 2 and "none of the clips found" in r.stderr
+
+
+def test_scripts_take_a_clip_without_its_suffix(tmp_path):
+    import runpy
+
+    from conftest import REPO
+
+    clips = runpy.run_path(str(REPO / "scripts" / "_clips.py"))
+    (tmp_path / "cmu_12_01_walk.bvh").write_text("")
+    (tmp_path / "take.trc").write_text("")
+    assert clips["resolve_clips"](tmp_path, ["cmu_12_01_walk", "take.trc"], [], "x") == [
+        tmp_path / "cmu_12_01_walk.bvh", tmp_path / "take.trc"]
+    assert clips["find_clip"](tmp_path, "take") is None
+
+
+def test_shared_data_skip_names_the_folder_looked_in(tmp_path, monkeypatch):
+    import conftest
+
+    monkeypatch.setattr(conftest, "SHARED_DATA", tmp_path)
+    monkeypatch.setattr(conftest, "SHARED_DATA_ORIGIN", "from PHYSMOCAP_SHARED_DATA")
+    with pytest.raises(pytest.skip.Exception) as info:
+        conftest.shared_file("nope.bvh")
+    reason = str(info.value)
+    assert reason.endswith(f"nope.bvh not found in {tmp_path} (from PHYSMOCAP_SHARED_DATA)"), reason
+    r = subprocess.run([sys.executable, "-c", "import conftest; print(conftest.SHARED_DATA, conftest.SHARED_DATA_ORIGIN)"],
+                       capture_output=True, text=True, timeout=60, cwd=conftest.REPO / "tests",
+                       env={**os.environ, "PHYSMOCAP_SHARED_DATA": str(tmp_path)})
+    assert r.stdout.strip() == f"{tmp_path} from PHYSMOCAP_SHARED_DATA", r.stderr
+
+
+def test_a_failed_rename_names_its_output(tmp_path, monkeypatch):
+    """An OutputSet whose rename into place fails names that output, not the run's last one."""
+    import physmocap.fileio as fileio
+    from physmocap.errors import OutputError
+
+    real = os.replace
+
+    def failing(src, dst):
+        if str(dst).endswith("a.txt"):
+            raise OSError(errno.EIO, os.strerror(errno.EIO), str(src), str(dst))
+        return real(src, dst)
+
+    monkeypatch.setattr(fileio.os, "replace", failing)
+    with pytest.raises(OutputError) as info:
+        with fileio.OutputSet():
+            for name in ("a.txt", "b.txt"):
+                with fileio.atomic_open(tmp_path / name) as fh:
+                    fh.write(name)
+    assert str(info.value) == f"{tmp_path / 'a.txt'}: not written: {os.strerror(errno.EIO)}"
+    assert list(tmp_path.iterdir()) == []

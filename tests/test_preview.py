@@ -192,3 +192,36 @@ def test_renders_when_mujoco_was_imported_first(backend, tmp_path):
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 0 and "(16, 16, 3)" in r.stdout, r.stderr
+
+
+@pytest.mark.parametrize("suffix,end", [(".mp4", "200"), (".mp4", "524"), (".gif", "200"), (".png", "524")])
+def test_file_size_limit_is_one_line_naming_the_preview(backend, tmp_path, suffix, end):
+    """Over ``ulimit -f``: ffmpeg is killed by SIGXFSZ (a short video, all its frames already in
+    the pipe, used to pass as written; a long one gave imageio's nine-line 'Broken pipe' dump),
+    Pillow's GIF write fails in its close: one line naming the preview, no file left."""
+    import resource
+
+    out = tmp_path / f"big{suffix}"
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (50 * 1024, 50 * 1024))
+
+    r = subprocess.run([sys.executable, "-m", "physmocap", "preview", "example", "-o", str(out), "--end", end],
+                       capture_output=True, text=True, timeout=600, preexec_fn=limit)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("physmocap: error:")]
+    assert r.returncode == 2 and len(errors) == 1, r.stderr
+    assert errors[0].startswith(f"physmocap: error: {out}: not written: File too large"), r.stderr
+    assert "Traceback" not in r.stderr and "FFMPEG" not in r.stderr and "Exception ignored" not in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_mp4_complete_tells_a_cut_video(backend, tmp_path):
+    from physmocap.render.output import mp4_complete
+
+    out = tmp_path / "v.mp4"
+    assert _run(["preview", "example", "-o", str(out), "--end", "20"]) == 0
+    data = out.read_bytes()
+    assert mp4_complete(out)
+    for cut in (len(data) - 1, len(data) // 2, 4):
+        out.write_bytes(data[:cut])
+        assert not mp4_complete(out)

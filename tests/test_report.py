@@ -248,3 +248,46 @@ def test_cli_report_aligns_a_cut_and_resampled_retarget(tmp_path, capsys):
     src = metrics.source_skating(cut, idx)
     assert data["metrics"]["source"]["skating"]["mean_cm_s"] == pytest.approx(src["mean_cm_s"], rel=1e-4)
     assert data["source"]["frames"] == traj.num_frames and data["source"]["fps"] == 30.0
+
+
+def _without_member(src, dst, member: str) -> None:
+    """Copy the NPZ ``src`` to ``dst`` without ``member`` (a file of an older physmocap)."""
+    import zipfile
+
+    with zipfile.ZipFile(src) as zi, zipfile.ZipFile(dst, "w") as zo:
+        for info in zi.infolist():
+            if info.filename != member:
+                zo.writestr(info, zi.read(info))
+
+
+def test_report_on_the_npz_agrees_with_retarget_report(tmp_path, capsys):
+    """`report walk.npz` measures the fidelity figures `retarget --report` gave (the actor's
+    speeds scaled by the root scale the retarget used, stored in the NPZ as target_scale); a
+    file without it has the scale recomputed as a default retarget does, with a warning."""
+    npz, first, again = tmp_path / "walk.npz", tmp_path / "walk_report.json", tmp_path / "r.json"
+    assert main(["retarget", "example", "-o", str(tmp_path / "walk.bvh"), "--qpos", str(npz), "--report",
+                 str(first), "--end", "200", "--quiet"]) == 0
+    assert main(["report", str(npz), "--json", str(again)]) == 0
+    fid = json.loads(first.read_text())["fidelity"]
+    assert fid and json.loads(again.read_text())["fidelity"] == fid
+    k = float(np.load(npz)["target_scale"])
+    assert 0.5 < k < 2 and k != 1.0
+    old = tmp_path / "old.npz"
+    _without_member(npz, old, "target_scale.npy")
+    from physmocap.errors import PhysmocapWarning
+
+    with pytest.warns(PhysmocapWarning, match="old.npz: the file stores no root scale"):
+        assert main(["report", str(old), "--json", str(again)]) == 0
+    assert json.loads(again.read_text())["fidelity"] == fid
+
+
+@pytest.mark.parametrize("value", [np.float64(0.0), np.float64(np.nan), np.array(["x"])])
+def test_bad_stored_root_scale_is_one_line(tmp_path, capsys, value):
+    npz = tmp_path / "walk.npz"
+    assert main(["retarget", "example", "-o", str(npz), "--end", "20", "--quiet"]) == 0
+    data = dict(np.load(npz))
+    data["target_scale"] = value
+    np.savez(npz, **data)
+    assert main(["report", str(npz)]) == 2
+    err = capsys.readouterr().err
+    assert "physmocap: error:" in err and "walk.npz: 'target_scale'" in err

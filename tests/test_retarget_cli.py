@@ -250,3 +250,35 @@ def test_clean_leaves_a_clip_without_glitches_byte_identical(tmp_path, capsys):
         assert main(["retarget", str(clean_path), "-o", str(b), "--quiet", "--start", "0", "--no-plant", "--clean"]) == 0
     assert not [w for w in caught if "--clean" in str(w.message)]  # a one-stride walk: no knee clamp taken for a freeze
     assert np.array_equal(np.load(a)["qpos"], np.load(b)["qpos"])
+
+
+@pytest.mark.parametrize("command", ["retarget", "preview", "report", "batch"])
+@pytest.mark.parametrize("option,name,needle", [
+    ("--contacts", "nope.csv", "contact label file not found"),
+    ("--source-map", "nope.toml", "mapping file not found"),
+    ("--map", "nope.toml", "mapping file not found"),
+    ("--marker-set", "nope.toml", "marker set file not found"),
+    ("--character", "nope.xml", "MJCF file not found"),
+    ("--map", ".", "is a directory, expected a mapping file"),
+])
+def test_option_files_are_checked_before_the_input_is_read(tmp_path, capsys, monkeypatch, command, option, name,
+                                                           needle):
+    """A missing or unusable file named by an option is the one error, before the capture (or
+    the saved trajectory) is read and retargeted: no warnings about the input first."""
+    import physmocap.report
+    import physmocap.sources
+
+    def no_reading(*args, **kwargs):
+        raise AssertionError("the input was read before the option files were checked")
+
+    monkeypatch.setattr(physmocap.sources, "load_motion", no_reading)
+    monkeypatch.setattr(physmocap.report, "load_trajectory", no_reading)
+    value = str(tmp_path / name) if name != "." else str(tmp_path)
+    outputs = {"retarget": ["-o", str(tmp_path / "o.bvh")], "preview": ["-o", str(tmp_path / "o.gif")],
+               "report": [], "batch": ["-o", str(tmp_path / "out")]}
+    inp = str(tmp_path / "walk.npz") if command == "report" else "example"
+    assert main([command, inp, *outputs[command], option, value]) == 2
+    err = capsys.readouterr().err
+    assert err == f"physmocap: error: {value}: {needle}\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+

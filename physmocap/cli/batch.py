@@ -45,11 +45,12 @@ OWN = {"source", "output", "format", "jobs", "force", "ray", "func", "command", 
 
 def run(args: argparse.Namespace) -> int:
     from ..batch import plan, run_batch
-    from .retarget import config_from_args
+    from .retarget import check_option_files, config_from_args
 
     if args.jobs < 1:
         raise OptionError("--jobs must be at least 1")
     config_from_args(args)  # a bad option is one error now, not one per file
+    check_option_files(args)
     _check_character(args)
     options = {k: v for k, v in sorted(vars(args).items()) if k not in OWN}
     given = [f"--{name}" for name in ("up", "units") if options.get(name) is not None]

@@ -259,7 +259,7 @@ def run_init(args: argparse.Namespace) -> int:
         check_not_input([out], [args.path])
         if out.exists() and not out.is_dir() and not args.force:
             raise OutputError("exists; use --force to overwrite it", path=out)
-        check_writable(out)
+        check_writable(args.output)
     proposal = propose_mapping(args.path)
     text = proposal.to_toml()
     for line in proposal.report():

@@ -116,9 +116,11 @@ def options_from_args(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from ..render.output import check_output, check_size, require_imageio, video_frames
+    from .retarget import check_option_files
 
     check_output(args.output)
     require_imageio()
+    check_option_files(args)  # a saved .npz input does not pass through retarget's checks
     # every option is checked before the (possibly long) retarget
     frames = _frame_list(args.frames)
     options = options_from_args(args)

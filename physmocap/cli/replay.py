@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 
         if out.suffix.lower() not in WRITERS:
             raise OptionError(f"cannot write {out.suffix!r}; use one of {sorted(WRITERS)}", path=out)
-        check_writable(out)
+        check_writable(args.output)
     if args.stats:
         check_writable(args.stats)
     check_distinct([out, args.stats])

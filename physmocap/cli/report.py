@@ -72,6 +72,9 @@ def run(args: argparse.Namespace) -> int:
         check_output_dir(args.plots, "plot directory")
     if args.start is not None and args.start < 0:
         raise OptionError(f"--start must be >= 0, got {args.start}")
+    from .retarget import check_option_files
+
+    check_option_files(args)  # before the trajectory and its source are read
     traj = load_trajectory(args.trajectory, args.character, args.map)
     if args.start is None:
         args.start = int(traj.source_start)

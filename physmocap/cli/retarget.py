@@ -182,6 +182,32 @@ def config_from_args(args: argparse.Namespace):
     return RetargetConfig().with_options(**options)
 
 
+#: The options naming an input file besides the capture: argparse destination -> what it is.
+OPTION_FILES = {
+    "contacts": "contact label file",
+    "source_map": "mapping file",
+    "map": "mapping file",
+    "marker_set": "marker set file",
+}
+
+
+def check_option_files(args: argparse.Namespace) -> None:
+    """Refuse a file named by ``--contacts``, ``--source-map``, ``--map``, ``--marker-set``
+    or ``--character`` (an MJCF path, not a bundled name) that is missing or unreadable,
+    before the capture is read (:func:`~physmocap.fileio.check_readable`)."""
+    from ..fileio import check_readable
+
+    for dest, kind in OPTION_FILES.items():
+        value = getattr(args, dest, None)
+        if value:
+            check_readable(value, kind)
+    character = getattr(args, "character", None)
+    if character:
+        from ..models.character import character_file
+
+        check_readable(character_file(character), "MJCF file")
+
+
 WRITERS = {".bvh", ".npz", ".csv", ".mcap"}
 
 #: Allocations of at least this many bytes get a mapping of their own (glibc's ``mallopt``).
@@ -308,6 +334,7 @@ def retarget_from_args(args: argparse.Namespace):
     from ..sources import load_motion
 
     config = config_from_args(args)
+    check_option_files(args)  # here, not in config_from_args: a batch manifest's missing file fails its own job
     read_opts = {"units": args.in_units} if args.in_units else {}
     read_opts.update(marker_read_options(args))
     motion = cleaned_source(load_motion(args.input, min_frames=1, **read_opts), args)
@@ -331,8 +358,8 @@ def run(args: argparse.Namespace) -> int:
     wanted = {"robot-csv": ".csv", "robot-npz": ".npz"}.get(args.format)
     if wanted and outputs[0].suffix.lower() != wanted:
         raise OptionError(f"--format {args.format} writes a {wanted} file", path=outputs[0])
-    for out in outputs:
-        check_writable(out)
+    for raw, out in zip([x for x in (args.output, args.qpos, args.csv) if x], outputs):
+        check_writable(raw)  # as typed: a trailing separator is refused
         if out.suffix.lower() not in WRITERS:
             raise OptionError(
                 f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",

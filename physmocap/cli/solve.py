@@ -94,8 +94,9 @@ def run(args: argparse.Namespace) -> int:
     if actor_out is not None and actor_out.suffix.lower() != ".bvh":
         raise OptionError("the actor is written as .bvh", path=actor_out)
     outputs = [x for x in (out, actor_out, Path(args.report) if args.report else None) if x is not None]
-    for x in outputs:
-        check_writable(x)
+    for x in (args.output, args.actor, args.report):  # as typed: a trailing separator is refused
+        if x:
+            check_writable(x)
     check_not_input(outputs, [args.input, args.marker_set, args.map])
     check_distinct(outputs)
     check_frame_range(args.start, args.end)

@@ -35,7 +35,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ..render.scene import add_skeleton
     from .preview import _load
+    from .retarget import check_option_files
 
+    check_option_files(args)
     inp = _load(args)
     traj, sk = inp.traj, inp.skeleton
     model = traj.character.model

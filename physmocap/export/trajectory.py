@@ -23,7 +23,8 @@ NPZ contents (all plain arrays, loadable with ``np.load(path)`` and
                     (F, N, 3) metres, ``target_orientations`` (F, N, 4) x-y-z-w,
                     ``target_has_orientation`` (N,), ``target_valid`` (F, N)),
                     so ``physmocap report`` measures tracking against exactly
-                    what the retargeter tracked
+                    what the retargeter tracked; ``target_scale``: the root
+                    scale (character leg over the actor's) the targets used
 ==================  ==========================================================
 
 The file is a zip archive written with fixed timestamps, so the same
@@ -182,6 +183,7 @@ def target_arrays(targets) -> "dict[str, np.ndarray | ArrayBlocks]":
         "target_orientations": row_blocks(targets.orientations),
         "target_has_orientation": np.asarray(targets.has_orientation, dtype=bool),
         "target_valid": np.asarray(targets.valid, dtype=bool),
+        "target_scale": np.float64(targets.scale),
     }
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "Character",
     "TrackedFrame",
     "load_character",
+    "character_file",
     "bundled_characters",
     "DEFAULT_CHARACTER",
     "CHARACTER_REQUIRED",
@@ -128,6 +129,13 @@ def bundled_characters() -> dict[str, Path]:
     return {p.name[: -len(".map.toml")]: d / (p.name[: -len(".map.toml")] + ".xml")
             for p in sorted(d.glob("*.map.toml"))
             if (d / (p.name[: -len(".map.toml")] + ".xml")).exists()}
+
+
+def character_file(path: str | os.PathLike | None) -> Path:
+    """The MJCF file ``load_character(path)`` reads: the default humanoid for None, a
+    bundled character by name, else ``path`` itself (not checked to exist); InputError for
+    a name that is no bundled character."""
+    return _resolve(path)
 
 
 def _resolve(path: str | os.PathLike | None) -> Path:

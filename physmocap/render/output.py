@@ -10,13 +10,14 @@ row above the source row.
 from __future__ import annotations
 
 import functools
+import io
 from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..errors import OptionError
-from ..fileio import atomic_path, check_writable
+from ..errors import OptionError, OutputError
+from ..fileio import atomic_path, check_writable, write_error
 from ..progress import Progress
 from .scene import PreviewScene
 
@@ -39,7 +40,7 @@ def check_output(path: str | Path) -> Path:
     p = Path(path)
     if p.suffix.lower() not in SUFFIXES:
         raise OptionError(f"cannot write {p.suffix or 'files without a suffix'!r} previews; use one of {', '.join(SUFFIXES)}", path=p)
-    check_writable(p)
+    check_writable(path)
     return p
 
 
@@ -96,18 +97,78 @@ def write_video(scene: PreviewScene, frames: Iterable[int], path: Path, fps: flo
     kind = path.suffix.lower()
     n = 0
     with atomic_path(path) as tmp, Progress(len(frames), "preview", enabled=progress) as bar:
+        gif = io.BytesIO()  # Pillow holds a GIF's frames until the end: encode in memory, write once
         if kind == ".mp4":
             writer = iio.get_writer(tmp, format="FFMPEG", fps=fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_log_level="error")
-        else:
-            writer = iio.get_writer(tmp, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
+        else:  # (a write failing in Pillow's close would be retried, and fail again, in its __del__)
+            writer = iio.get_writer(gif, format="GIF", mode="I", duration=1000.0 / fps, loop=0)
         try:
-            for t in frames:
-                writer.append_data(label(scene.render(t), _caption(t, first, scene.traj.fps)))
-                n += 1
-                bar.update(1)
-        finally:
-            writer.close()
+            try:
+                for t in frames:
+                    writer.append_data(label(scene.render(t), _caption(t, first, scene.traj.fps)))
+                    n += 1
+                    bar.update(1)
+            finally:
+                writer.close()
+        except OSError as exc:
+            if exc.errno is not None or kind != ".mp4":
+                raise  # a write of this process: atomic_path names the output
+            raise _encoder_failure(tmp, path) from None  # imageio's many-line "Broken pipe / FFMPEG COMMAND"
+        if kind == ".mp4" and not mp4_complete(tmp):  # ffmpeg died (killed by SIGXFSZ...) after the last frame
+            raise _encoder_failure(tmp, path)
+        if kind != ".mp4":
+            tmp.write_bytes(gif.getvalue())
     return n
+
+
+def mp4_complete(path: Path) -> bool:
+    """True when the MP4 at ``path`` is a whole file: its top-level boxes fill it exactly and
+    one is the ``moov`` index ffmpeg writes last (imageio does not check ffmpeg's exit status,
+    so a video cut short by a full disk or a file size limit would otherwise pass)."""
+    size = path.stat().st_size
+    pos, kinds = 0, set()
+    with open(path, "rb") as fh:
+        while pos < size:
+            fh.seek(pos)
+            head = fh.read(16)
+            if len(head) < 8:
+                return False
+            box, kind = int.from_bytes(head[:4], "big"), head[4:8]
+            if box == 1 and len(head) == 16:
+                box = int.from_bytes(head[8:16], "big")
+            elif box == 0:
+                box = size - pos
+            if box < 8 or pos + box > size:
+                return False
+            kinds.add(kind)
+            pos += box
+    return b"moov" in kinds
+
+
+def _encoder_failure(tmp: Path, target: Path) -> OutputError:
+    """The error for a video ffmpeg could not finish, naming ``target`` and the likely cause:
+    the file size limit (``ulimit -f``), a full disk, or else the encoder itself."""
+    import errno
+    import os
+
+    size = tmp.stat().st_size if tmp.exists() else 0
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        over_limit = soft != resource.RLIM_INFINITY and size >= soft
+    except (ImportError, OSError, ValueError):  # pragma: no cover - not a Unix
+        over_limit = False
+    if over_limit:
+        return write_error(OSError(errno.EFBIG, os.strerror(errno.EFBIG)), target)
+    try:
+        st = os.statvfs(tmp.parent)
+        full = st.f_bavail * st.f_frsize < (1 << 20)
+    except (AttributeError, OSError):  # pragma: no cover - not a Unix
+        full = False
+    if full:
+        return write_error(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)), target)
+    return OutputError("not written: the video encoder (ffmpeg) stopped before the end of the video", path=target)
 
 
 def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = None, first: int = 0) -> list[int]:

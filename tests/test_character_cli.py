@@ -37,6 +37,15 @@ def test_info_json(capsys):
     assert knee["units"] == "deg, deg/s"
     assert desc["contacts"]["left"] == ["left_heel", "left_ball", "left_toe_tip"]
     assert desc["total_mass"] == pytest.approx(70.0)
+    assert ["right_shoulder_flexion", "right_shoulder_abduction", "right_shoulder_rotation"] in desc["velocity_groups"]
+
+
+def test_info_names_the_hinge_groups_on_the_humanoid_only(capsys):
+    assert main(["character", "info"]) == 0
+    out = capsys.readouterr().out
+    assert "the body's angular speed along each axis" in out and "left_hip_flexion, left_hip_adduction, left_hip_rotation" in out
+    assert main(["character", "info", "robot"]) == 0
+    assert "angular speed" not in capsys.readouterr().out  # motors: each hinge's own rate
 
 
 def test_info_bad_mapping_is_one_line(tmp_path, capsys):

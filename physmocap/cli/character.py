@@ -123,6 +123,7 @@ def describe(ch) -> dict:
         "hip_height": ch.hip_height,
         "total_mass": ch.total_mass,
         "dof": int(model.nv),
+        "velocity_groups": [list(g) for g in getattr(ch, "velocity_groups", ())],
         "bodies": bodies,
         "joints": joints,
         "sites": sites,
@@ -174,6 +175,12 @@ def print_info(desc: dict, out: TextIO) -> None:
         unit = "" if j["type"] == "hinge" else " (m)"
         w(f"  {j['name']:<28} {j['body']:<18} {_fmt_range(*j['range']):>18} "
           f"{j['velocity_limit']:8.0f}  {ax}{unit}\n")
+
+    if desc.get("velocity_groups"):
+        w("  speed of these hinges (one body, one anchor, human limits): the body's angular speed along each axis,\n"
+          "  not the hinge's rate:\n")
+        for g in desc["velocity_groups"]:
+            w(f"    {', '.join(g)}\n")
 
     w(f"\ntracked canonical joints ({len(desc['tracked'])}; rest position in m)\n")
     for c, t in desc["tracked"].items():

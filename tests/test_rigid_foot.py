@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, retargeted
-from physmocap.ik.footplan import RigidFoot, planted_positions, swing_flatten, turn_foot
+from physmocap.ik.footplan import RigidFoot, planted_positions, swing_flatten, toe_bend, turn_foot
 from physmocap.ik.rigidfoot import LEVEL_PITCH_FULL, LEVEL_PITCH_NONE, level_roll, tip_reference, toe_line_correction
 from physmocap.metrics.fidelity import saturation_matrix
 from physmocap.rotations import Rotation
@@ -168,6 +168,29 @@ def test_a_swing_foot_into_the_floor_is_pitched_level_just_enough_to_clear_it():
     moved, q = turn_foot(turns, ankle, toe[:, None], Q)
     assert np.allclose(moved[:, 0], ankle + turned.apply([0.13, 0.0, -0.03]))
     assert np.allclose(np.abs(np.sum(q * turned.as_quat(), axis=1)), 1.0)
+
+
+def test_the_swing_turn_is_bounded_by_the_actors_toe_bend():
+    """The turn stands in for the toes a rigid foot lacks: at most the actor's toe bend.  A
+    foot the actor points at the floor with its toes in line (a toe drag behind a dancer: the
+    CMU dance's robot foot was flattened 30-40 degrees off the actor) keeps its pitch; a
+    toe bend smaller than the turn needed bounds it; :func:`toe_bend` reads it from the
+    actor's ankle, toe and toe end (0 for toes in line or bent down)."""
+    foot, clearance = _foot_box(), 0.012
+    Q = Rotation.from_euler("y", [[70.0], [70.0], [70.0]], degrees=True).as_quat()
+    ankle = np.tile([0.0, 0.0, 0.10], (3, 1))
+    free = swing_flatten(foot, ankle, Q, np.ones(3), clearance)
+    need = Rotation.from_quat(free).magnitude()
+    bounded = swing_flatten(foot, ankle, Q, np.ones(3), clearance, most=np.array([0.0, 0.5 * need[1], 2.0 * need[2]]))
+    got = Rotation.from_quat(bounded).magnitude()
+    assert need.min() > np.radians(5.0)
+    assert got[0] == pytest.approx(0.0, abs=1e-12)  # toes in line: no turn
+    assert got[1] == pytest.approx(0.5 * need[1], rel=1e-6)  # bounded by the bend
+    assert got[2] == pytest.approx(need[2], rel=1e-9)  # bend to spare: the least turn that clears
+    a = np.zeros((3, 3))
+    t = np.array([[0.1, 0.0, -0.1], [0.1, 0.0, -0.1], [0.1, 0.0, -0.1]])  # foot pitched 45 degrees down
+    e = t + np.array([[0.05, 0.0, 0.0], [0.035, 0.0, -0.035], [0.0, 0.0, -0.05]])  # toes flat, in line, bent down
+    assert np.degrees(toe_bend(a, t, e)) == pytest.approx([45.0, 0.0, 0.0], abs=1e-9)
 
 
 @pytest.mark.filterwarnings("ignore")

@@ -56,7 +56,7 @@ import numpy as np
 from ..spill import release
 from .easing import smoothstep
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "toe_bend", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -436,7 +436,7 @@ FLATTEN_STEPS = 20
 
 
 def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray, weight: np.ndarray,
-                  clearance: float) -> np.ndarray:
+                  clearance: float, most: np.ndarray | None = None) -> np.ndarray:
     r"""``(F, 4)`` x-y-z-w: the turns that pitch a rigid foot's targets towards level, on its
     swing frames, just enough for the foot to clear the floor at its ankle target (the identity
     elsewhere; applied as ``turn * orientation``, and to the foot's other targets about the
@@ -458,8 +458,11 @@ def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
     easing to 1 in the swing).  The flatter branch, on every frame: the one the solver takes
     while the foot still clears its pitch of largest reach, so the two agree, and the leg keeps
     the actor's pose instead of being lifted.  Only a foot pitched toe down is turned: the actor's
-    heel is the rigid foot's heel, the toes that bend are what it lacks.  ``ankle (F, 3)``
-    metres, ``orientation (F, 4)``.
+    heel is the rigid foot's heel, the toes that bend are what it lacks.  ``most (F,)``
+    (radians, optional) bounds the turn: the actor's toe bend (:func:`toe_bend`), so that a foot
+    the actor points at the floor with its toes in line (a toe drag behind a dancer) keeps its
+    pitch and is lifted by the solver instead of flattened 30-40 degrees off the actor.
+    ``ankle (F, 3)`` metres, ``orientation (F, 4)``.
     """
     from ..rotations import quat_apply, quat_conj, quat_mul
 
@@ -485,7 +488,9 @@ def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
     def clear(t: np.ndarray) -> np.ndarray:
         return foot.toe_point(a, quat_mul(turn(t), q))[:, 2] >= clearance
 
-    lo, hi = np.zeros(len(rows)), np.ones(len(rows))
+    lo = np.zeros(len(rows))
+    # at most the actor's toe bend: the turn stands in for the toes a rigid foot lacks
+    hi = np.ones(len(rows)) if most is None else np.clip(np.asarray(most, dtype=float)[rows] / np.maximum(-pitch, 1e-9), 0.0, 1.0)
     hi[clear(lo) | (pitch >= 0.0)] = 0.0  # clear as it is, or heel down: left alone
     for _ in range(FLATTEN_STEPS):
         mid = 0.5 * (lo + hi)
@@ -494,6 +499,18 @@ def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
         lo = np.where(ok, lo, mid)
     out[rows] = turn(w * hi)
     return out
+
+
+def toe_bend(ankle: np.ndarray, toe: np.ndarray, toe_end: np.ndarray) -> np.ndarray:
+    r"""``(F,)`` radians: how far the toe segment ``toe -> toe_end`` points up from the foot
+    segment ``ankle -> toe`` (the difference of their pitches above the horizontal), 0 where
+    the toes are in line with the foot or bent down; positions ``(F, 3)`` metres."""
+    def pitch(v: np.ndarray) -> np.ndarray:
+        return np.arctan2(v[:, 2], np.linalg.norm(v[:, :2], axis=1))
+
+    foot = np.asarray(toe, dtype=float) - np.asarray(ankle, dtype=float)
+    toes = np.asarray(toe_end, dtype=float) - np.asarray(toe, dtype=float)
+    return np.maximum(pitch(toes) - pitch(foot), 0.0)
 
 
 def turn_foot(turns: np.ndarray, ankle: np.ndarray, points: np.ndarray, orientation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

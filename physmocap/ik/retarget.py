@@ -37,7 +37,7 @@ from .branches import MAX_PASSES, STUCK_DEG, plan_guides
 from .config import RetargetConfig
 from .contacts import Contacts, detect_contacts, load_contact_csv
 from .footlevel import level_feet
-from .footplan import BODY_PART_JOINTS, eased_mask, plant_body_contacts, planted_positions, swing_flatten, turn_foot
+from .footplan import BODY_PART_JOINTS, eased_mask, plant_body_contacts, planted_positions, swing_flatten, toe_bend, turn_foot
 from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .rigidfoot import level_roll
@@ -208,7 +208,7 @@ def retarget(
         # the unplanned targets are let go before tracking (the planned ones keep their raw
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
-                               found.body_labels, own=ours)
+                               found.body_labels, own=ours, toe_bends=actor_toe_bends(motion, joint_indices))
     if ours:
         spill_targets(targets)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
@@ -327,6 +327,7 @@ def plan_targets(
     body_labels: dict[str, np.ndarray] | None = None,
     *,
     own: bool = False,
+    toe_bends: dict[str, np.ndarray] | None = None,
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
     feet levelled on their flat-stance frames (:func:`~physmocap.ik.footlevel.level_feet`),
@@ -357,23 +358,41 @@ def plan_targets(
     )
     for side, (foot, orientation) in rigid.items():  # swing feet pitched clear of the floor
         _flatten_swing(levelled, side, foot, orientation, 1.0 - _contact_weights(labels, side, targets.fps, plant.ease_time),
-                       plant.clearance)
+                       plant.clearance, (toe_bends or {}).get(side))
     if body_labels:
         plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy
     return levelled
 
 
+def actor_toe_bends(motion: Motion, joint_indices: dict[str, int]) -> dict[str, np.ndarray]:
+    """Side -> ``(F,)`` radians: how far the actor's toes point up from its foot
+    (:func:`~.footplan.toe_bend` of its ankle, toe and toe end), for the sides that map all
+    three (a rigid foot's swing turn is bounded by it: :func:`~.footplan.swing_flatten`)."""
+    sides = [s for s in ("left", "right") if all(f"{s}_{j}" in joint_indices for j in ("ankle", "toe", "toe_end"))]
+    if not sides:
+        return {}
+    wanted = [joint_indices[f"{s}_{j}"] for s in sides for j in ("ankle", "toe", "toe_end")]
+    P, col = motion.joint_world_positions(wanted)
+    out = {}
+    for s in sides:
+        a, t, e = (np.asarray(P[:, col[joint_indices[f"{s}_{j}"]]], dtype=float) for j in ("ankle", "toe", "toe_end"))
+        out[s] = toe_bend(a, t, e)
+    release(P)
+    return out
+
+
 def _flatten_swing(targets: Targets, side: str, foot, orientation: np.ndarray, swing: np.ndarray,
-                   clearance: float) -> None:
+                   clearance: float, bend: np.ndarray | None = None) -> None:
     """``side``'s rigid foot targets in ``targets`` (planned, ours) pitched towards level where
-    its swing (``swing (F,)``, 0..1) would take it within ``clearance`` of the floor
-    (:func:`~.footplan.swing_flatten`): the ankle's orientation, and the foot's other joints
-    turned about the ankle with it (:func:`~.footplan.turn_foot`)."""
+    its swing (``swing (F,)``, 0..1) would take it within ``clearance`` of the floor, by at most
+    the actor's toe bend ``bend (F,)`` (radians; None: unbounded) (:func:`~.footplan.swing_flatten`):
+    the ankle's orientation, and the foot's other joints turned about the ankle with it
+    (:func:`~.footplan.turn_foot`)."""
     i = targets.names.index(f"{side}_ankle")
     cols = [i] + [c for c in _foot_columns(targets.names, side) if c != i]
     points = _get_columns(targets.positions, cols)
-    turns = swing_flatten(foot, points[:, 0], orientation, swing, clearance)
+    turns = swing_flatten(foot, points[:, 0], orientation, swing, clearance, most=bend)
     if np.all(turns[:, 3] == 1.0):
         return
     moved, turned = turn_foot(turns, points[:, 0], points[:, 1:], orientation)

@@ -164,3 +164,51 @@ def test_a_ridge_the_fit_cannot_use_is_refused(ridge):
 
     with pytest.raises(OptionError, match="regress_ridge must be in"):
         CleanOptions(regress_ridge=ridge)
+
+
+@pytest.mark.parametrize("off", [30.0, 120.0])
+def test_an_estimate_ending_beyond_a_quarter_turn_from_the_good_end_is_no_estimate(off):
+    """An estimate whose own path ends further than regress.MAX_MISMATCH_DEG from the span's
+    good far end has lost the motion: spreading that mismatch over the span turned the dance's
+    toe 107 degrees RMS off where it hardly moved (seed 5 of the frozen benchmark, blended in at
+    23 %).  It is no estimate (None); one within the limit is joined to both ends as before."""
+    from physmocap.clean.detect import _angle
+    from physmocap.clean.regress import MAX_MISMATCH_DEG, _faded, spread_mismatch
+
+    n = 20
+    path = Rotation.from_rotvec(np.outer(np.linspace(0.0, 0.3, n + 2), [0.0, 0.0, 1.0])).as_quat()
+    target = quat_mul(path[-1], Rotation.from_rotvec(np.radians(off) * np.array([1.0, 0.0, 0.0])).as_quat())
+    spread = spread_mismatch(path, target)
+    faded = _faded(path, target, path[-1])  # the mismatch at the start instead
+    if off > MAX_MISMATCH_DEG:
+        assert spread is None and faded is None
+    else:
+        assert spread is not None and faded is not None
+        assert _angle(spread[-1:], target[None])[0] < off / n * 1.5  # arrives at the good end
+        assert _angle(faded[:1], target[None])[0] < off / n * 1.5  # leaves from it
+
+
+def test_the_ridge_is_chosen_among_the_estimates_there_are(walk, monkeypatch):
+    """A ridge whose steps estimate is None on a pseudo-gap (beyond MAX_MISMATCH_DEG) is not
+    chosen for the steps, and the pose's choice is unaffected."""
+    from physmocap.clean.correct import _matcher, _pseudo_gaps
+    from physmocap.clean.regress import Regression
+
+    glitch = [Glitch("frozen", "LeftUpLeg", 300, 347, 1.0)]
+    matcher = _matcher(walk, glitch, CleanOptions(), canonical_joints(walk))
+    R = np.asarray(walk.rotations, dtype=float)
+    j = walk.skeleton.names.index("LeftUpLeg")
+    reg = Regression(R, matcher.M, matcher.animated, matcher.bad, j, 300, 347, 0.01)
+    gaps = _pseudo_gaps(300, 347, len(R))
+    reg.choose_ridge(gaps, 48)
+    chosen = list(reg.chosen)
+    real = Regression._bridges
+
+    def without_steps(self, a, b):  # the chosen ridge's steps lost on every pseudo-gap
+        found = real(self, a, b)
+        return [(p, None if i == chosen[1] else s) for i, (p, s) in enumerate(found)]
+
+    monkeypatch.setattr(Regression, "_bridges", without_steps)
+    reg2 = Regression(R, matcher.M, matcher.animated, matcher.bad, j, 300, 347, 0.01)
+    reg2.choose_ridge(gaps, 48)
+    assert reg2.chosen[0] == chosen[0] and reg2.chosen[1] != chosen[1]

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import copy
 import warnings
-from typing import Any
+from functools import partial
+from typing import Any, Callable
 
 import numpy as np
 
@@ -208,7 +209,7 @@ def retarget(
         # the unplanned targets are let go before tracking (the planned ones keep their raw
         # positions); orientations built here are levelled where they are
         targets = plan_targets(targets, character, labels, config.plant, config.solver.floor_height,
-                               found.body_labels, own=ours, toe_bends=actor_toe_bends(motion, joint_indices))
+                               found.body_labels, own=ours, toe_bends=partial(actor_toe_bends, motion, joint_indices))
     if ours:
         spill_targets(targets)
     traj = _track(targets, character, config.solver, motion.source, progress, labels, config.plant)
@@ -327,7 +328,7 @@ def plan_targets(
     body_labels: dict[str, np.ndarray] | None = None,
     *,
     own: bool = False,
-    toe_bends: dict[str, np.ndarray] | None = None,
+    toe_bends: Callable[[], dict[str, np.ndarray]] | None = None,
 ) -> Targets:
     """A copy of ``targets`` planned for planting over the whole clip (:mod:`.footplan`):
     feet levelled on their flat-stance frames (:func:`~physmocap.ik.footlevel.level_feet`),
@@ -337,7 +338,9 @@ def plan_targets(
     horizontal offsets in ``info["foot_offsets"]``.  With ``own`` the caller gives up
     ``targets``' arrays: the feet are levelled in its orientations (no copy), and its
     positions, kept as the raw ones, move to a temporary file for a long clip
-    (:func:`~physmocap.spill.spill`) before they are copied."""
+    (:func:`~physmocap.spill.spill`) before they are copied.  ``toe_bends`` gives the actor's
+    toe bends (:func:`actor_toe_bends`), called only for a character with rigid feet: their
+    swing turn is bounded by it (without it, unbounded)."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
     if own:
         targets.positions = spill(targets.positions)
@@ -356,9 +359,10 @@ def plan_targets(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
         planting.toe_contacts(), rigid_feet=rigid, in_place=True,
     )
+    bends = toe_bends() if rigid and toe_bends is not None else {}  # read only for rigid feet
     for side, (foot, orientation) in rigid.items():  # swing feet pitched clear of the floor
         _flatten_swing(levelled, side, foot, orientation, 1.0 - _contact_weights(labels, side, targets.fps, plant.ease_time),
-                       plant.clearance, (toe_bends or {}).get(side))
+                       plant.clearance, bends.get(side))
     if body_labels:
         plant_body_contacts(levelled.positions, targets.names, body_labels, targets.fps, plant.ease_time, floor_height, in_place=True)
     levelled.info = {**levelled.info, "raw_positions": targets.positions, "foot_offsets": offsets}  # not modified: no copy

@@ -176,7 +176,7 @@ def test_cmu_markers_agree_with_the_vendor_skeleton():
     """The CMU take's markers and the skeleton CMU solved from them: knee and elbow flexion
     within about 5 degrees mean (acceptance: 5); joint centres, regression and functional,
     within 8.5 cm mean (the issue asks 3 cm: not met, the vendor places its joints its own
-    way, see the README).  The solved skeleton is tested in test_markers_solve.py."""
+    way, see docs/markers.md).  The solved skeleton is tested in test_markers_solve.py."""
     import contextlib
     import io
     import runpy

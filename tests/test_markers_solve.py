@@ -171,7 +171,7 @@ def test_solve_rejects_a_non_marker_file(tmp_path, capsys):
 
 #: Measured on the first 360 frames (solve_markers, 2 iterations per frame): overall marker
 #: residual RMS 6-7 mm; solved joint centres 6-8 cm mean from the vendor's joints (whose own
-#: placement differs: see README), knee flexion within 3-4 degrees.
+#: placement differs: see docs/markers.md), knee flexion within 3-4 degrees.
 def test_cmu_take_solved_end_to_end(tmp_path, capsys):
     c3d = _shared("cmu_01_01_markers.c3d")
     out, rep = tmp_path / "actor.bvh", tmp_path / "res.json"

@@ -131,7 +131,7 @@ class SolverOptions:
             pose's lag would be extrapolated too).  A frame that needs a relaxation on the
             way is solved again from the previous pose.  Off by default (the default output
             is unchanged); on, the 120 Hz walks need 20-35 % fewer QPs a frame and track as
-            well or better, but the answers change and resting feet slip more (README,
+            well or better, but the answers change and resting feet slip more (docs/history.md,
             "Speed stop 23": CMU walk humanoid 0.17 -> 0.37 cm/s).
         catch_up: Metres.  A frame that has not converged after ``max_iterations`` with a
             position-only target still farther than this from its joint gets up to

@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 from typing import IO, Iterator
 
-from .errors import OutputError
+from .errors import OptionError, OutputError
 
 
 def _check_folder(folder: Path, target: Path, what: str) -> None:
@@ -59,6 +59,17 @@ def check_writable(path: str | os.PathLike, what: str = "output file") -> Path:
         raise OutputError(f"is not a regular file (a device or a pipe); expected a file name for the {what}", path=p)
     _check_folder(p.parent if str(p.parent) else Path("."), p, what)
     return p
+
+
+def suffix_error(path: str | os.PathLike, suffixes, what: str = "files") -> OptionError:
+    """The error for an output whose suffix is not one of ``suffixes`` (``.bvh``...):
+    ``out.xyz: cannot write .xyz files; use .bvh, .csv, .mcap or .npz`` (or ``no file
+    suffix; use ...``)."""
+    names = sorted(suffixes)
+    choices = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " or " + names[-1]
+    suffix = Path(path).suffix
+    head = f"cannot write {suffix} {what}" if suffix else "no file suffix"
+    return OptionError(f"{head}; use {choices}", path=path)
 
 
 def check_readable(path: str | os.PathLike, kind: str) -> Path:

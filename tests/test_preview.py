@@ -80,7 +80,7 @@ def test_retarget_writes_a_preview_too(backend, tmp_path):
 @pytest.mark.parametrize(
     "argv,needle",
     [
-        (["preview", "example", "-o", "{tmp}/x.avi"], "use one of .mp4, .gif, .png"),
+        (["preview", "example", "-o", "{tmp}/x.avi"], "cannot write .avi previews; use .gif, .mp4 or .png"),
         (["preview", "example", "-o", "{tmp}/missing/x.mp4"], "does not exist"),
         (["preview", "example", "-o", "{tmp}/x.png", "--size", "10x10000"], "--size"),
         (["preview", "example", "-o", "{tmp}/x.png", "--camera", "diagonal"], "--camera"),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -124,9 +125,11 @@ def run(args: argparse.Namespace) -> int:
     }
     traj = Trajectory(character, qpos, motion.fps, source=str(motion.source))
     if args.compare:
-        offline = retarget(  # frame for frame, as streamed (no reference-frame skipping)
-            motion, character, mapping=args.source_map or motion.meta.get("source_mapping"), start=0, progress=False
-        )
+        with warnings.catch_warnings():  # the comparison's own (its frame 0 may be a T-pose) are not the stream's
+            warnings.simplefilter("ignore")
+            offline = retarget(  # frame for frame, as streamed (no reference-frame skipping)
+                motion, character, mapping=args.source_map or motion.meta.get("source_mapping"), start=0, progress=False
+            )
         a, _ = offline.body_poses()
         b, _ = traj.body_poses()
         d = np.linalg.norm(a[:, 1:] - b[:, 1:], axis=-1) * 100.0

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 from ..errors import OptionError
-from ..fileio import OutputSet, announce, check_distinct, check_not_input, check_writable
+from ..fileio import OutputSet, announce, check_distinct, check_not_input, check_writable, suffix_error
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -361,10 +361,7 @@ def run(args: argparse.Namespace) -> int:
     for raw, out in zip([x for x in (args.output, args.qpos, args.csv) if x], outputs):
         check_writable(raw)  # as typed: a trailing separator is refused
         if out.suffix.lower() not in WRITERS:
-            raise OptionError(
-                f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}",
-                path=out,
-            )
+            raise suffix_error(out, WRITERS)
     if args.report:
         check_writable(args.report, "report")
     check_not_input(outputs + [args.report, args.preview], [args.input, args.contacts, args.source_map, args.map])

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import OptionError
-from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable
+from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable, suffix_error
 
 if TYPE_CHECKING:  # numpy and mujoco stay unimported until a command runs
     from ..markers.solve import MarkerSolveOptions
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
             raise OptionError("--actor and --map go with --character")
         actor_out, out = out, None
     elif out.suffix.lower() not in WRITERS:
-        raise OptionError(f"cannot write {out.suffix or 'files without a suffix'!r}; use one of {sorted(WRITERS)}", path=out)
+        raise suffix_error(out, WRITERS)
     if actor_out is not None and actor_out.suffix.lower() != ".bvh":
         raise OptionError("the actor is written as .bvh", path=actor_out)
     outputs = [x for x in (out, actor_out, Path(args.report) if args.report else None) if x is not None]

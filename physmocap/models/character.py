@@ -290,8 +290,8 @@ def _proposed_mapping(mjcf: Path):
         return getattr(exc, "message", None) or str(exc)
     warn(
         f"{mjcf}: no mapping file found: using the mapping `physmocap character init` proposes "
-        f"({len(proposal.joints)} joints; run `physmocap character init {mjcf.name} -o "
-        f"{mjcf.stem}.map.toml` to see, edit and keep it)"
+        f"({len(proposal.joints)} joints; run `physmocap character init {mjcf} -o "
+        f"{mjcf.with_name(mjcf.stem + '.map.toml')}` to see, edit and keep it)"
     )
     return mapping_from_text(proposal.to_toml(), mjcf.with_name(f"{mjcf.stem}.map.toml (proposed)"))
 

@@ -17,7 +17,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..errors import OptionError, OutputError
-from ..fileio import atomic_path, check_writable, write_error
+from ..fileio import atomic_path, check_writable, suffix_error, write_error
 from ..progress import Progress
 from .scene import PreviewScene
 
@@ -39,7 +39,7 @@ def check_output(path: str | Path) -> Path:
     """The output path if its suffix is known and its folder writable (before any work)."""
     p = Path(path)
     if p.suffix.lower() not in SUFFIXES:
-        raise OptionError(f"cannot write {p.suffix or 'files without a suffix'!r} previews; use one of {', '.join(SUFFIXES)}", path=p)
+        raise suffix_error(p, SUFFIXES, "previews")
     check_writable(path)
     return p
 

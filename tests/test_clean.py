@@ -708,3 +708,52 @@ def test_the_window_correlation_is_summed_in_blocks_of_joints(monkeypatch):
     np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
     monkeypatch.setattr(correct, "CORRELATION_BLOCK_BYTES", 1)  # one joint a block
     np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
+
+
+def _benchmark():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
+    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_benchmark_leaves_the_reference_own_glitches_out_of_the_error(walk):
+    """A "clean" reference with a glitch of its own (a thigh flipped 180 degrees for 6 frames)
+    that every cleaned version repairs: the benchmark's error leaves out exactly the joint
+    positions the untouched clip's cleaning moves (the leg below the thigh on those frames),
+    so a repair of the reference's own glitch is not scored as error, and the rest of the
+    body on those frames still is."""
+    bench = _benchmark()
+    j = _joint(walk, "RightUpLeg")
+    flip = Rotation.from_rotvec([np.pi, 0, 0]).as_quat()
+    frames = list(range(200, 206))
+    reference = _with(walk, j, frames, q=flip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base_fixed, _ = clean(reference)
+    own = bench.own_moved(reference, base_fixed)
+    moved_frames = np.flatnonzero(own.any(axis=1))
+    assert set(moved_frames) == set(frames)
+    below = {k for k in range(len(walk.skeleton.names)) if own[frames[0], k]}
+    leg = {k for k in range(len(walk.skeleton.parents)) if _descends(walk.skeleton.parents, k, j)}
+    assert below and below <= leg
+    # the cleaner's output of the reference itself: no error left on the positions counted,
+    # the flipped leg's positions not counted (not scored against the reference's flip)
+    P0, Pf = reference.world_positions(), base_fixed.world_positions()
+    b, a, n, left = bench.position_errors(P0, Pf, P0, frames, own)
+    assert a == 0.0 and left == len(frames) * len(below) and n == len(frames) * (own.shape[1] - len(below))
+    b_all, a_all, _, left_all = bench.position_errors(P0, Pf, P0, frames, np.zeros_like(own))
+    assert a_all > 0.0 and left_all == 0  # the old figure: the repair of the reference's flip counted as error
+    assert np.all(bench.worst_increase(P0, Pf, P0, frames, own) == 0.0)
+
+
+def _descends(parents, k, j):
+    while k >= 0:
+        if k == j:
+            return True
+        k = parents[k]
+    return False

@@ -757,3 +757,26 @@ def _descends(parents, k, j):
             return True
         k = parents[k]
     return False
+
+
+def test_knee_frozen_as_it_leaves_its_clamped_extension_is_found_and_repaired(walk):
+    """CMU's knees hold full extension (the identity) exactly in every stance, a limit the
+    solver clamps to and no freeze.  A right knee frozen for 0.26 s just as it leaves that hold
+    (frames 113-143, after its hold of 89-112) holds the limit on and jumps back: the run of the
+    limit is longer than any other and ends catching up, so the part past the limit's longest
+    other hold is frozen, found on exactly the frozen frames and repaired; the clip's own holds
+    stay unflagged."""
+    j = _joint(walk, "RightLeg")
+    frames = list(range(113, 144))
+    bad = _with(walk, j, frames, hold=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fixed, report = clean(bad)
+    mine = [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightLeg"]
+    assert mine == [("frozen", 113, 143)]
+    assert not [g for g in clean(walk)[1].glitches if g.kind == "frozen"]
+    P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
+    before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
+    after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
+    assert after < 0.2 * before
+    assert np.array_equal(np.asarray(fixed.rotations)[:112], np.asarray(bad.rotations)[:112])  # the hold kept

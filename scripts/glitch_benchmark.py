@@ -459,6 +459,8 @@ def main() -> int:
     ap.add_argument("--floor", type=float, default=0.5, help="degrees an injection must change a pair to label it")
     ap.add_argument("--floor-m", type=float, default=0.01, help="metres an injection must move a joint to label it")
     ap.add_argument("--misses", action="store_true", help="print every missed and falsely flagged span")
+    ap.add_argument("--no-methods", action="store_true",
+                    help="leave out the rotational repairs' comparison (the second table: two more repairs per run, the IK's slow)")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     if args.sources in ("rotational", "both"):
@@ -524,8 +526,9 @@ def rotational(args: argparse.Namespace) -> None:
                               f" injected {inj[0] if inj else '-'}-{inj[-1] if inj else '-'} found as {sorted(kinds)}")
             frames = sorted({f for _, f in truth[t]})
             if frames:
-                for m, v in _method_errors(glitched, fixed, report, P0, frames, own_fix, own_pos).items():
-                    methods[t][m] += v
+                if not args.no_methods:
+                    for m, v in _method_errors(glitched, fixed, report, P0, frames, own_fix, own_pos).items():
+                        methods[t][m] += v
                 Pg, Pf = glitched.world_positions(), fixed.world_positions()
                 b, a, n, left = position_errors(Pg, Pf, P0, frames, own_pos)  # no truth where the clip's own repairs move
                 err[t][0] += b
@@ -562,7 +565,8 @@ def rotational(args: argparse.Namespace) -> None:
     print(f"{'all':11s} {p:9.3f} {pi:10.3f} {r:7.3f} {f:6.3f} {tot[0] + tot[2]:6d}   (F1 of the injected precision)")
     print("RMS, removed, worst and worse leave out the joint positions the untouched clip's own repairs move (no truth there);"
           " 'own pos' counts those left out of the injected frames, 'all pos' is the share removed with them counted.")
-    _print_methods(args.types, methods)
+    if not args.no_methods:
+        _print_methods(args.types, methods)
 
 
 if __name__ == "__main__":

@@ -780,3 +780,17 @@ def test_knee_frozen_as_it_leaves_its_clamped_extension_is_found_and_repaired(wa
     after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
     assert after < 0.2 * before
     assert np.array_equal(np.asarray(fixed.rotations)[:112], np.asarray(bad.rotations)[:112])  # the hold kept
+
+
+def test_spike_out_of_a_held_value_is_no_catch_up(walk):
+    """The bundled walk's finger holds one value from frame 1 to its end; a 2-frame spike
+    (frames 356-357) splits that hold in two runs of the same value, the first ending in a
+    jump.  The jump is the spike's (undone two frames later), not a joint catching up after
+    a freeze: only the spike is reported."""
+    j = _joint(walk, "RightHandIndex1")
+    q = Rotation.from_rotvec(np.radians(60.0) * np.array([0.0, 0.6, 0.8])).as_quat()
+    bad = _with(walk, j, [356, 357], q=q)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, report = clean(bad)
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightHandIndex1"] == [("spike", 356, 357)]

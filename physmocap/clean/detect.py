@@ -365,7 +365,7 @@ def _held_runs(values: np.ndarray) -> tuple[list[tuple[int, int]], list[tuple]]:
 
 def _frozen(
     values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float,
-    twin_runs: Sequence[tuple[tuple[int, int], tuple]] = (),
+    twin_runs: Sequence[tuple[tuple[int, int], tuple]] = (), undone: frozenset[int] = frozenset(),
 ) -> list[Glitch]:
     """Runs where a joint's ``values (F, k)`` (a rotation, or a position) stay exactly the same
     while the body moves (``moving (F,)``), or that end with the joint catching up: its first
@@ -382,7 +382,9 @@ def _frozen(
     that value: a joint that stops updating while it is held at its limit (a knee frozen just as
     it leaves full extension) holds the limit on, and its data jumps to where it got to when it
     comes back.  The clamp is then taken to last as long as its longest other run, and the rest
-    of the run, if ``frozen_time`` or longer, is frozen."""
+    of the run, if ``frozen_time`` or longer, is frozen.  A jump out of the limit into a span
+    that comes back (a spike or flip of the joint starting on a frame of ``undone``) is that
+    glitch's, not a catch-up."""
     F = len(values)
     if F < 2 or np.all(values[1:] == values[:-1]):  # never animated: not a glitch
         return []
@@ -402,7 +404,7 @@ def _frozen(
         clamp += [b - a + 1 for (a, b), w in twin_runs if w == v]
         if clamp:  # a limit the capture clamps to: frozen only past its longest other hold, catching up
             start += max(clamp) - 1  # the last frame of the limit's longest hold: the last good one
-            if not catch_up or e - start + 1 < shortest:
+            if not catch_up or e + 1 in undone or e - start + 1 < shortest:
                 continue
         elif moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
@@ -471,8 +473,11 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
         P, W = motion.forward_kinematics()
         skip = reference_exit(motion, opt, P)  # a reference pose the capture jumps away from (CMU's T-pose)
         limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
+        undone: dict[int, frozenset[int]] = {}  # per joint, the first frames of its spikes and flips
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
+            found = _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
+            undone[j] = frozenset(g.start for g in found if g.kind in ("spike", "flip"))
+            glitches += found
         # the body moves on a frame where the median joint moves
         moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         from .positional import twin_pairs  # positional imports this module
@@ -480,7 +485,7 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
         twin = dict(p for a, b in twin_pairs(motion, ji) for p in ((a, b), (b, a)))
         for j in animated:
             twin_runs = list(zip(*_held_runs(R[:, twin[j]]))) if j in twin else ()
-            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps, twin_runs)
+            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps, twin_runs, undone[j])
     if motion.positions is not None:
         from .positional import positional_glitches
 

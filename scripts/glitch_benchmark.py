@@ -54,7 +54,10 @@ moves).  A (joint, frame) pair is labelled only where the injection moves the jo
 of the glitched joints on their glitched frames (a gap has no "before").
 
 Usage:  python scripts/glitch_benchmark.py [--clips ...] [--per-type 6] [--seed 0] [--misses]
-            [--sources rotational|positional|both]
+            [--sources rotational|positional|both] [--no-methods]
+
+A BVH's glitches depend on the seed and the clip's place among all the shared BVHs, not on the
+other clips named with ``--clips``: one clip of a run is reproduced alone.
 """
 
 from __future__ import annotations

@@ -15,7 +15,9 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
   ``discontinuity`` (reported on its frame).
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value
-  held in several separate runs is a limit the capture's own solver clamps to, not a freeze.
+  held in several separate runs is a limit the capture's own solver clamps to, not a freeze,
+  unless one run outlasts every other hold of it and ends with the joint catching up (a joint
+  frozen as it leaves its limit): past the limit's longest other hold, that run is frozen.
 * **Positional sources** (:mod:`.positional`): bone stretch, gaps, frozen joints and
   left/right swaps.
 * **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion

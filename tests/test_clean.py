@@ -708,3 +708,89 @@ def test_the_window_correlation_is_summed_in_blocks_of_joints(monkeypatch):
     np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
     monkeypatch.setattr(correct, "CORRELATION_BLOCK_BYTES", 1)  # one joint a block
     np.testing.assert_allclose(correct._correlation(body, T), whole, rtol=0, atol=1e-10 * np.abs(whole).max())
+
+
+def _benchmark():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
+    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_benchmark_leaves_the_reference_own_glitches_out_of_the_error(walk):
+    """A "clean" reference with a glitch of its own (a thigh flipped 180 degrees for 6 frames)
+    that every cleaned version repairs: the benchmark's error leaves out exactly the joint
+    positions the untouched clip's cleaning moves (the leg below the thigh on those frames),
+    so a repair of the reference's own glitch is not scored as error, and the rest of the
+    body on those frames still is."""
+    bench = _benchmark()
+    j = _joint(walk, "RightUpLeg")
+    flip = Rotation.from_rotvec([np.pi, 0, 0]).as_quat()
+    frames = list(range(200, 206))
+    reference = _with(walk, j, frames, q=flip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        base_fixed, _ = clean(reference)
+    own = bench.own_moved(reference, base_fixed)
+    moved_frames = np.flatnonzero(own.any(axis=1))
+    assert set(moved_frames) == set(frames)
+    below = {k for k in range(len(walk.skeleton.names)) if own[frames[0], k]}
+    leg = {k for k in range(len(walk.skeleton.parents)) if _descends(walk.skeleton.parents, k, j)}
+    assert below and below <= leg
+    # the cleaner's output of the reference itself: no error left on the positions counted,
+    # the flipped leg's positions not counted (not scored against the reference's flip)
+    P0, Pf = reference.world_positions(), base_fixed.world_positions()
+    b, a, n, left = bench.position_errors(P0, Pf, P0, frames, own)
+    assert a == 0.0 and left == len(frames) * len(below) and n == len(frames) * (own.shape[1] - len(below))
+    b_all, a_all, _, left_all = bench.position_errors(P0, Pf, P0, frames, np.zeros_like(own))
+    assert a_all > 0.0 and left_all == 0  # the old figure: the repair of the reference's flip counted as error
+    assert np.all(bench.worst_increase(P0, Pf, P0, frames, own) == 0.0)
+
+
+def _descends(parents, k, j):
+    while k >= 0:
+        if k == j:
+            return True
+        k = parents[k]
+    return False
+
+
+def test_knee_frozen_as_it_leaves_its_clamped_extension_is_found_and_repaired(walk):
+    """CMU's knees hold full extension (the identity) exactly in every stance, a limit the
+    solver clamps to and no freeze.  A right knee frozen for 0.26 s just as it leaves that hold
+    (frames 113-143, after its hold of 89-112) holds the limit on and jumps back: the run of the
+    limit is longer than any other and ends catching up, so the part past the limit's longest
+    other hold is frozen, found on exactly the frozen frames and repaired; the clip's own holds
+    stay unflagged."""
+    j = _joint(walk, "RightLeg")
+    frames = list(range(113, 144))
+    bad = _with(walk, j, frames, hold=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fixed, report = clean(bad)
+    mine = [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightLeg"]
+    assert mine == [("frozen", 113, 143)]
+    assert not [g for g in clean(walk)[1].glitches if g.kind == "frozen"]
+    P0, Pb, Pf = walk.world_positions(), bad.world_positions(), fixed.world_positions()
+    before = np.sqrt(np.mean(np.sum((Pb[frames] - P0[frames]) ** 2, axis=-1)))
+    after = np.sqrt(np.mean(np.sum((Pf[frames] - P0[frames]) ** 2, axis=-1)))
+    assert after < 0.2 * before
+    assert np.array_equal(np.asarray(fixed.rotations)[:112], np.asarray(bad.rotations)[:112])  # the hold kept
+
+
+def test_spike_out_of_a_held_value_is_no_catch_up(walk):
+    """The bundled walk's finger holds one value from frame 1 to its end; a 2-frame spike
+    (frames 356-357) splits that hold in two runs of the same value, the first ending in a
+    jump.  The jump is the spike's (undone two frames later), not a joint catching up after
+    a freeze: only the spike is reported."""
+    j = _joint(walk, "RightHandIndex1")
+    q = Rotation.from_rotvec(np.radians(60.0) * np.array([0.0, 0.6, 0.8])).as_quat()
+    bad = _with(walk, j, [356, 357], q=q)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, report = clean(bad)
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightHandIndex1"] == [("spike", 356, 357)]

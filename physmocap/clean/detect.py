@@ -15,7 +15,9 @@ Detectors (all thresholds in :class:`CleanOptions`, in seconds and degrees, neve
   ``discontinuity`` (reported on its frame).
 * **Frozen** joints: a joint whose rotation stays exactly the same for ``frozen_time`` or
   longer while it moves before and after and the rest of the body moves meanwhile; a value
-  held in several separate runs is a limit the capture's own solver clamps to, not a freeze.
+  held in several separate runs is a limit the capture's own solver clamps to, not a freeze,
+  unless one run outlasts every other hold of it and ends with the joint catching up (a joint
+  frozen as it leaves its limit): past the limit's longest other hold, that run is frozen.
 * **Positional sources** (:mod:`.positional`): bone stretch, gaps, frozen joints and
   left/right swaps.
 * **Anatomical**: a knee, elbow, hip or trunk angle beyond its range of motion
@@ -365,7 +367,7 @@ def _held_runs(values: np.ndarray) -> tuple[list[tuple[int, int]], list[tuple]]:
 
 def _frozen(
     values: np.ndarray, step: np.ndarray, moving: np.ndarray, fps: float, opt: CleanOptions, joint: str, still: float,
-    twin_held: Sequence[tuple] = (),
+    twin_runs: Sequence[tuple[tuple[int, int], tuple]] = (), undone: frozenset[int] = frozenset(),
 ) -> list[Glitch]:
     """Runs where a joint's ``values (F, k)`` (a rotation, or a position) stay exactly the same
     while the body moves (``moving (F,)``), or that end with the joint catching up: its first
@@ -374,27 +376,39 @@ def _frozen(
     one whose value stopped updating jumps to where it had got to; steps below ``still``, per
     frame, count as that: the capture's noise floor).
 
-    A value held in several separate runs, by the joint or by its other side (``twin_held``:
-    the values :func:`_held_runs` finds on the twin joint), is a limit the capture's solver
-    clamps to (CMU's knees at full extension, the identity, in every stance), not a freeze: a
-    clip cut to one stride has one such run of each knee, and the two knees hold the same value."""
+    A value held in several separate runs, by the joint or by its other side (``twin_runs``:
+    the ``(run, value)`` pairs :func:`_held_runs` finds on the twin joint), is a limit the
+    capture's solver clamps to (CMU's knees at full extension, the identity, in every stance),
+    not a freeze: a clip cut to one stride has one such run of each knee, and the two knees hold
+    the same value.  Unless the run ends catching up and lasts longer than every other run of
+    that value: a joint that stops updating while it is held at its limit (a knee frozen just as
+    it leaves full extension) holds the limit on, and its data jumps to where it got to when it
+    comes back.  The clamp is then taken to last as long as its longest other run, and the rest
+    of the run, if ``frozen_time`` or longer, is frozen.  A jump out of the limit into a span
+    that comes back (a spike or flip of the joint starting on a frame of ``undone``) is that
+    glitch's, not a catch-up."""
     F = len(values)
     if F < 2 or np.all(values[1:] == values[:-1]):  # never animated: not a glitch
         return []
     half = max(2, int(round(opt.context_time * fps)))
     shortest = max(3, int(round(opt.frozen_time * fps)))
     runs, held = _held_runs(values)
-    clamps = list(held) + list(twin_held)
     out = []
-    for (start, e), v in zip(runs, held):
+    for i, ((start, e), v) in enumerate(zip(runs, held)):
         inside = start > 0 and e < F - 1  # moving before and after: a joint left still is not frozen
-        if clamps.count(v) > 1 or not inside or e - start + 1 < shortest:
+        if not inside or e - start + 1 < shortest:
             continue
         later = step[e + 2 : e + 2 + half]
         later = later[np.isfinite(later)]
         after = max(float(np.median(later)), still) if len(later) else np.inf
         catch_up = step[e + 1] > opt.jump_ratio * after
-        if moving[start : e + 1].mean() <= 0.5 and not catch_up:
+        clamp = [b - a + 1 for k, ((a, b), w) in enumerate(zip(runs, held)) if k != i and w == v]
+        clamp += [b - a + 1 for (a, b), w in twin_runs if w == v]
+        if clamp:  # a limit the capture clamps to: frozen only past its longest other hold, catching up
+            start += max(clamp) - 1  # the last frame of the limit's longest hold: the last good one
+            if not catch_up or e + 1 in undone or e - start + 1 < shortest:
+                continue
+        elif moving[start : e + 1].mean() <= 0.5 and not catch_up:
             continue
         out.append(Glitch("frozen", joint, int(start + 1), int(e), float((e - start) / fps), unit="s"))
     return out
@@ -461,16 +475,19 @@ def detect_glitches(motion: Motion, options: CleanOptions | None = None, mapping
         P, W = motion.forward_kinematics()
         skip = reference_exit(motion, opt, P)  # a reference pose the capture jumps away from (CMU's T-pose)
         limb = limbs(motion, np.asarray(P, dtype=float), np.asarray(W, dtype=float), animated)
+        undone: dict[int, frozenset[int]] = {}  # per joint, the first frames of its spikes and flips
         for j in animated:
-            glitches += _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
+            found = _jumps(R[:, j], fps, opt, names[j], skip, limb[j])
+            undone[j] = frozenset(g.start for g in found if g.kind in ("spike", "flip"))
+            glitches += found
         # the body moves on a frame where the median joint moves
         moving = np.median(steps[:, animated], axis=1) > opt.still_speed / fps if animated else np.zeros(len(R), bool)
         from .positional import twin_pairs  # positional imports this module
 
         twin = dict(p for a, b in twin_pairs(motion, ji) for p in ((a, b), (b, a)))
         for j in animated:
-            twin_held = _held_runs(R[:, twin[j]])[1] if j in twin else ()
-            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps, twin_held)
+            twin_runs = list(zip(*_held_runs(R[:, twin[j]]))) if j in twin else ()
+            glitches += _frozen(R[:, j], steps[:, j], moving, fps, opt, names[j], opt.still_speed / fps, twin_runs, undone[j])
     if motion.positions is not None:
         from .positional import positional_glitches
 

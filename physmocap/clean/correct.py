@@ -339,8 +339,13 @@ def _bridge(
     rotations (:class:`.regress.Regression`, ridge ``ridge``), judged on the joint's own good
     motion next to the span: each rebuilds the ``n = e - s + 1`` frames just before the span
     (leaving one frame between) and just after it as if they were glitched too
-    (:func:`_pseudo_gaps`), its error there the sum of squared rotation errors (infinite
-    where it cannot be built on one of them).  The estimates within ``blend`` times the best
+    (:func:`_pseudo_gaps`), its error there the sum over the pseudo-gaps of its squared
+    rotation errors divided by those of the joint held still at the gap's last good frame
+    before (the share of a freeze's error it leaves; infinite where it cannot be built on one
+    of them): a pseudo-gap where the joint swings widely, and every estimate is far off,
+    does not outweigh one where it moves as little as over the span (the dance's forearm
+    coming to rest, seed 4: the swing before picked the cubic, 10.7 degrees RMS off, over
+    estimates 2.1 off).  The estimates within ``blend`` times the best
     one's error are averaged (in the tangent space at the best one), weighted by the inverse
     of their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
@@ -372,12 +377,13 @@ def _bridge(
         hidden = np.zeros(F, bool)
         hidden[a : b + 1] = True
         truth = R[a : b + 1, j]
-        err[0] += np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2)
+        scale = max(float(np.sum(_angle(np.broadcast_to(R[a - 1, j], truth.shape), truth) ** 2)), 1e-12)
+        err[0] += np.sum(_angle(_hermite(R[:, j], a - 1, b + 1), truth) ** 2) / scale
         for i, est in enumerate(estimates(a, b, hidden), start=1):
             if est is None:
                 err[i] = np.inf
                 continue
-            err[i] += np.sum(_angle(est, truth) ** 2)
+            err[i] += np.sum(_angle(est, truth) ** 2) / scale
             tested[i] = True
     err[1:][~tested[1:]] = np.inf
     if not np.isfinite(err[1:]).any():

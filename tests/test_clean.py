@@ -794,3 +794,29 @@ def test_spike_out_of_a_held_value_is_no_catch_up(walk):
         warnings.simplefilter("ignore")
         _, report = clean(bad)
     assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightHandIndex1"] == [("spike", 356, 357)]
+
+
+def test_pseudo_gaps_judge_each_estimate_by_the_share_of_the_hold_it_leaves():
+    """The dance's right forearm frozen for 50 frames (240-289) as it comes to rest after a
+    swing: the pseudo-gap before the span is that 13-degree swing, where only the cubic has
+    some skill, and the one after is nearly still, like the span, where the matched and
+    regressed motion do best.  Summed as absolute errors the swing outweighs the still gap and
+    the cubic, carrying the swing's speed through the span, was chosen (7.5 degrees RMS off,
+    worse than the freeze); judged by the share of each pseudo-gap's held-pose error they
+    leave, both gaps count and the repair beats the freeze."""
+    from conftest import shared_file
+
+    from physmocap.clean.detect import _angle
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = load_motion(shared_file("cmu_05_10_dance_spins.bvh"))
+        j = _joint(m, "RightForeArm")
+        frames = list(range(240, 290))
+        bad = _with(m, j, frames, hold=True)
+        fixed, report = clean(bad)
+    assert [(g.kind, g.start, g.end) for g in report.glitches if g.joint == "RightForeArm"] == [("frozen", 240, 289)]
+    R0 = np.asarray(m.rotations)[frames, j]
+    held = np.sqrt(np.mean(_angle(np.asarray(bad.rotations)[frames, j], R0) ** 2))
+    after = np.sqrt(np.mean(_angle(np.asarray(fixed.rotations)[frames, j], R0) ** 2))
+    assert after < 0.75 * held, (after, held)

@@ -63,6 +63,9 @@ __all__ = ["PlantOptions", "PlanHints", "FootPlanter", "FootAnchor", "Planting"]
 #: rest pose before the foot counts as tipped, and the lowest point's height above the floor
 #: beyond which the foot is still coming down (:meth:`FootPlanter._follow_contact`).
 TIP_HEIGHT = 0.002
+#: Metres above the floor within which a contact site rests on it (the figures' resting
+#: height): a hold that let go softly within a contact is taken hard again there.
+RESTING_HEIGHT = 0.002
 #: Metres within the lowest that a material point of a foot still rests (its resting patch:
 #: a box's bottom edge or corner; as the figures' contact patch).
 PATCH_TIE = 0.001
@@ -260,6 +263,8 @@ class FootPlanter:
         self._prev_z: np.ndarray | None = None
         n = len(self.sites)
         self.locked = np.zeros(n, dtype=bool)
+        #: per held site, the share of its hold's cost while it lets go (1: a hard hold)
+        self.fade = np.ones(n)
         self.age = np.zeros(n, dtype=int)
         self.labelled = np.zeros(n, dtype=bool)
         #: sites neither labelled nor held this frame (they get the swing clearance)
@@ -382,6 +387,7 @@ class FootPlanter:
 
     def reset(self) -> None:
         self.locked[:] = False
+        self.fade[:] = 1.0
         self.on_corner[:] = False
         self.labelled[:] = False
         self.landed[:] = False
@@ -441,10 +447,24 @@ class FootPlanter:
             pivoting = hints is not None and hints.pivoting is not None and bool(hints.pivoting[k])
             low = min(z[k], z[k] + 2.0 * vz[k]) < band or ((rolling or pivoting) and self.locked[k])
             partner = self.locked & self._others[k]
+            fade = 1.0  # share of a hold's cost while it lets go (1: hard)
             if partner.any() and not rolling and not pivoting:  # a foot already held: its further holds, without look-ahead
                 rigid = self._rest_partners is not None and bool((partner & self._rest_partners[k]).any())
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
+                if not rigid:
+                    # held next to a held point of another segment (a ball next to a held toe
+                    # tip): the two fix the toes' bend, so the hold lets go softly as the site
+                    # rises through the release margin instead of at its top (only rising: a
+                    # foot landing on its toes keeps its holds), and never tightens again
+                    # within the contact until the site is back on the floor or its own
+                    # body comes back down (a hold taken again as the bending toes lowered
+                    # the ball 5 mm, the heel still rising, locked them again, and they
+                    # snapped at the next release; a foot rocking back onto its heel is held)
+                    mates = self._rest_partners is not None and bool(np.any(vz[self._rest_partners[k]] < 0.0))
+                    fade = 1.0 if z[k] <= RESTING_HEIGHT or mates else float(self.fade[k])
+                    if self.locked[k] and z[k] > start and vz[k] > 0.0 and opt.release_margin > 0:
+                        fade = min(fade, 1.0 - smoothstep((z[k] - start) / opt.release_margin))
             # A lock starts when a labelled site touches down (a labelled site still in
             # the air is pulled down first: holding it in the air would keep it from
             # reaching the floor).  With lock_low it lasts, label or not, until the
@@ -460,11 +480,16 @@ class FootPlanter:
                     self._follow_contact(k, data)
                 hold = self.corner[k] if self.on_corner[k] else self.xy[k]
                 hold.set_target(self.anchor[k])
+                self.fade[k] = fade
+                if hold is self.xy[k]:  # a corner hold (a rigid foot's pivot) never fades
+                    hold.set_cost(opt.cost_xy * fade)
                 # a foot turning about another held point: this one held softly (FootPlanter.turn)
-                (soft if self.turning[k] else hard).append(hold)
+                (soft if self.turning[k] or fade < 1.0 else hard).append(hold)
             else:
                 self.locked[k] = False
                 self.on_corner[k] = False
+                if not flags[k]:  # the contact is over: its next hold starts hard
+                    self.fade[k] = 1.0
             self.free[k] = not flags[k] and not engaged[k]
             self.landed[k] |= not self.free[k]
             lifting = hints is not None and hints.lifting is not None and bool(hints.lifting[k])

@@ -98,7 +98,11 @@ class PlantOptions:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
             soon as its contact begins.
-        release_margin: A held site is let go only above ``engage_height`` plus this.
+        release_margin: A held site is let go only above ``engage_height`` plus this.  A
+            site held next to a held point of another segment (a ball next to a held toe
+            tip: the two fix the toes' bend) lets go softly instead, its hold's cost fading
+            along a smoothstep as it rises through this margin above ``settle_height``
+            (:meth:`FootPlanter.update`).
         settle_height: A site whose foot is already held at a point of another segment
             (a toe tip next to a held ball) is held only while it is this close to the
             floor (metres; a hold left above it, from toes rolling, is let go until the

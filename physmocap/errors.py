@@ -47,7 +47,9 @@ class PhysmocapError(Exception):
             where = f"line {self.line}: "
         if self.frame is not None:
             where += f"frame {self.frame}: "
-        return where + self.message
+        from .resources import display_text
+
+        return display_text(where + self.message)  # the bundled clip as "example", not its installed path
 
 
 class InputError(PhysmocapError):
@@ -71,8 +73,12 @@ class PhysmocapWarning(UserWarning):
 
 
 def warn(message: str) -> None:
-    """Emit a :class:`PhysmocapWarning` (shown on stderr by default)."""
-    warnings.warn(message, PhysmocapWarning, stacklevel=2)
+    """Emit a :class:`PhysmocapWarning` (shown on stderr by default), naming the bundled clip
+    ``example`` (:func:`~physmocap.resources.display_text`)."""
+    from .resources import display_text
+
+    text = display_text(message)  # the bundled clip as "example", not its installed path
+    warnings.warn(text, PhysmocapWarning, stacklevel=2)
 
 
 def progress_enabled() -> bool:

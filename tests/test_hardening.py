@@ -996,3 +996,26 @@ def test_a_failed_rename_names_its_output(tmp_path, monkeypatch):
                     fh.write(name)
     assert str(info.value) == f"{tmp_path / 'a.txt'}: not written: {os.strerror(errno.EIO)}"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_messages_call_the_bundled_clip_example(tmp_path, capsys):
+    """Warnings, errors and the lines the commands print name the bundled clip ``example``, as
+    the user gave it, never by its place in this installation."""
+    import json
+
+    installed = str(resolve_input("example"))
+    assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--in-units", "furlong"]) == 2
+    assert _one_line(capsys).startswith("physmocap: error: example: unknown length unit 'furlong'")
+    with pytest.warns(Warning) as caught:
+        assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--end", "12", "--quiet"]) == 0
+    assert any(str(w.message).startswith("example: frame 0 looks like a reference pose") for w in caught)
+    assert main(["inspect", "example", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["file"] == "example"
+    assert main(["convert", "example", str(tmp_path / "c.bvh"), "--end", "5"]) == 0
+    assert main(["clean", "example", "--report", str(tmp_path / "g.json")]) == 0
+    out = capsys.readouterr()
+    assert "physmocap: read example:" in out.err and out.out.startswith("example: ")
+    assert json.loads((tmp_path / "g.json").read_text())["source"] == "example"
+    assert all(installed not in str(w.message) for w in caught)
+    assert installed not in out.out + out.err
+

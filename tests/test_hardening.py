@@ -1019,3 +1019,25 @@ def test_messages_call_the_bundled_clip_example(tmp_path, capsys):
     assert all(installed not in str(w.message) for w in caught)
     assert installed not in out.out + out.err
 
+
+def test_library_warnings_point_at_the_callers_line(tmp_path):
+    """A warning from a library call is attributed to the caller's line (Python's default format
+    shows that line, not physmocap's own ``warn(...)``)."""
+    script = tmp_path / "use.py"
+    script.write_text("from physmocap.ik.retarget import default_start\n"
+                      "from physmocap.sources import load_motion\n"
+                      "motion = load_motion('example')\n"
+                      "first = default_start(motion)\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert lines[0].startswith(f"{script}:4: PhysmocapWarning: example: frame 0 looks like a reference pose"), r.stderr
+    assert lines[1:] == ["  first = default_start(motion)"], r.stderr
+    from physmocap.ik.retarget import default_start
+    from physmocap.sources import load_motion
+
+    motion = load_motion("example")
+    line = sys._getframe().f_lineno + 2
+    with pytest.warns(Warning) as caught:
+        default_start(motion)
+    assert [(w.filename, w.lineno) for w in caught] == [(__file__, line)]

@@ -47,7 +47,9 @@ class PhysmocapError(Exception):
             where = f"line {self.line}: "
         if self.frame is not None:
             where += f"frame {self.frame}: "
-        return where + self.message
+        from .resources import display_text
+
+        return display_text(where + self.message)  # the bundled clip as "example", not its installed path
 
 
 class InputError(PhysmocapError):
@@ -70,9 +72,27 @@ class PhysmocapWarning(UserWarning):
     """Something was recovered from but the user should know (goes to stderr)."""
 
 
+#: This package's folder as frames name their files (as imported, and with links resolved).
+_PACKAGE_DIRS = tuple({os.path.dirname(os.path.abspath(__file__)) + os.sep,
+                       os.path.dirname(os.path.realpath(__file__)) + os.sep})
+
+
 def warn(message: str) -> None:
-    """Emit a :class:`PhysmocapWarning` (shown on stderr by default)."""
-    warnings.warn(message, PhysmocapWarning, stacklevel=2)
+    """Emit a :class:`PhysmocapWarning` (shown on stderr by default), naming the bundled clip
+    ``example`` (:func:`~physmocap.resources.display_text`).
+
+    The warning is attributed to the first caller outside physmocap (the user's line that
+    called the library), so Python's default format shows that line, not this package's
+    ``warn(...)`` call; the command line prints the message alone.
+    """
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIRS):
+        level += 1
+        frame = frame.f_back
+    from .resources import display_text
+
+    text = display_text(message)  # the bundled clip as "example", not its installed path
+    warnings.warn(text, PhysmocapWarning, stacklevel=level if frame is not None else 2)
 
 
 def progress_enabled() -> bool:

@@ -45,7 +45,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from .errors import InputError, OptionError
+from .errors import InputError, OptionError, PhysmocapError
 from .fileio import announce, atomic_open
 
 __all__ = [
@@ -415,7 +415,10 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
     :class:`~physmocap.trajectory.Trajectory` (without targets).
 
     The character is loaded from the file's ``mjcf_path`` unless ``character``
-    (a Character, a bundled name or an MJCF path) is given.
+    (a Character, a bundled name or an MJCF path) is given, with the mapping file the file
+    records (``map_path``, the retarget's ``--map``) unless ``map_path`` is given or
+    ``character`` names another model; a recorded mapping file that is missing is warned
+    about and the model's default mapping used.
     """
     from .models import load_character
     from .trajectory import Trajectory
@@ -444,6 +447,7 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
             frame=int(np.argmax(bad)),
         )
     if character is None or isinstance(character, (str, bytes)) or hasattr(character, "__fspath__"):
+        from_file = character is None
         if character is None:
             if "mjcf_path" not in data:
                 raise InputError("trajectory file names no character (mjcf_path); pass --character", path=p)
@@ -463,6 +467,8 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
                     f"the character's MJCF {character!r} named in the file does not exist; pass --character",
                     path=p,
                 )
+        if map_path is None:
+            map_path = _stored_map(data, p, character, from_file)
         character = load_character(character, map_path)
     nq = character.model.nq
     if qpos.shape[1] != nq:
@@ -480,6 +486,43 @@ def load_trajectory(path: str | os.PathLike, character=None, map_path: str | os.
     if "source_start" in data:
         traj.source_start = int(npz_number(data["source_start"], "source_start", p, 0, 2**40, integer=True))
     return traj
+
+
+def _stored_map(data: dict, path: Path, character, from_file: bool) -> str | None:
+    """The mapping file the trajectory file records (``map_path``) for loading ``character``
+    (its stored MJCF when ``from_file``, else one given): None when it records none (older
+    files, or the default mapping), when ``character`` is another model than the one it
+    stored, or, with a warning naming it and what is used instead, when the file is gone."""
+    from .errors import warn
+    from .fileio import npz_text
+    from .models.character import _find_map, _resolve
+    from .resources import mjcf_dir, resolve_portable
+
+    stored = npz_text(data["map_path"], "map_path", path) if "map_path" in data else ""
+    if not stored:
+        return None
+
+    try:
+        mjcf = _resolve(os.fsdecode(character))
+        if not from_file and "mjcf_path" in data:
+            recorded = _resolve(resolve_portable(npz_text(data["mjcf_path"], "mjcf_path", path), path.parent))
+            if mjcf.resolve() != recorded.resolve():
+                return None  # another model than the one the mapping was written for
+    except (PhysmocapError, OSError, ValueError):
+        return None  # the character is refused (or compared) when it is loaded
+    mapping = resolve_portable(stored, path.parent)
+    if Path(mapping).is_file():
+        return mapping
+    default = _find_map(mjcf, None)
+    if default is None:
+        instead = "the model's default mapping"
+    elif default.resolve().is_relative_to(mjcf_dir().resolve()):
+        instead = f"physmocap's bundled mapping {default.name}"  # not this installation's path
+    else:
+        instead = f"the mapping file {os.path.normpath(default)}"
+    warn(f"{path}: the character's mapping file {os.path.normpath(mapping)} recorded in the file is not there; "
+         f"using {instead} instead (pass --map to choose another)")
+    return None
 
 
 def _bundled_name(path: str) -> str | None:

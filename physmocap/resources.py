@@ -38,6 +38,18 @@ def resolve_input(path: str | Path) -> Path:
     return Path(path)
 
 
+def display_path(path: str | os.PathLike) -> str:
+    """How messages name a file: ``"example"`` for the bundled clip (the name the user gives,
+    not its place in this installation), any other path as it is."""
+    s = os.fspath(path)
+    return EXAMPLE_NAME if s == str(example_clip()) else s
+
+
+def display_text(text: str) -> str:
+    """``text`` (a message) with the bundled clip's installed path shown as ``"example"``."""
+    return text.replace(str(example_clip()), EXAMPLE_NAME)
+
+
 def _bundled_mjcf_names() -> dict[Path, str]:
     d = mjcf_dir()
     return {(d / f"{name}.xml").resolve(): name for name in ("humanoid", "robot") if (d / f"{name}.xml").exists()}

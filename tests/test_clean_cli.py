@@ -89,3 +89,21 @@ def test_a_flag_changes_what_is_found(tmp_path, capsys):
     assert frozen() == [("RightUpLeg", 200, 229)]
     assert frozen("--frozen-time", "0.5") == []
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("name", ["vicon_upperbody.trc", "vicon_upperbody_box.c3d"])
+def test_an_upper_body_take_is_refused_without_talk_of_a_character(tmp_path, capsys, name):
+    """``clean`` has no character: an upper-body marker take is refused because the skeleton
+    cannot be built without leg markers, not because it "cannot drive a character's legs"."""
+    from conftest import shared_file
+
+    out = tmp_path / "x.bvh"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["clean", str(shared_file(name)), "-o", str(out)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("physmocap: error:")]
+    assert len(err) == 1 and "character" not in err[0], err
+    assert (f"{shared_file(name)}: no marker on left_thigh, left_shank, left_foot, right_thigh, right_shank, "
+            "right_foot: the legs were not captured (an upper-body take?), so a full-body skeleton cannot be "
+            "built without leg markers; `physmocap solve FILE -o actor.bvh`") in err[0]
+    assert not out.exists()

@@ -996,3 +996,48 @@ def test_a_failed_rename_names_its_output(tmp_path, monkeypatch):
                     fh.write(name)
     assert str(info.value) == f"{tmp_path / 'a.txt'}: not written: {os.strerror(errno.EIO)}"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_messages_call_the_bundled_clip_example(tmp_path, capsys):
+    """Warnings, errors and the lines the commands print name the bundled clip ``example``, as
+    the user gave it, never by its place in this installation."""
+    import json
+
+    installed = str(resolve_input("example"))
+    assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--in-units", "furlong"]) == 2
+    assert _one_line(capsys).startswith("physmocap: error: example: unknown length unit 'furlong'")
+    with pytest.warns(Warning) as caught:
+        assert main(["retarget", "example", "-o", str(tmp_path / "o.bvh"), "--end", "12", "--quiet"]) == 0
+    assert any(str(w.message).startswith("example: frame 0 looks like a reference pose") for w in caught)
+    assert main(["inspect", "example", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["file"] == "example"
+    assert main(["convert", "example", str(tmp_path / "c.bvh"), "--end", "5"]) == 0
+    assert main(["clean", "example", "--report", str(tmp_path / "g.json")]) == 0
+    out = capsys.readouterr()
+    assert "physmocap: read example:" in out.err and out.out.startswith("example: ")
+    assert json.loads((tmp_path / "g.json").read_text())["source"] == "example"
+    assert all(installed not in str(w.message) for w in caught)
+    assert installed not in out.out + out.err
+
+
+def test_library_warnings_point_at_the_callers_line(tmp_path):
+    """A warning from a library call is attributed to the caller's line (Python's default format
+    shows that line, not physmocap's own ``warn(...)``)."""
+    script = tmp_path / "use.py"
+    script.write_text("from physmocap.ik.retarget import default_start\n"
+                      "from physmocap.sources import load_motion\n"
+                      "motion = load_motion('example')\n"
+                      "first = default_start(motion)\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert lines[0].startswith(f"{script}:4: PhysmocapWarning: example: frame 0 looks like a reference pose"), r.stderr
+    assert lines[1:] == ["  first = default_start(motion)"], r.stderr
+    from physmocap.ik.retarget import default_start
+    from physmocap.sources import load_motion
+
+    motion = load_motion("example")
+    line = sys._getframe().f_lineno + 2
+    with pytest.warns(Warning) as caught:
+        default_start(motion)
+    assert [(w.filename, w.lineno) for w in caught] == [(__file__, line)]

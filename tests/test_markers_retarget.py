@@ -64,7 +64,8 @@ def test_an_upper_body_take_cannot_drive_a_character_and_says_why(tmp_path, caps
         assert main(["retarget", str(shared_file(name)), "-o", str(out), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert (f"physmocap: error: {shared_file(name)}: no marker on left_thigh, left_shank, left_foot, right_thigh, "
-            "right_shank, right_foot: the legs were not captured") in err
+            "right_shank, right_foot: the legs were not captured (an upper-body take?), so they cannot drive a "
+            "character's legs") in err
     assert "Traceback" not in err and not out.exists()
 
 

@@ -291,3 +291,59 @@ def test_bad_stored_root_scale_is_one_line(tmp_path, capsys, value):
     assert main(["report", str(npz)]) == 2
     err = capsys.readouterr().err
     assert "physmocap: error:" in err and "walk.npz: 'target_scale'" in err
+
+
+def test_report_reloads_the_character_with_the_retargets_mapping_file(tmp_path, recwarn):
+    """A trajectory NPZ records the mapping file the retarget was given (``map_path``, relative
+    to the NPZ, deterministic bytes); ``report`` reloads the character with it, not with the
+    mapping found beside the model, and warns once, naming it, when it is gone."""
+    import shutil
+
+    from physmocap.resources import mjcf_dir
+
+    for d in ("chars", "maps", "out"):
+        (tmp_path / d).mkdir()
+    shutil.copy(mjcf_dir() / "robot.xml", tmp_path / "chars" / "robot.xml")
+    text = (mjcf_dir() / "robot.map.toml").read_text()
+    (tmp_path / "maps" / "mine.map.toml").write_text(text.replace('name = "robot"', 'name = "mine"'))
+    (tmp_path / "chars" / "robot.map.toml").write_text(text)  # what the model finds by itself
+    out = tmp_path / "out" / "w.npz"
+    argv = ["retarget", "example", "-o", str(out), "--character", str(tmp_path / "chars" / "robot.xml"),
+            "--map", str(tmp_path / "maps" / "mine.map.toml"), "--end", "20", "--quiet"]
+    assert main(argv) == 0
+    first = out.read_bytes()
+    assert main(argv) == 0 and out.read_bytes() == first  # the same bytes on a re-run
+    with np.load(out, allow_pickle=False) as z:
+        assert str(z["map_path"]) == "../maps/mine.map.toml" and str(z["mjcf_path"]) == "../chars/robot.xml"
+    report = tmp_path / "r.json"
+    recwarn.clear()
+    assert main(["report", str(out), "--json", str(report)]) == 0
+    assert not [w for w in recwarn if "mapping" in str(w.message)]
+    assert json.loads(report.read_text())["character"]["name"] == "mine"
+    # the same model named with --character keeps the recorded mapping; --map overrides it
+    assert main(["report", str(out), "--character", str(tmp_path / "chars" / "robot.xml"), "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["character"]["name"] == "mine"
+    assert main(["report", str(out), "--map", str(tmp_path / "chars" / "robot.map.toml"), "--json", str(report)]) == 0
+    assert json.loads(report.read_text())["character"]["name"] == "robot"
+    (tmp_path / "maps" / "mine.map.toml").unlink()
+    with pytest.warns(Warning) as caught:
+        assert main(["report", str(out), "--json", str(report)]) == 0
+    warned = [str(w.message) for w in caught]
+    assert len(warned) == 1 and f"mapping file {tmp_path / 'maps' / 'mine.map.toml'} recorded" in warned[0], warned
+    assert f"using the mapping file {tmp_path / 'chars' / 'robot.map.toml'} instead" in warned[0]
+    assert json.loads(report.read_text())["character"]["name"] == "robot"
+
+
+def test_a_trajectory_of_the_bundled_mapping_records_none(tmp_path, capsys):
+    """The default humanoid's bundled mapping is not recorded (no path into the installation);
+    a file without ``map_path`` (an older physmocap's) loads as before."""
+    out = tmp_path / "w.npz"
+    assert main(["retarget", "example", "-o", str(out), "--end", "12", "--quiet"]) == 0
+    with np.load(out, allow_pickle=False) as z:
+        assert str(z["map_path"]) == ""
+        arrays = {k: z[k] for k in z.files if k != "map_path"}
+    old = tmp_path / "old.npz"
+    np.savez(old, **arrays)
+    capsys.readouterr()
+    assert load_trajectory(old).character.name == "humanoid"
+    assert capsys.readouterr().err == ""

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from ..resources import display_path
 from .options import CleanOptions
 
 if TYPE_CHECKING:  # the detectors load scipy: imported when used (``physmocap --help`` stays fast)
@@ -119,4 +120,4 @@ def clean(
     _check_finite(motion)
     found = detect_glitches(motion, options, mapping)
     fixed, done = correct_glitches(motion, found, options, resolve=resolve, mapping=mapping)
-    return fixed, GlitchReport(str(motion.source), motion.num_frames, float(motion.fps), tuple(done))
+    return fixed, GlitchReport(display_path(motion.source), motion.num_frames, float(motion.fps), tuple(done))

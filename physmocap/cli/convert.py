@@ -14,6 +14,7 @@ import argparse
 import sys
 
 from ..errors import OptionError
+from ..resources import display_path
 
 
 def register(subparsers) -> None:  # noqa: ANN001
@@ -104,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     F = motion.num_frames
     ends = int(motion.skeleton.end_site.sum())
     print(
-        f"physmocap: read {motion.source}: {F} frames at {motion.fps:.6g} fps, "
+        f"physmocap: read {display_path(motion.source)}: {F} frames at {motion.fps:.6g} fps, "
         f"{motion.skeleton.num_joints - ends} joints and {ends} end sites, units {motion.units}, {motion.file_up}-up",
         file=sys.stderr,
     )

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..canonical import CANONICAL_JOINTS, CANONICAL_NAMES, REQUIRED_JOINTS
 from ..errors import MappingError, OptionError, warn
+from ..resources import display_path
 
 __all__ = ["register", "run", "describe"]
 
@@ -105,7 +106,7 @@ def describe(motion, jmap) -> dict[str, Any]:
     height = float(z.max() - z.min()) if z.size else 0.0
     prof = PROFILES.get(jmap.based_on or jmap.profile)
     return {
-        "file": motion.source,
+        "file": display_path(motion.source),  # the bundled clip as "example"
         "format": motion.meta.get("format") if isinstance(motion.meta, dict) else None,
         "kind": "rotational" if motion.is_rotational else "positional",
         "frames": motion.num_frames,

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OptionError
+from ..resources import display_path
 from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_writable
 
 
@@ -108,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
     # the first frame calibrates and converges from the rest pose: reported on its own
     lat = all_lat[1:] if processed > 1 else all_lat
     stats = {
-        "recording": str(motion.source),
+        "recording": display_path(motion.source),
         "character": str(character.name),
         "frames": F,
         "fps": float(motion.fps),
@@ -135,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
         d = np.linalg.norm(a[:, 1:] - b[:, 1:], axis=-1) * 100.0
         stats["offline_difference_cm"] = {"mean": float(d.mean()), "p95": float(np.percentile(d, 95)), "max": float(d.max())}
     print(
-        f"replayed {processed}/{F} frames of {motion.source} onto {character.name} ({stats['mode']}): "
+        f"replayed {processed}/{F} frames of {display_path(motion.source)} onto {character.name} ({stats['mode']}): "
         f"latency median {stats['latency_ms']['median']:.2f} ms, p99 {stats['latency_ms']['p99']:.2f} ms, "
         f"max {stats['latency_ms']['max']:.1f} ms (first frame {stats['latency_ms']['first_frame']:.0f} ms); "
         f"dropped frames {dropped}; {stats['throughput_fps']:.0f} frames/s"

@@ -337,7 +337,13 @@ def retarget_from_args(args: argparse.Namespace):
     check_option_files(args)  # here, not in config_from_args: a batch manifest's missing file fails its own job
     read_opts = {"units": args.in_units} if args.in_units else {}
     read_opts.update(marker_read_options(args))
-    motion = cleaned_source(load_motion(args.input, min_frames=1, **read_opts), args)
+    from ..markers.motion import LegsNotCapturedError
+
+    try:
+        motion = load_motion(args.input, min_frames=1, **read_opts)
+    except LegsNotCapturedError as exc:
+        raise exc.for_character() from None  # an upper-body take: say what it means for the character
+    motion = cleaned_source(motion, args)
     character = load_character(args.character, args.map)
     return retarget(
         motion,

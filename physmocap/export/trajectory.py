@@ -16,6 +16,10 @@ NPZ contents (all plain arrays, loadable with ``np.load(path)`` and
 ``quat_convention`` ``"wxyz"``
 ``mjcf_path``       the character's MJCF file: a bundled character's name, or the
                     path relative to the NPZ's folder
+``map_path``        the character's mapping file, relative to the NPZ's folder;
+                    ``""`` when none was used or it is the bundled one the MJCF
+                    finds by itself (``physmocap report`` reloads the character
+                    with it unless given ``--map``)
 ``character``       the character's name
 ``source``          the input motion: ``example``, or its path relative to the NPZ's folder
 ``source_start``    the source frame the trajectory's frame 0 came from
@@ -166,11 +170,30 @@ def trajectory_arrays(traj: Trajectory, base: Path | None = None) -> dict[str, "
         "joint_qposadr": model.jnt_qposadr.astype(np.int64),
         "quat_convention": np.array("wxyz"),
         "mjcf_path": np.array(portable_path(ch.mjcf_path, base)),
+        "map_path": np.array(stored_map_path(ch, base)),
         "character": np.array(str(ch.name)),
         "source": np.array(portable_path(traj.source, base)),
         "source_start": np.int64(traj.source_start),
         **target_arrays(traj.targets),
     }
+
+
+def stored_map_path(character, base: Path) -> str:
+    """How a trajectory NPZ names the character's mapping file (its ``map_path``): ``""`` for
+    none (the model's own names or a proposed mapping) or for the mapping bundled with physmocap
+    that the MJCF finds without ``--map``; else the file's path relative to ``base`` (the NPZ's
+    folder), so no absolute path of this machine enters the file."""
+    from ..models.character import _find_map
+    from ..resources import mjcf_dir, portable_path
+
+    given = getattr(character, "map_path", None)
+    if given is None:
+        return ""
+    mp = Path(given).resolve()
+    found = _find_map(Path(character.mjcf_path), None)
+    if found is not None and found.resolve() == mp and mp.is_relative_to(mjcf_dir().resolve()):
+        return ""
+    return portable_path(given, base)
 
 
 def target_arrays(targets) -> "dict[str, np.ndarray | ArrayBlocks]":

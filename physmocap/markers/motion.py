@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..motion import Motion
 from .functional import functional_joint_centres, warn_fallbacks
 from .joints import up_axis, warn_unused
@@ -18,7 +19,7 @@ from .recording import MarkerRecording
 if TYPE_CHECKING:
     from .solve import MarkerSolveOptions
 
-__all__ = ["marker_motion", "solved_motion", "check_legs", "LEG_SEGMENTS"]
+__all__ = ["marker_motion", "solved_motion", "check_legs", "LegsNotCapturedError", "LEG_SEGMENTS"]
 
 #: Segments a solved actor needs markers on before it is handed to the retargeter: without
 #: them its legs would hang in the rest pose under a moving pelvis, and the character's feet
@@ -89,19 +90,33 @@ def marker_motion(rec: MarkerRecording, marker_set: str | os.PathLike | None = N
     return motion
 
 
+class LegsNotCapturedError(InputError):
+    """A marker recording with no marker on the leg ``segments``: the full-body actor is not
+    solved from it.  The message says what follows for the command at hand: by default that
+    the skeleton cannot be built; :meth:`for_character` (retargeting) that the take cannot
+    drive a character's legs."""
+
+    def __init__(self, segments, path=None, consequence: str = "a full-body skeleton cannot be built without "
+                 "leg markers") -> None:
+        self.segments = tuple(segments)
+        super().__init__(f"no marker on {', '.join(self.segments)}: the legs were not captured (an upper-body "
+                         f"take?), so {consequence}; `physmocap solve FILE -o actor.bvh` solves the captured "
+                         "part alone", path=path)
+
+    def for_character(self) -> "LegsNotCapturedError":
+        """The same refusal as a retarget states it: the take cannot drive a character's legs."""
+        return LegsNotCapturedError(self.segments, self.path, "they cannot drive a character's legs")
+
+
 def check_legs(rec: MarkerRecording, ms: MarkerSet) -> None:
-    """An :class:`~physmocap.errors.InputError` naming the leg segments (:data:`LEG_SEGMENTS`)
-    that no marker of the recording is on (by role or label hint:
-    :func:`.functional.segment_markers`): an upper-body take cannot drive a character's legs."""
-    from ..errors import InputError
+    """A :class:`LegsNotCapturedError` naming the leg segments (:data:`LEG_SEGMENTS`) that no
+    marker of the recording is on (by role or label hint: :func:`.functional.segment_markers`)."""
     from .functional import segment_markers
 
     have = set(segment_markers(rec, ms).values())
     bare = [s for s in LEG_SEGMENTS if s not in have]
     if bare:
-        raise InputError(f"no marker on {', '.join(bare)}: the legs were not captured (an upper-body take?), so "
-                         "they cannot drive a character's legs; `physmocap solve FILE -o actor.bvh` solves the "
-                         "captured part alone", path=rec.source)
+        raise LegsNotCapturedError(bare, rec.source)
 
 
 def solved_motion(rec: MarkerRecording, marker_set: str | os.PathLike | MarkerSet | None = None,

@@ -42,6 +42,7 @@ character's world (Z-up, floor at ``floor``).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -223,12 +224,16 @@ class PlanHints:
             labelled whatever its height (pulled down only softly, it may rise: let go
             2 cm up while its label still held the foot, the PyMO walk's robot foot slid
             3.3 cm in one frame).  None: no such site.
+        bending: The site's foot's toe targets bend up on this frame (the toe segment's
+            pitch above the foot's grows): a ball held next to its held toe tip may let go
+            softly (:meth:`FootPlanter.update`).  None: unknown (never lets go softly).
     """
 
     rolling: np.ndarray
     holdable: np.ndarray
     lifting: np.ndarray | None = None
     pivoting: np.ndarray | None = None
+    bending: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -458,16 +463,19 @@ class FootPlanter:
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
                 if not rigid:
                     # held next to a held point of another segment (a ball next to a held toe
-                    # tip): the two fix the toes' bend, so the hold lets go softly as the site
-                    # rises through the release margin instead of at its top (only rising: a
-                    # foot landing on its toes keeps its holds), and never tightens again
+                    # tip): the two fix the toes' bend, so while the toe targets bend up the
+                    # hold lets go softly as the site rises through the release margin instead
+                    # of at its top (only rising: a foot landing on its toes keeps its holds;
+                    # only bending: a foot lifting with its toes flexing down let its toes
+                    # kink up against the actor's), and never tightens again
                     # within the contact until the site is back on the floor or its own
                     # body comes back down (a hold taken again as the bending toes lowered
                     # the ball 5 mm, the heel still rising, locked them again, and they
                     # snapped at the next release; a foot rocking back onto its heel is held)
                     mates = self._rest_partners is not None and bool(np.any(vz[self._rest_partners[k]] < 0.0))
                     fade = 1.0 if z[k] <= RESTING_HEIGHT or mates else float(self.fade[k])
-                    if self.locked[k] and z[k] > start and vz[k] > 0.0 and opt.release_margin > 0:
+                    bending = hints is not None and hints.bending is not None and bool(hints.bending[k])
+                    if self.locked[k] and z[k] > start and vz[k] > 0.0 and bending and opt.release_margin > 0:
                         fade = min(fade, 1.0 - smoothstep((z[k] - start) / opt.release_margin))
             # A lock starts when a labelled site touches down (a labelled site still in
             # the air is pulled down first: holding it in the air would keep it from
@@ -664,6 +672,11 @@ class Planting:
         self.anchored = bool(anchored)
         self.character = character
         self.names = tuple(names)
+        #: side -> the target columns of its ankle, toe and toe end (the toes' bend, PlanHints.bending)
+        self._bend_columns = {side: tuple(self.names.index(f"{side}_{j}") for j in ("ankle", "toe", "toe_end"))
+                              for side in ("left", "right")
+                              if all(f"{side}_{j}" in self.names for j in ("ankle", "toe", "toe_end"))}
+        self._last_bend: dict[str, float] = {}
         model = character.model
         self.sites = [s for side in ("left", "right") for s in character.contacts.get(side, ())]
         self.site_label = {}
@@ -953,6 +966,21 @@ class Planting:
             if turns.get(side, 0.0) != 0.0:
                 self.locks.turn(s, turns[side])
 
+    def _toes_bending(self, positions: np.ndarray, first: bool) -> dict[str, bool]:
+        """Side -> whether its toe targets bend up on this frame: the pitch of ``toe ->
+        toe_end`` above that of ``ankle -> toe`` grows from the previous frame's (False on
+        the first frame, and for a foot without the three targets)."""
+        if first:
+            self._last_bend.clear()
+        out = {}
+        for side, (a, t, e) in self._bend_columns.items():
+            foot, toes = positions[t] - positions[a], positions[e] - positions[t]
+            bend = math.atan2(toes[2], math.hypot(toes[0], toes[1])) - math.atan2(foot[2], math.hypot(foot[0], foot[1]))
+            last = self._last_bend.get(side)
+            out[side] = last is not None and bend > last
+            self._last_bend[side] = bend
+        return out
+
     @staticmethod
     def _xy(data: mujoco.MjData, ref: tuple[str, int]) -> np.ndarray:
         kind, i = ref
@@ -987,8 +1015,10 @@ class Planting:
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
             waiting = toe & heel & self._toe_segment
+            bending = self._toes_bending(positions, first)
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
-                              pivoting=toes_only & self._pivot)
+                              pivoting=toes_only & self._pivot,
+                              bending=np.array([bending.get(side, False) for side in self._site_side], dtype=bool))
             self._turn_holds(positions, orientations, valid, data)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only

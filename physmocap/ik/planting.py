@@ -394,6 +394,31 @@ class FootPlanter:
         self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
         self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
 
+    def _release_share(self, k: int, z: float, vz: np.ndarray, start: float, hints: "PlanHints | None") -> float:
+        r"""The share of ``cost_xy`` that holds site ``k`` on this frame, 1 (hard) -> 0: for a site
+        held next to a held point of another segment (a ball next to a held toe tip), whose two
+        holds fix the toes' bend.
+
+        While the foot's toe targets bend up (``hints.bending``) and the site rises (``vz``,
+        metres this frame) above ``start`` (metres over the floor ``z``), the hold lets go softly,
+        :math:`1 - \operatorname{smoothstep}((z - start) / \text{release\_margin})`, instead of at
+        once at the top of the margin (where the toes caught up at their velocity cap: the CMU
+        walk's right toe, three frames).  Only rising: a foot landing on its toes keeps its
+        holds; only bending: a foot lifting with its toes flexing down let them kink up against
+        the actor's (the Bandai punch).  The share never grows again within the contact (a hold
+        taken hard again as the bending toes lowered the ball 5 mm locked them again, and they
+        snapped at the next release) until the site is back on the floor
+        (:data:`RESTING_HEIGHT`) or its own body comes back down (a foot rocking back onto its
+        heel is held).
+        """
+        opt = self.options
+        mates = self._rest_partners is not None and bool(np.any(vz[self._rest_partners[k]] < 0.0))
+        share = 1.0 if z <= RESTING_HEIGHT or mates else float(self.fade[k])
+        bending = hints is not None and hints.bending is not None and bool(hints.bending[k])
+        if self.locked[k] and z > start and vz[k] > 0.0 and bending and opt.release_margin > 0:
+            share = min(share, 1.0 - smoothstep((z - start) / opt.release_margin))
+        return share
+
     def reset(self) -> None:
         self.locked[:] = False
         self.fade[:] = 1.0
@@ -462,21 +487,7 @@ class FootPlanter:
                 start = opt.engage_height if rigid else min(opt.settle_height, opt.engage_height)
                 low = z[k] < start + (opt.release_margin if self.locked[k] else 0.0)
                 if not rigid:
-                    # held next to a held point of another segment (a ball next to a held toe
-                    # tip): the two fix the toes' bend, so while the toe targets bend up the
-                    # hold lets go softly as the site rises through the release margin instead
-                    # of at its top (only rising: a foot landing on its toes keeps its holds;
-                    # only bending: a foot lifting with its toes flexing down let its toes
-                    # kink up against the actor's), and never tightens again
-                    # within the contact until the site is back on the floor or its own
-                    # body comes back down (a hold taken again as the bending toes lowered
-                    # the ball 5 mm, the heel still rising, locked them again, and they
-                    # snapped at the next release; a foot rocking back onto its heel is held)
-                    mates = self._rest_partners is not None and bool(np.any(vz[self._rest_partners[k]] < 0.0))
-                    fade = 1.0 if z[k] <= RESTING_HEIGHT or mates else float(self.fade[k])
-                    bending = hints is not None and hints.bending is not None and bool(hints.bending[k])
-                    if self.locked[k] and z[k] > start and vz[k] > 0.0 and bending and opt.release_margin > 0:
-                        fade = min(fade, 1.0 - smoothstep((z[k] - start) / opt.release_margin))
+                    fade = self._release_share(k, float(z[k]), vz, start, hints)
             # A lock starts when a labelled site touches down (a labelled site still in
             # the air is pulled down first: holding it in the air would keep it from
             # reaching the floor).  With lock_low it lasts, label or not, until the

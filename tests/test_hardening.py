@@ -1041,3 +1041,18 @@ def test_library_warnings_point_at_the_callers_line(tmp_path):
     with pytest.warns(Warning) as caught:
         default_start(motion)
     assert [(w.filename, w.lineno) for w in caught] == [(__file__, line)]
+
+
+def test_the_cli_gives_pythons_warning_format_back_when_it_returns(capsys):
+    """``physmocap.cli.main`` prints warnings as ``physmocap: warning: ...`` while it runs and
+    leaves a calling program's warning format as it found it."""
+    import warnings
+
+    from physmocap.cli import main
+
+    before = warnings.formatwarning
+    assert main(["character", "info", "humanoid"]) == 0
+    assert warnings.formatwarning is before
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert warnings.formatwarning is before

@@ -67,8 +67,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``physmocap`` console script."""
+    """Entry point of the ``physmocap`` console script.  Warnings print as
+    ``physmocap: warning: ...`` while it runs; Python's own format is back when it returns
+    (a program that calls it keeps its warnings as they were)."""
+    previous = warnings.formatwarning
     warnings.formatwarning = _format_warning
+    try:
+        return _run(argv)
+    finally:
+        warnings.formatwarning = previous
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -49,6 +49,7 @@ from typing import Mapping, Sequence
 import mujoco
 import numpy as np
 
+from ..metrics.fidelity import RESTING_HEIGHT  # a hold that let go softly is taken hard again within it
 from ..models.geometry import character_geoms, foot_bodies, geom_candidates
 from ..errors import OptionError
 from ..options import check_fields
@@ -64,9 +65,6 @@ __all__ = ["PlantOptions", "PlanHints", "FootPlanter", "FootAnchor", "Planting"]
 #: rest pose before the foot counts as tipped, and the lowest point's height above the floor
 #: beyond which the foot is still coming down (:meth:`FootPlanter._follow_contact`).
 TIP_HEIGHT = 0.002
-#: Metres above the floor within which a contact site rests on it (the figures' resting
-#: height): a hold that let go softly within a contact is taken hard again there.
-RESTING_HEIGHT = 0.002
 #: Metres within the lowest that a material point of a foot still rests (its resting patch:
 #: a box's bottom edge or corner; as the figures' contact patch).
 PATCH_TIE = 0.001

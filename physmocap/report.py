@@ -495,7 +495,7 @@ def _stored_map(data: dict, path: Path, character, from_file: bool) -> str | Non
     stored, or, with a warning naming it and what is used instead, when the file is gone."""
     from .errors import warn
     from .fileio import npz_text
-    from .models.character import _find_map, _resolve
+    from .models.character import character_file, default_map_file
     from .resources import mjcf_dir, resolve_portable
 
     stored = npz_text(data["map_path"], "map_path", path) if "map_path" in data else ""
@@ -503,9 +503,9 @@ def _stored_map(data: dict, path: Path, character, from_file: bool) -> str | Non
         return None
 
     try:
-        mjcf = _resolve(os.fsdecode(character))
+        mjcf = character_file(os.fsdecode(character))
         if not from_file and "mjcf_path" in data:
-            recorded = _resolve(resolve_portable(npz_text(data["mjcf_path"], "mjcf_path", path), path.parent))
+            recorded = character_file(resolve_portable(npz_text(data["mjcf_path"], "mjcf_path", path), path.parent))
             if mjcf.resolve() != recorded.resolve():
                 return None  # another model than the one the mapping was written for
     except (PhysmocapError, OSError, ValueError):
@@ -513,7 +513,7 @@ def _stored_map(data: dict, path: Path, character, from_file: bool) -> str | Non
     mapping = resolve_portable(stored, path.parent)
     if Path(mapping).is_file():
         return mapping
-    default = _find_map(mjcf, None)
+    default = default_map_file(mjcf)
     if default is None:
         instead = "the model's default mapping"
     elif default.resolve().is_relative_to(mjcf_dir().resolve()):

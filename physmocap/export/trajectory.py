@@ -183,14 +183,14 @@ def stored_map_path(character, base: Path) -> str:
     none (the model's own names or a proposed mapping) or for the mapping bundled with physmocap
     that the MJCF finds without ``--map``; else the file's path relative to ``base`` (the NPZ's
     folder), so no absolute path of this machine enters the file."""
-    from ..models.character import _find_map
+    from ..models.character import default_map_file
     from ..resources import mjcf_dir, portable_path
 
     given = getattr(character, "map_path", None)
     if given is None:
         return ""
     mp = Path(given).resolve()
-    found = _find_map(Path(character.mjcf_path), None)
+    found = default_map_file(character.mjcf_path)
     if found is not None and found.resolve() == mp and mp.is_relative_to(mjcf_dir().resolve()):
         return ""
     return portable_path(given, base)

@@ -38,6 +38,7 @@ __all__ = [
     "TrackedFrame",
     "load_character",
     "character_file",
+    "default_map_file",
     "bundled_characters",
     "DEFAULT_CHARACTER",
     "CHARACTER_REQUIRED",
@@ -136,6 +137,13 @@ def character_file(path: str | os.PathLike | None) -> Path:
     bundled character by name, else ``path`` itself (not checked to exist); InputError for
     a name that is no bundled character."""
     return _resolve(path)
+
+
+def default_map_file(mjcf: str | os.PathLike) -> Path | None:
+    """The mapping file ``load_character(mjcf)`` reads without a given one: ``NAME.map.toml``
+    beside the model (or its scene's), else one bundled with physmocap for that model's file
+    name; None where there is none (the model's own names, or a proposed mapping)."""
+    return _find_map(Path(mjcf), None)
 
 
 def _resolve(path: str | os.PathLike | None) -> Path:

@@ -142,7 +142,7 @@ def test_the_stream_follows_the_actor_on_a_second_vendor():
 
     motion = load_motion(shared_file("pymo_walk.bvh"))
     traj = stream_motion(motion, load_character())
-    traj.source_motion, traj.joint_indices = motion, map_motion(motion)
+    assert traj.source_motion is motion and traj.joint_indices == map_motion(motion)  # carried by the stream
     fid = trajectory_fidelity(traj, floor_contact=False)
     arms = ("left_upper_arm", "right_upper_arm", "left_forearm", "right_forearm")
     assert max(fid.segments[s].median_deg for s in arms) < 8.0, {s: fid.segments[s].median_deg for s in arms}
@@ -164,7 +164,24 @@ def test_a_streamed_toe_lets_go_when_the_actor_s_toe_moves_off(walk):
     from physmocap.models import load_character
 
     traj = stream_motion(walk, load_character())
-    traj.source_motion, traj.joint_indices = walk, map_motion(walk)
+    assert traj.joint_indices == map_motion(walk)
     fid = trajectory_fidelity(traj, floor_contact=False)
     assert fid.worst_segment_median_deg < 8.0, fid.worst_segment_median_deg
     assert fid.facing_p95_deg < 3.0
+
+
+def test_fidelity_of_a_trajectory_without_its_source_is_a_clear_error(walk):
+    """Before: ``trajectory_fidelity`` of a streamed trajectory died on ``None.items()``
+    (stream_motion did not keep the motion and mapping it retargeted); now the stream keeps
+    them, and a trajectory without them is one ValueError naming what is missing."""
+    import dataclasses
+
+    from physmocap.ik.stream import stream_motion
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+
+    traj = stream_motion(walk.slice_frames(0, 60), load_character())
+    assert trajectory_fidelity(traj, floor_contact=False).facing_p95_deg < 10.0
+    bare = dataclasses.replace(traj, source_motion=None)
+    with pytest.raises(ValueError, match="source_motion and joint_indices"):
+        trajectory_fidelity(bare)

@@ -327,6 +327,8 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
         fps=motion.fps,
         source=motion.source,
         contacts=Contacts(labels=labels, fps=motion.fps, source="streamed") if labels else None,
+        source_motion=motion,
+        joint_indices=retargeter.joint_indices,
         solver=SolverStats(
             iterations=np.array(retargeter.iterations, dtype=np.int32),
             relaxation=np.array(retargeter.relaxations, dtype=np.int8),

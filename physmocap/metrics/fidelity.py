@@ -684,6 +684,11 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     """:func:`fidelity` of a retargeted trajectory against the source it was retargeted from."""
     motion = traj.source_motion
     joints = traj.joint_indices
+    if motion is None or joints is None:
+        raise ValueError(
+            f"{traj.source}: the trajectory does not carry the motion it was retargeted from "
+            "(source_motion and joint_indices): fidelity compares the two"
+        )
     used = figure_joints()
     actor = actor_joint_positions(motion, joints, used)
     character = character_joint_positions(traj, used)

@@ -1,4 +1,4 @@
-r"""Turning a planted foot towards its target heading (offline planting).
+r"""Turning a planted foot towards its target heading (offline and streaming planting).
 
 Two held contact points fix a foot's heading.  Held where it landed, a foot keeps
 whatever heading error its swing ended with, and it keeps it while the actor pivots

@@ -17,6 +17,9 @@ combined by :class:`Planting`:
     it moves: that is what keeps the stance-band speed near zero;
   - offline, a rigid foot tipped onto one corner of its edge is held on that corner
     (:meth:`FootPlanter._follow_contact`);
+  - a foot held at two points or more turns its holds towards the actor's foot heading
+    (:mod:`.footturn`, :meth:`FootPlanter.turn`) about its most distal held point resting
+    on the floor, so an actor pivoting on a planted foot is followed;
   - sites of a foot that is neither labelled nor held get a swing clearance
     (a hard inequality, :class:`~physmocap.ik.limits.FloorLimit`), so a swing
     foot does not skim, and slide within, the stance band.
@@ -131,7 +134,7 @@ class PlantOptions:
             its front edge, a tenth of ``cost_z``: without it the foot could tip
             onto its side edge instead of pitching (measured on the bundled robot:
             25 degrees of roll, its ankle roll limit, and 11 cm/s of slip).
-        pivot_threshold: Offline only: radians a foot held at two points may be off its
+        pivot_threshold: Radians a foot held at two points may be off its
             target heading before its holds turn (:mod:`.footturn`: beyond it they follow
             the target's heading, so an actor pivoting on a planted foot is followed; within
             it the difference is taken as the capture's drift and the foot stays put).  2
@@ -141,8 +144,10 @@ class PlantOptions:
             robot's facing on the jumps' turn p95 8.3 -> 5.8) with the feet's slip about
             the same (heels swivel more about the ball: the PyMO walk's geom slip 1.3 ->
             2.1 cm/s); against 0 it keeps the walks' heels from swivelling with every
-            degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).
-        heading_rate: Offline only: radians per second at which a held foot's heading
+            degree of drift (PyMO geom slip 2.1 against 3.2 cm/s).  Streaming uses 10
+            degrees (:data:`~physmocap.ik.stream.STREAMING_DEFAULTS`: it cannot tell a
+            wobble from the start of a pivot).
+        heading_rate: Radians per second at which a held foot's heading
             error beyond ``pivot_threshold`` that the target's own turning does not explain
             (a foot caught off its heading as it landed) is taken out (:mod:`.footturn`).
         smooth_transitions: Offline only: retarget once more with the joints pulled towards
@@ -369,14 +374,15 @@ class FootPlanter:
             self.anchor[k, :2] = patch[:2]
             self.on_corner[k] = True
 
-    def turn(self, foot: int, angle: float) -> None:
+    def turn(self, foot: int, angle: float, heights: np.ndarray | None = None, labelled: np.ndarray | None = None) -> None:
         r"""Turn the holds of ``foot`` by ``angle`` radians about the vertical axis.
 
         Two held points of one foot fix its heading, so a foot the plan turns
         while it is planted (an actor pivoting on a flat foot) would stay where it
         landed and swing round in one frame when a point is let go.  Its holds are
-        turned with the plan instead, about the foot's last held point (the most
-        distal: a foot pivots on its toes), :math:`a_k \leftarrow p + R_z(\alpha)(a_k - p)`.
+        turned with the plan instead, about the foot's most distal held point resting on the
+        floor (:meth:`_pivot_site`: a flat foot pivots on its toes, one rocked back on its heel
+        on the heel), :math:`a_k \leftarrow p + R_z(\alpha)(a_k - p)`.
         Nothing happens with fewer than two points held (one point does not fix the heading).
         The turned points other than the pivot are held softly on this frame (``cost_xy``):
         a hard hold turned where the leg cannot follow at once (a hip rotation at its
@@ -385,12 +391,32 @@ class FootPlanter:
         held = np.flatnonzero(self.locked & (self.feet == foot))
         if held.size < 2 or angle == 0.0:
             return
-        self.turning[held[:-1]] = True
-        pivot = self.anchor[held[-1], :2].copy()
+        k = self._pivot_site(held, heights, labelled)
+        self.turning[held[held != k]] = True
+        pivot = self.anchor[k, :2].copy()
         c, s = np.cos(angle), np.sin(angle)
         d = self.anchor[held, :2] - pivot
         self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
         self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
+
+    def heights(self, data: mujoco.MjData) -> np.ndarray:
+        """``(n,)`` metres: every contact site's height over the floor in ``data``."""
+        return data.site_xpos[self._site_ids, 2] - self.floor
+
+    def _pivot_site(self, held: np.ndarray, heights: np.ndarray | None, labelled: np.ndarray | None) -> int:
+        """The held site a foot turns about: of its held sites labelled in contact (``labelled``,
+        every site's label this frame; all held sites if none is), the most distal of those
+        resting on the floor (``heights``: every site's height over the floor now, metres; within
+        :data:`RESTING_HEIGHT` of the lowest of them).  A foot rocked back on its heel, its ball
+        still held (the hold outlasts its label until the ball lifts clear), turns about its
+        heel rather than swinging the heel across the floor.  Without heights: the most distal
+        held site."""
+        if labelled is not None and labelled[held].any():
+            held = held[labelled[held]]
+        if heights is None:
+            return int(held[-1])
+        z = heights[held]
+        return int(held[np.flatnonzero(z <= z.min() + RESTING_HEIGHT)[-1]])
 
     def _release_share(self, k: int, z: float, vz: np.ndarray, start: float, hints: "PlanHints | None") -> float:
         r"""The share of ``cost_xy`` that holds site ``k`` on this frame, 1 (hard) -> 0: for a site
@@ -468,7 +494,7 @@ class FootPlanter:
         hard: list[SitePositionTask | BodyPointTask] = []
         if not opt.plant:
             return soft, hard, engaged
-        z = data.site_xpos[self._site_ids, 2] - self.floor
+        z = self.heights(data)
         vz = np.zeros(n) if self._prev_z is None else z - self._prev_z
         self._prev_z = z
         for k, task in enumerate(self.tasks):
@@ -758,7 +784,7 @@ class Planting:
         self._has_orientation = (np.zeros(len(self.names), dtype=bool) if has_orientation is None
                                  else np.asarray(has_orientation, dtype=bool))
         #: offline: turns a foot held at two points towards its target heading (:mod:`.footturn`)
-        self._turner = None if self.anchored else self._heading_follower(character)
+        self._turner = self._heading_follower(character)
 
     def _rest_distances(self, character) -> np.ndarray:
         """``(n, n)`` horizontal rest-pose distances between contact sites on the same body
@@ -965,15 +991,16 @@ class Planting:
                                opt.heading_rate, HEADING_PITCH, legs)
 
     def _turn_holds(self, positions: np.ndarray, orientations: np.ndarray | None, valid: np.ndarray | None,
-                    data: mujoco.MjData) -> None:
+                    data: mujoco.MjData, labelled: np.ndarray | None = None) -> None:
         """Turn each foot's holds towards its target heading (:class:`~.footturn.HeadingFollower`,
         :meth:`FootPlanter.turn`)."""
         legs = {side: np.array([data.site_xpos[i] if site else data.xpos[i] for site, i in frames])
                 for side, frames in self._leg_frames.items()}
         turns = self._turner.turns(positions, orientations, valid, self.locks.locked, self.locks.anchor, legs)
+        heights = self.locks.heights(data)
         for s, side in enumerate(("left", "right")):
             if turns.get(side, 0.0) != 0.0:
-                self.locks.turn(s, turns[side])
+                self.locks.turn(s, turns[side], heights, labelled)
 
     def _toes_bending(self, positions: np.ndarray, first: bool) -> dict[str, bool]:
         """Side -> whether its toe targets bend up on this frame: the pitch of ``toe ->
@@ -1028,7 +1055,9 @@ class Planting:
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
                               pivoting=toes_only & self._pivot,
                               bending=np.array([bending.get(side, False) for side in self._site_side], dtype=bool))
-            self._turn_holds(positions, orientations, valid, data)
+            self._turn_holds(positions, orientations, valid, data, flags)
+        if self.anchored:  # a stream turns its held feet with the actor's as offline does
+            self._turn_holds(positions, orientations, valid, data, flags)
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

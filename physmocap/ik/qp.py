@@ -249,15 +249,17 @@ class QPBuilder:
             )
             cost = np.concatenate([t.cost for t in tasks])
             sites = [t.site_id for t in tasks]
+            # flat indices (a 1-D take is the cheapest gather): the rows' Jacobian rows in the
+            # (tasks, 3, nv) buffer seen as (3 * tasks, nv), and their coordinates in site_xpos;
             # the tasks are kept so that their ids stay theirs until new_frame
-            plan = self._site_plans[key] = (tuple(tasks), owner, axes, row_sites, sites, target, gain, cost)
-        _, owner, axes, row_sites, sites, target, gain, cost = plan
+            plan = self._site_plans[key] = (tuple(tasks), 3 * owner + axes, 3 * row_sites + axes, sites, target, gain, cost)
+        _, jac_rows, xpos_at, sites, target, gain, cost = plan
         jac, model = self._jacS, self.model
         if len(sites) > len(jac):
             jac = self._jacS = np.zeros((max(len(sites), 2 * len(jac)), 3, self.nv))
         for j, sid in enumerate(sites):
             mujoco.mj_jacSite(model, data, jac[j], None, sid)
-        return jac[owner, axes], gain * (data.site_xpos[row_sites, axes] - target), cost
+        return jac.reshape(-1, self.nv).take(jac_rows, axis=0), gain * (data.site_xpos.take(xpos_at) - target), cost
 
     def objective(
         self,

@@ -682,7 +682,7 @@ class FloorLimit(mink.Limit):
         return plan
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _RowsPlan:
     """What :meth:`FloorLimit.compute_qp_inequalities` reads for a set of active points, apart
     from the pose: the number of geom candidates among them, the candidates'

@@ -214,6 +214,35 @@ def test_floor_and_self_collision_rows_match_point_by_point(name, seed):
             np.testing.assert_allclose(con.h, h, rtol=0, atol=1e-15)
 
 
+def test_floor_rows_follow_the_frames_clearances_and_the_pose():
+    """The floor limit keeps what its rows read apart from the pose per set of active points
+    and frame's clearances: new clearances (a new frame) and a new pose give the same rows,
+    to the bit, as a limit that kept nothing."""
+    from physmocap.ik.limits import FloorLimit
+
+    solver = _setup("humanoid", 0)
+    solver._sync()
+    model, limit = solver.model, solver.floor_limit
+    fresh = FloorLimit(model, sites=limit.sites, floor=limit.floor, margin=limit.margin, activation=limit.activation)
+    z, _, body = limit.heights(solver.configuration.data)
+    foot = int(body[np.flatnonzero(z < limit.floor + limit.activation)[0]])  # a body with points near the floor
+    toe = int(limit.sites[-1])
+    frames = [({}, {}), ({}, {foot: 0.012}), ({toe: 0.02}, {foot: 0.012}), ({toe: 0.02}, {})]
+    for step, (clearance, bodies) in enumerate([*frames, *frames]):
+        if step == len(frames):  # the same frames again in another pose
+            qpos = solver.configuration.q
+            qpos[2] -= 0.01
+            solver.reset(qpos)
+        for lim in (limit, fresh):
+            lim.clearance, lim.swing_bodies = dict(clearance), dict(bodies)
+        fresh._plan = (None, None, None)
+        kept = limit.compute_qp_inequalities(solver.configuration, 1.0)
+        again = limit.compute_qp_inequalities(solver.configuration, 1.0)
+        new = fresh.compute_qp_inequalities(solver.configuration, 1.0)
+        for con in (kept, again):
+            assert con.G.tobytes() == new.G.tobytes() and con.h.tobytes() == new.h.tobytes()
+
+
 def test_bounds_index_consecutive_dofs_by_slice():
     """Consecutive dofs (every hinge of the bundled characters, the free root) are written
     through slices, any other index set through fancy indexing: the same bounds either way."""

@@ -17,6 +17,7 @@ QP's step :math:`\\Delta q` (tangent space) satisfies :math:`G \\Delta q \\le h`
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import mink
@@ -77,10 +78,17 @@ class PointJacobians:
             jac(model, data, row, None, p, b)
         return self._buf[:k]
 
-    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray, out: np.ndarray) -> None:
+    def off_chain(self, bodies: np.ndarray) -> np.ndarray:
+        """``(k, nv)`` booleans: the dofs that do not move each of ``bodies`` (:meth:`vertical`'s
+        ``off_chain``)."""
+        return self._off_chain[bodies]
+
+    def vertical(self, data: mujoco.MjData, bodies: np.ndarray, points: np.ndarray, out: np.ndarray,
+                 off_chain: np.ndarray | None = None) -> None:
         """``out`` ``(k, nv)`` := :math:`-J_z` of points ``(k, 3)`` (metres, world) on ``bodies``
         ``(k,)`` (per radian or metre of each dof): ``mj_jac``'s rows negated, to the bit (the
-        dofs off a point's chain ``-0.0``, the negated zeros)."""
+        dofs off a point's chain ``-0.0``, the negated zeros).  ``off_chain``: the bodies'
+        :meth:`off_chain`, where the caller keeps it (None: gathered here)."""
         k = len(bodies)
         if k > len(self._tmp):
             self._tmp = np.empty((max(k, 2 * len(self._tmp)), self.model.nv))
@@ -92,7 +100,7 @@ class PointJacobians:
         np.subtract(out, tmp, out=out)
         np.add(out, axes[5], out=out)
         np.negative(out, out=out)
-        np.putmask(out, self._off_chain[bodies], -0.0)
+        np.putmask(out, self._off_chain[bodies] if off_chain is None else off_chain, -0.0)
 
 
 def _dof_chains(model: mujoco.MjModel) -> np.ndarray:
@@ -286,11 +294,17 @@ class GeomCandidates:
         head -= radius
         return rows, z
 
-    def points_at(self, data: mujoco.MjData, rows: np.ndarray) -> np.ndarray:
-        """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows``:
-        :math:`x_g + R_g p`."""
-        R = data.geom_xmat.take(self._xmat_at[rows]).reshape(-1, 3, 3)
-        return data.geom_xpos.take(self._xpos_at[rows]) + np.einsum("kij,kj->ki", R, self.local[rows, :3])
+    def points_at(self, data: mujoco.MjData, rows: np.ndarray | tuple) -> np.ndarray:
+        """World positions ``(len(rows), 3)`` (metres) of the candidates ``rows`` (or of their
+        :meth:`gather`): :math:`x_g + R_g p`."""
+        xpos_at, xmat_at, local = rows if isinstance(rows, tuple) else self.gather(rows)
+        R = data.geom_xmat.take(xmat_at).reshape(-1, 3, 3)
+        return data.geom_xpos.take(xpos_at) + np.einsum("kij,kj->ki", R, local)
+
+    def gather(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What :meth:`points_at` reads for the candidates ``rows``: the flat indices of their
+        geoms' positions ``(k, 3)`` and rotations ``(k, 9)`` and their local points ``(k, 3)``."""
+        return self._xpos_at[rows], self._xmat_at[rows], self.local[rows, :3]
 
     def lowest(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """``(z_low (n,), anchor (n, 3))`` for the geoms, in the order given."""
@@ -538,6 +552,7 @@ class FloorLimit(mink.Limit):
         self.swing_bodies: dict[int, float] = {}
         self.max_rise = 0.004
         self._swing: tuple | None = None  # the two dicts as arrays, see _swing_arrays
+        self._plan: tuple = (None, None, None)  # ((active rows' bytes, floor, margin), _swing, _RowsPlan): _rows_plan
 
     def _swing_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(clearance sites, their heights, body id -> clearance or nan (None: no swing
@@ -612,33 +627,78 @@ class FloorLimit(mink.Limit):
         if active.size == 0:
             return mink.Constraint()
         n_act = len(active)
-        clear_sites, clear_heights, per_body = self._swing_arrays()
+        plan = self._rows_plan(active)
+        anchor = np.empty((plan.split + len(plan.sites), 3))
+        anchor[: plan.split] = self._cand.points_at(data, plan.candidates)
+        anchor[plan.split :] = data.site_xpos[plan.sites]
+        G = np.empty((len(anchor), self.model.nv))
+        h = np.empty(len(anchor))
+        self._pj.vertical(data, plan.bodies, anchor, G, plan.off_chain)
+        za = zn[inside]
+        h[:n_act] = za - self.floor - self.margin
+        if plan.swing is not None:
+            zs = za[plan.swing]
+            h[:n_act][plan.swing] = zs - np.minimum(plan.swing_floor, zs + self.max_rise)
+        # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
+        if plan.clear_floor is not None:
+            zs = anchor[n_act:, 2]
+            h[n_act:] = zs - np.minimum(plan.clear_floor, zs + self.max_rise)
+        return mink.Constraint(G=G, h=h)
+
+    def _rows_plan(self, active: np.ndarray) -> "_RowsPlan":
+        """The :class:`_RowsPlan` of the rows of the points ``active`` (ascending indices into
+        :meth:`heights`' points) and of this frame's clearance sites and swing bodies; kept
+        while neither changes (over a frame's iterations, the same points are near the floor)."""
+        swing_arrays = self._swing_arrays()
+        key = (active.tobytes(), self.floor, self.margin)
+        if self._plan[0] == key and self._plan[1] is self._swing:
+            return self._plan[2]
+        clear_sites, clear_heights, per_body = swing_arrays
         ng = len(self._cand.gid)
         split = int(active.searchsorted(ng))
         # the points: active geom candidates, active contact sites, then the clearance sites
         sites = self.sites[active[split:] - ng]
         if len(clear_sites):
             sites = np.concatenate([sites, clear_sites])
-        anchor = np.empty((split + len(sites), 3))
-        anchor[:split] = self._cand.points_at(data, active[:split])
-        anchor[split:] = data.site_xpos[sites]
         b = self._bodies[active]
-        G = np.empty((len(anchor), self.model.nv))
-        h = np.empty(len(anchor))
-        self._pj.vertical(data, np.concatenate([b, self.model.site_bodyid[clear_sites]]) if len(clear_sites) else b, anchor, G)
-        za = zn[inside]
-        h[:n_act] = za - self.floor - self.margin
+        bodies = np.concatenate([b, self.model.site_bodyid[clear_sites]]) if len(clear_sites) else b
+        swing = swing_floor = None
         if per_body is not None:
             c = per_body[b]
-            swing = ~np.isnan(c)
-            if swing.any():
-                zs = za[swing]
-                h[:n_act][swing] = zs - np.minimum(self.floor + np.maximum(c[swing], self.margin), zs + self.max_rise)
-        # swing clearance: z + J dq >= min(floor + clearance, z + max_rise)
-        if len(clear_sites):
-            zs = anchor[n_act:, 2]
-            h[n_act:] = zs - np.minimum(self.floor + clear_heights, zs + self.max_rise)
-        return mink.Constraint(G=G, h=h)
+            lifted = ~np.isnan(c)
+            if lifted.any():
+                swing, swing_floor = lifted, self.floor + np.maximum(c[lifted], self.margin)
+        plan = _RowsPlan(
+            split=split,
+            candidates=self._cand.gather(active[:split]),
+            sites=sites,
+            bodies=bodies,
+            off_chain=self._pj.off_chain(bodies),
+            swing=swing,
+            swing_floor=swing_floor,
+            clear_floor=self.floor + clear_heights if len(clear_sites) else None,
+        )
+        self._plan = (key, self._swing, plan)
+        return plan
+
+
+@dataclass(frozen=True, eq=False)
+class _RowsPlan:
+    """What :meth:`FloorLimit.compute_qp_inequalities` reads for a set of active points, apart
+    from the pose: the number of geom candidates among them, the candidates'
+    :meth:`GeomCandidates.gather`, the sites (active contact sites, then the clearance sites),
+    every row's body and :meth:`PointJacobians.off_chain`, the active points of swing bodies
+    (a mask, None: none) with the height they clear, :math:`z_{floor} + \max(c, m)` (metres),
+    and the clearance sites' :math:`z_{floor} + c` (None: none)."""
+
+    split: int
+    candidates: tuple[np.ndarray, np.ndarray, np.ndarray]
+    sites: np.ndarray
+    bodies: np.ndarray
+    off_chain: np.ndarray
+    swing: np.ndarray | None
+    swing_floor: np.ndarray | None
+    clear_floor: np.ndarray | None
 
 
 class RootStepLimit(mink.Limit):

@@ -242,21 +242,24 @@ class QPBuilder:
         key = tuple(map(id, tasks))
         plan = self._site_plans.get(key)
         if plan is None:
-            owner = np.repeat(np.arange(len(tasks)), [t.k for t in tasks])
-            axes = np.concatenate([np.array(t.axes, dtype=int) for t in tasks])
-            sites = np.array([t.site_id for t in tasks])
-            target = np.array([t.target for t in tasks])[owner, axes]
-            gain = np.array([-t.gain for t in tasks])[owner]
+            # per row (task, axis): its task, axis, site, target coordinate and negated gain
+            rows = [(j, a, t.site_id, t.target[a], -t.gain) for j, t in enumerate(tasks) for a in t.axes]
+            owner, axes, row_sites, target, gain = (
+                np.array([row[c] for row in rows], dtype=dtype) for c, dtype in enumerate((int, int, int, float, float))
+            )
             cost = np.concatenate([t.cost for t in tasks])
+            sites = [t.site_id for t in tasks]
+            # flat indices (a 1-D take is the cheapest gather): the rows' Jacobian rows in the
+            # (tasks, 3, nv) buffer seen as (3 * tasks, nv), and their coordinates in site_xpos;
             # the tasks are kept so that their ids stay theirs until new_frame
-            plan = self._site_plans[key] = (tuple(tasks), owner, axes, sites[owner], sites.tolist(), target, gain, cost)
-        _, owner, axes, row_sites, sites, target, gain, cost = plan
+            plan = self._site_plans[key] = (tuple(tasks), 3 * owner + axes, 3 * row_sites + axes, sites, target, gain, cost)
+        _, jac_rows, xpos_at, sites, target, gain, cost = plan
         jac, model = self._jacS, self.model
         if len(sites) > len(jac):
             jac = self._jacS = np.zeros((max(len(sites), 2 * len(jac)), 3, self.nv))
         for j, sid in enumerate(sites):
             mujoco.mj_jacSite(model, data, jac[j], None, sid)
-        return jac[owner, axes], gain * (data.site_xpos[row_sites, axes] - target), cost
+        return jac.reshape(-1, self.nv).take(jac_rows, axis=0), gain * (data.site_xpos.take(xpos_at) - target), cost
 
     def objective(
         self,
@@ -333,19 +336,24 @@ class QPBuilder:
         if free is not None:
             e[free] = 0.0
         eps = w * (-posture.gain * e)
-        self._Hdiag += w2 + (posture.lm_damping * float(eps @ eps) if posture.lm_damping else 0.0)
+        if posture.lm_damping:
+            self._Hdiag += w2 + posture.lm_damping * float(eps @ eps)
+        else:  # w^2 + 0.0 is w^2 (a square is never -0.0)
+            self._Hdiag += w2
         self.c -= eps * w
 
-    def _posture_weights(self, posture: mink.PostureTask) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def _posture_weights(self, posture: mink.PostureTask) -> tuple[np.ndarray, np.ndarray, slice | np.ndarray | None]:
         """``(w, w^2, free-joint dofs or None)`` of a posture task, its costs with the free
-        joint's zeroed; recomputed when the costs change."""
+        joint's zeroed (the dofs a slice where consecutive); recomputed when the costs change."""
         cached = self._postures.get(id(posture))
         key = posture.cost.tobytes()
         if cached is None or cached[0] is not posture or cached[1] != key:
             w = posture.cost.copy()
+            free = None
             if posture._v_ids is not None:
                 w[posture._v_ids] = 0.0
-            cached = self._postures[id(posture)] = (posture, key, (w, w * w, posture._v_ids))
+                free = _span(np.sort(posture._v_ids))  # the free joint's dofs: a slice
+            cached = self._postures[id(posture)] = (posture, key, (w, w * w, free))
         return cached[2]
 
     # -- constraints --------------------------------------------------------------

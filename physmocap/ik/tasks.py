@@ -53,6 +53,11 @@ class SitePositionTask(mink.Task):
 
     def set_cost(self, cost) -> None:
         """Cost per metre: a scalar or one per regulated axis (>= 0)."""
+        if isinstance(cost, float):  # a scalar (the planting's, every frame): no temporary array
+            if cost < 0:
+                raise ValueError("costs must be >= 0")
+            self.cost.fill(cost)
+            return
         c = np.empty(self.k)
         c[:] = cost  # broadcast and converted to float, as np.broadcast_to(np.asarray(cost, float)) would
         if (c < 0).any():

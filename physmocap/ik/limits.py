@@ -684,7 +684,7 @@ class FloorLimit(mink.Limit):
 
 @dataclass(frozen=True, eq=False)
 class _RowsPlan:
-    """What :meth:`FloorLimit.compute_qp_inequalities` reads for a set of active points, apart
+    r"""What :meth:`FloorLimit.compute_qp_inequalities` reads for a set of active points, apart
     from the pose: the number of geom candidates among them, the candidates'
     :meth:`GeomCandidates.gather`, the sites (active contact sites, then the clearance sites),
     every row's body and :meth:`PointJacobians.off_chain`, the active points of swing bodies

@@ -6,8 +6,9 @@ real motion under it.  Any other rotational glitch (a frozen joint, a joint past
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
 it and its first good one after it by whichever of five estimates rebuilds the joint's
 own good motion next to the span best, or their blend (:func:`_bridge`): a cubic Hermite
-curve in rotation space, leaving and arriving at the joint's own speed, the joint's motion in
-the windows of the clip where the whole body moves most like it does around the span
+curve in rotation space, leaving and arriving at the joint's own speed (:mod:`.hermite`),
+the joint's motion in the windows of the clip where the whole body moves most like it does
+around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
 what it was doing), its other side's motion, reflected, in the windows where the body
 mirrored left to right moves most like it (half a stride away in a walk), or its pose or its
@@ -41,6 +42,7 @@ from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
+from .hermite import curve as hermite_curve, log_between
 from .positional import twin as positional_twin, twin_pairs
 from .regress import Regression, spread_mismatch
 
@@ -63,25 +65,15 @@ REPAIRED = {
 
 def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
     """``(b - a - 1, 4)`` rotations strictly between frames ``a`` and ``b`` of ``R (F, 4)``:
-    a cubic Hermite curve in the tangent space at ``R[a]`` through both ends, its end
-    velocities the joint's own one-frame motion just outside (so a glitch over moving
-    motion is bridged at that motion's speed, not by a pause)."""
-    from ..rotations import quat_conj, quat_mul
-
+    a cubic Hermite curve in the tangent space at ``R[a]`` through both ends
+    (:func:`.hermite.curve`), its end velocities the joint's own one-frame motion just outside
+    (so a glitch over moving motion is bridged at that motion's speed, not by a pause), or,
+    at the clip's ends, the span's mean turn per frame."""
     F, n = len(R), b - a - 1
-    base = quat_conj(R[a])
-
-    def log(q):
-        return Rotation.from_quat(quat_mul(np.broadcast_to(base, q.shape), q)).as_rotvec()
-
-    p0, p1 = np.zeros(3), log(R[b][None])[0]
-    v0 = -log(R[a - 1][None])[0] if a >= 1 else p1 / (n + 1)
-    v1 = (log(R[b + 1][None])[0] - p1) if b + 1 < F else p1 / (n + 1)
-    span = float(n + 1)
-    s = (np.arange(1, n + 1) / span)[:, None]
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    p = h00 * p0 + h10 * span * v0 + h01 * p1 + h11 * span * v1
-    return quat_mul(np.broadcast_to(R[a], (n, 4)), Rotation.from_rotvec(p).as_quat())
+    p1 = log_between(R[a], R[b])
+    v0 = -log_between(R[a], R[a - 1]) if a >= 1 else p1 / (n + 1)
+    v1 = (log_between(R[a], R[b + 1]) - p1) if b + 1 < F else p1 / (n + 1)
+    return hermite_curve(R[a], p1, v0, v1, n)
 
 
 #: Bytes of spectra :func:`_correlation` holds at once (a block of joints at a time).

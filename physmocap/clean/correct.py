@@ -4,15 +4,16 @@ A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its off
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
-it and its first good one after it by whichever of five estimates rebuilds the joint's
+it and its first good one after it by whichever of six estimates rebuilds the joint's
 own good motion next to the span best, or their blend (:func:`_bridge`): a cubic Hermite
 curve in rotation space, leaving and arriving at the joint's own speed (:mod:`.hermite`),
-the joint's motion in the windows of the clip where the whole body moves most like it does
-around the span
+the joint's motion in the windows of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
 what it was doing), its other side's motion, reflected, in the windows where the body
-mirrored left to right moves most like it (half a stride away in a walk), or its pose or its
-steps regressed on the other joints' rotations (:class:`.regress.Regression`).  Where a point
+mirrored left to right moves most like it (half a stride away in a walk), its pose or its
+steps regressed on the other joints' rotations (:class:`.regress.Regression`), or the cubic
+plus the joint's departure from it regressed on the other joints' departures from theirs
+over the same frames (:class:`.regress.Departure`).  Where a point
 below the joint stands on the floor next to the span, the bridge is turned so that it goes
 on standing there while the rest of the limb can reach it (:func:`_on_contact`: a frozen
 thigh keeps its foot planted).  At the clip's ends the nearest good rotation is held.  A
@@ -44,13 +45,13 @@ from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
 from .hermite import curve as hermite_curve, log_between
 from .positional import twin as positional_twin, twin_pairs
-from .regress import Regression, spread_mismatch
+from .regress import Departure, Regression, spread_mismatch
 
 __all__ = ["BRIDGES", "blend_shares", "correct_glitches"]
 
 
 #: The rotational bridges :func:`_bridge` chooses among (and averages), as the report names them.
-BRIDGES = ("cubic", "matched", "mirrored", "regressed pose", "regressed steps")
+BRIDGES = ("cubic", "matched", "mirrored", "regressed pose", "regressed steps", "regressed departure")
 
 #: Glitch kinds that are repaired (the others are reported only).
 REPAIRED = {
@@ -326,10 +327,12 @@ def _bridge(
     R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0, ridge: float = 0.01,
     held: bool = False,
 ) -> tuple[np.ndarray, str]:
-    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from five estimates,
+    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from six estimates,
     the Hermite curve, the matched motion and the mirrored matched motion
-    (:class:`_Matcher`), and the joint's pose and its steps regressed on the other joints'
-    rotations (:class:`.regress.Regression`, ridge ``ridge``), judged on the joint's own good
+    (:class:`_Matcher`), the joint's pose and its steps regressed on the other joints'
+    rotations (:class:`.regress.Regression`, ridge ``ridge``), and the Hermite curve plus the
+    joint's departure from it regressed on the other joints' departures from theirs
+    (:class:`.regress.Departure`, the same ridge), judged on the joint's own good
     motion next to the span: each rebuilds the ``n = e - s + 1`` frames just before the span
     (leaving one frame between) and just after it as if they were glitched too
     (:func:`_pseudo_gaps`), its error there the sum of squared rotation errors (infinite
@@ -344,9 +347,8 @@ def _bridge(
     one's error are averaged (in the tangent space at the best one), weighted by the inverse
     of their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
-    and how: the estimate's name ("cubic", "matched", "mirrored", "regressed pose" or
-    "regressed steps"), or where several were averaged their names and weights
-    (:func:`_blend_name`: "blend of mirrored 62% + matched 38%")."""
+    and how: the estimate's name (one of :data:`BRIDGES`), or where several were averaged
+    their names and weights (:func:`_blend_name`: "blend of mirrored 62% + matched 38%")."""
     from ..rotations import quat_conj, quat_mul
 
     cubic = _hermite(R[:, j], s - 1, e + 1)
@@ -354,19 +356,21 @@ def _bridge(
         return cubic, "cubic"
     F, n = len(R), e - s + 1
     regression = Regression(R, matcher.M, matcher.animated, matcher.bad, j, s, e, ridge)
+    departure = Departure(R, matcher.animated, matcher.bad, j, s, e, ridge)
     kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
 
     def estimates(a: int, b: int, hidden: np.ndarray | None) -> list[np.ndarray | None]:
         """Every estimate but the cubic of frames ``a..b`` (``hidden``: more frames not to use)."""
         found = [matcher.bridge(j, a, b, hidden, mirrored) for mirrored in kinds]
         regressed = regression.estimates(a, b)
-        return found + (list(regressed) if regressed is not None else [None, None])
+        return found + (list(regressed) if regressed is not None else [None, None]) + [departure.estimate(a)]
 
     names = [name for name in BRIDGES if name != "mirrored" or matcher.mirrors]
     err = np.zeros(len(names))
     tested = np.zeros(len(names), dtype=bool)
     gaps = _pseudo_gaps(s, e, F)
     regression.choose_ridge(gaps, n)
+    departure.choose_ridge(gaps)
     for a in gaps:
         b = a + n - 1
         hidden = np.zeros(F, bool)
@@ -947,7 +951,7 @@ def correct_glitches(
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
     "matched" or "mirrored" (:class:`_Matcher`), "regressed pose" or "regressed steps"
-    (:class:`.regress.Regression`), or "blend of ..." where several of those
+    (:class:`.regress.Regression`), "regressed departure" (:class:`.regress.Departure`), or "blend of ..." where several of those
     were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
     ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"

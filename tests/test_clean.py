@@ -461,7 +461,7 @@ def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
     from physmocap.clean import CleanOptions
     from physmocap.clean.correct import _bridge, _hermite, _matcher, _pseudo_gaps, blend_shares
     from physmocap.clean.detect import Glitch, _angle, canonical_joints
-    from physmocap.clean.regress import Regression
+    from physmocap.clean.regress import Departure, Regression
 
     j, frames = _joint(walk, "LeftForeArm"), list(range(200, 248))
     bad = _with(walk, j, frames, hold=True)
@@ -471,6 +471,9 @@ def test_bridges_that_rebuild_the_joint_about_as_well_are_averaged(walk):
     regression.choose_ridge(_pseudo_gaps(200, 247, len(R)), 48)
     found = [_hermite(R[:, j], 199, 248), matcher.bridge(j, 200, 247), matcher.bridge(j, 200, 247, None, True),
              *regression.estimates(200, 247)]
+    departure = Departure(R, matcher.animated, matcher.bad, j, 200, 247, CleanOptions().regress_ridge)
+    departure.choose_ridge(_pseudo_gaps(200, 247, len(R)))
+    found.append(departure.estimate(200))
     names = list(BRIDGES)
     alone, name = _bridge(R, j, 200, 247, matcher, 1.0)
     assert any(np.allclose(alone, q) for q in found)

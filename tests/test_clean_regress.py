@@ -212,3 +212,65 @@ def test_the_ridge_is_chosen_among_the_estimates_there_are(walk, monkeypatch):
     reg2 = Regression(R, matcher.M, matcher.animated, matcher.bad, j, 300, 347, 0.01)
     reg2.choose_ridge(gaps, 48)
     assert reg2.chosen[0] == chosen[0] and reg2.chosen[1] != chosen[1]
+
+
+def test_hermite_windows_are_the_span_bridge_for_every_joint(walk):
+    """:func:`physmocap.clean.hermite.windows` (many windows, every joint at once) is the
+    span bridge :func:`physmocap.clean.correct._hermite` of each joint over each window."""
+    from physmocap.clean import hermite
+    from physmocap.clean.correct import _hermite
+
+    R = np.asarray(walk.rotations)
+    starts, n = np.array([5, 120, 401]), 17
+    H = hermite.windows(R, starts, n)
+    assert H.shape == (3, n, R.shape[1], 4)
+    for w, a in enumerate(starts):
+        for j in (0, 7, R.shape[1] - 1):
+            assert np.allclose(H[w, :, j], _hermite(R[:, j], a - 1, a + n))
+
+
+def test_a_departure_the_body_shows_is_rebuilt(walk):
+    """The coupled forearm (its rotation the right knee's, turned by fixed rotations) leaves
+    its Hermite bridge exactly as the knee leaves the knee's, turned: the departure regressed
+    on the other joints' departures rebuilds 0.4 s of it frozen to within a tenth of the
+    cubic's error, and joins both good ends (no step there larger than twice the joint's own
+    largest)."""
+    from physmocap.clean.correct import _hermite
+    from physmocap.clean.detect import _angle
+    from physmocap.clean.regress import Departure
+
+    clip, j = _coupled(walk)
+    s, e = 300, 347
+    R = np.array(clip.rotations, copy=True)
+    truth = R[s : e + 1, j].copy()
+    R[s : e + 1, j] = R[s - 1, j]
+    bad = np.zeros(R.shape[:2], dtype=bool)
+    bad[s : e + 1, j] = True
+    animated = [k for k in range(R.shape[1]) if np.ptp(R[:, k], axis=0).max() > 1e-6]
+    departure = Departure(R, animated, bad, j, s, e, CleanOptions().regress_ridge)
+    est = departure.estimate(s)
+    cubic = _hermite(R[:, j], s - 1, e + 1)
+    rms = lambda q: float(np.sqrt(np.mean(_angle(q, truth) ** 2)))  # noqa: E731
+    assert rms(est) < 0.1 * rms(cubic), (rms(est), rms(cubic))
+    path = np.concatenate([R[s - 1 : s, j], est, R[e + 1 : e + 2, j]])
+    steps = _angle(path[1:], path[:-1])
+    own = _angle(clip.rotations[s : e + 2, j], clip.rotations[s - 1 : e + 1, j]).max()
+    assert steps[0] <= 2 * own and steps[-1] <= 2 * own, (steps[0], steps[-1], own)
+
+
+def test_departure_windows_stay_within_their_budget(walk, monkeypatch):
+    """Windows start every quarter of the span's length, or sparser in a long clip so that
+    they hold at most ``MAX_WINDOW_FRAMES`` frames; none meets a glitch of a kept joint."""
+    import physmocap.clean.regress as regress
+
+    R = np.asarray(walk.rotations)
+    F, n, j, s = len(R), 30, 5, 200
+    bad = np.zeros(R.shape[:2], dtype=bool)
+    bad[s : s + n, j] = True
+    animated = list(range(R.shape[1]))
+    every = regress.Departure(R, animated, bad, j, s, s + n - 1, 0.01)
+    assert np.all(np.diff(every.starts) % 8 == 0) and every.D.shape[:2] == (len(every.starts), n)  # 30 / 4
+    assert not np.any((every.starts - 2 <= s + n - 1) & (every.starts + n + 1 >= s))  # none over the glitch
+    monkeypatch.setattr(regress, "MAX_WINDOW_FRAMES", F * n // 20)
+    sparse = regress.Departure(R, animated, bad, j, s, s + n - 1, 0.01)
+    assert len(sparse.starts) * n <= F * n // 20 and np.all(np.diff(sparse.starts) >= 20)

@@ -4,14 +4,16 @@ A spike or flip of 0.15 s or more (``CleanOptions.offset_min_time``) has its off
 jump and the inverse of the exit jump, interpolated over the span), which brings back the
 real motion under it.  Any other rotational glitch (a frozen joint, a joint past its range
 of motion, a short spike or flip) is bridged between the joint's last good rotation before
-it and its first good one after it by whichever of five estimates rebuilds the joint's
+it and its first good one after it by whichever of six estimates rebuilds the joint's
 own good motion next to the span best, or their blend (:func:`_bridge`): a cubic Hermite
-curve in rotation space, leaving and arriving at the joint's own speed, the joint's motion in
-the windows of the clip where the whole body moves most like it does around the span
+curve in rotation space, leaving and arriving at the joint's own speed (:mod:`.hermite`),
+the joint's motion in the windows of the clip where the whole body moves most like it does around the span
 (:class:`_Matcher`: a frozen joint's real motion is lost, the rest of the body still shows
 what it was doing), its other side's motion, reflected, in the windows where the body
-mirrored left to right moves most like it (half a stride away in a walk), or its pose or its
-steps regressed on the other joints' rotations (:class:`.regress.Regression`).  Where a point
+mirrored left to right moves most like it (half a stride away in a walk), its pose or its
+steps regressed on the other joints' rotations (:class:`.regress.Regression`), or the cubic
+plus the joint's departure from it regressed on the other joints' departures from theirs
+over the same frames (:class:`.regress.Departure`).  Where a point
 below the joint stands on the floor next to the span, the bridge is turned so that it goes
 on standing there while the rest of the limb can reach it (:func:`_on_contact`: a frozen
 thigh keeps its foot planted).  At the clip's ends the nearest good rotation is held.  A
@@ -41,14 +43,15 @@ from ..errors import OptionError
 from ..motion import Motion
 from ..rotations import Rotation
 from .detect import CleanOptions, Glitch, _angle, animated_joints, canonical_joints
+from .hermite import curve as hermite_curve, log_between
 from .positional import twin as positional_twin, twin_pairs
-from .regress import Regression, spread_mismatch
+from .regress import Departure, Regression, spread_mismatch
 
 __all__ = ["BRIDGES", "blend_shares", "correct_glitches"]
 
 
 #: The rotational bridges :func:`_bridge` chooses among (and averages), as the report names them.
-BRIDGES = ("cubic", "matched", "mirrored", "regressed pose", "regressed steps")
+BRIDGES = ("cubic", "matched", "mirrored", "regressed pose", "regressed steps", "regressed departure")
 
 #: Glitch kinds that are repaired (the others are reported only).
 REPAIRED = {
@@ -63,25 +66,15 @@ REPAIRED = {
 
 def _hermite(R: np.ndarray, a: int, b: int) -> np.ndarray:
     """``(b - a - 1, 4)`` rotations strictly between frames ``a`` and ``b`` of ``R (F, 4)``:
-    a cubic Hermite curve in the tangent space at ``R[a]`` through both ends, its end
-    velocities the joint's own one-frame motion just outside (so a glitch over moving
-    motion is bridged at that motion's speed, not by a pause)."""
-    from ..rotations import quat_conj, quat_mul
-
+    a cubic Hermite curve in the tangent space at ``R[a]`` through both ends
+    (:func:`.hermite.curve`), its end velocities the joint's own one-frame motion just outside
+    (so a glitch over moving motion is bridged at that motion's speed, not by a pause), or,
+    at the clip's ends, the span's mean turn per frame."""
     F, n = len(R), b - a - 1
-    base = quat_conj(R[a])
-
-    def log(q):
-        return Rotation.from_quat(quat_mul(np.broadcast_to(base, q.shape), q)).as_rotvec()
-
-    p0, p1 = np.zeros(3), log(R[b][None])[0]
-    v0 = -log(R[a - 1][None])[0] if a >= 1 else p1 / (n + 1)
-    v1 = (log(R[b + 1][None])[0] - p1) if b + 1 < F else p1 / (n + 1)
-    span = float(n + 1)
-    s = (np.arange(1, n + 1) / span)[:, None]
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
-    p = h00 * p0 + h10 * span * v0 + h01 * p1 + h11 * span * v1
-    return quat_mul(np.broadcast_to(R[a], (n, 4)), Rotation.from_rotvec(p).as_quat())
+    p1 = log_between(R[a], R[b])
+    v0 = -log_between(R[a], R[a - 1]) if a >= 1 else p1 / (n + 1)
+    v1 = (log_between(R[a], R[b + 1]) - p1) if b + 1 < F else p1 / (n + 1)
+    return hermite_curve(R[a], p1, v0, v1, n)
 
 
 #: Bytes of spectra :func:`_correlation` holds at once (a block of joints at a time).
@@ -334,10 +327,12 @@ def _bridge(
     R: np.ndarray, j: int, s: int, e: int, matcher: _Matcher | None, blend: float = 3.0, ridge: float = 0.01,
     held: bool = False,
 ) -> tuple[np.ndarray, str]:
-    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from five estimates,
+    """Joint ``j``'s rotations over frames ``s..e`` of ``R (F, J, 4)`` from six estimates,
     the Hermite curve, the matched motion and the mirrored matched motion
-    (:class:`_Matcher`), and the joint's pose and its steps regressed on the other joints'
-    rotations (:class:`.regress.Regression`, ridge ``ridge``), judged on the joint's own good
+    (:class:`_Matcher`), the joint's pose and its steps regressed on the other joints'
+    rotations (:class:`.regress.Regression`, ridge ``ridge``), and the Hermite curve plus the
+    joint's departure from it regressed on the other joints' departures from theirs
+    (:class:`.regress.Departure`, the same ridge), judged on the joint's own good
     motion next to the span: each rebuilds the ``n = e - s + 1`` frames just before the span
     (leaving one frame between) and just after it as if they were glitched too
     (:func:`_pseudo_gaps`), its error there the sum of squared rotation errors (infinite
@@ -352,9 +347,8 @@ def _bridge(
     one's error are averaged (in the tangent space at the best one), weighted by the inverse
     of their errors: where two rebuild the joint's motion about as well, the test cannot tell
     which is right and their mean is off by less than the wrong one.  Returns the rotations
-    and how: the estimate's name ("cubic", "matched", "mirrored", "regressed pose" or
-    "regressed steps"), or where several were averaged their names and weights
-    (:func:`_blend_name`: "blend of mirrored 62% + matched 38%")."""
+    and how: the estimate's name (one of :data:`BRIDGES`), or where several were averaged
+    their names and weights (:func:`_blend_name`: "blend of mirrored 62% + matched 38%")."""
     from ..rotations import quat_conj, quat_mul
 
     cubic = _hermite(R[:, j], s - 1, e + 1)
@@ -362,19 +356,21 @@ def _bridge(
         return cubic, "cubic"
     F, n = len(R), e - s + 1
     regression = Regression(R, matcher.M, matcher.animated, matcher.bad, j, s, e, ridge)
+    departure = Departure(R, matcher.animated, matcher.bad, j, s, e, ridge)
     kinds = [False, True] if matcher.mirrors else [False]  # mirrored or not
 
     def estimates(a: int, b: int, hidden: np.ndarray | None) -> list[np.ndarray | None]:
         """Every estimate but the cubic of frames ``a..b`` (``hidden``: more frames not to use)."""
         found = [matcher.bridge(j, a, b, hidden, mirrored) for mirrored in kinds]
         regressed = regression.estimates(a, b)
-        return found + (list(regressed) if regressed is not None else [None, None])
+        return found + (list(regressed) if regressed is not None else [None, None]) + [departure.estimate(a)]
 
     names = [name for name in BRIDGES if name != "mirrored" or matcher.mirrors]
     err = np.zeros(len(names))
     tested = np.zeros(len(names), dtype=bool)
     gaps = _pseudo_gaps(s, e, F)
     regression.choose_ridge(gaps, n)
+    departure.choose_ridge(gaps)
     for a in gaps:
         b = a + n - 1
         hidden = np.zeros(F, bool)
@@ -955,7 +951,7 @@ def correct_glitches(
     """A copy of ``motion`` with the repairable glitches bridged, and the glitch list with
     ``corrected`` filled in ("offset removed", "cubic" (Hermite in rotation space),
     "matched" or "mirrored" (:class:`_Matcher`), "regressed pose" or "regressed steps"
-    (:class:`.regress.Regression`), or "blend of ..." where several of those
+    (:class:`.regress.Regression`), "regressed departure" (:class:`.regress.Departure`), or "blend of ..." where several of those
     were averaged, with their shares ("blend of mirrored 62% + matched 38%", :func:`_bridge`;
     ", on contact" where :func:`_on_contact` then kept a foot standing), "re-solved" (the hard-limited IK on an actor-fitted
     humanoid, :mod:`.resolve`), "held" (the nearest good rotation, at the clip's ends), "parent-relative"

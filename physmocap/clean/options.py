@@ -116,7 +116,8 @@ class CleanOptions:
             keeps the best alone where it is strictly best.
         regress_ridge: Ridge penalty of the regressed bridges (a bridged joint's pose and its
             steps regressed on the other joints' rotations and their velocities, fitted on the
-            clip's good frames, :mod:`physmocap.clean.regress`), per training frame, on
+            clip's good frames, and its departure from its cubic bridge regressed on the other
+            joints' departures from theirs, :mod:`physmocap.clean.regress`), per training frame, on
             features standardised to unit variance: small enough to follow the body (0.001 and
             0.1 remove about as much of the benchmark's frozen joints' error), large enough
             to keep hundreds of correlated channels from fitting noise.

@@ -30,6 +30,10 @@ The fit is held as sums over its frames (:math:`n`, :math:`\sum x`, :math:`\sum 
 pseudo-gap (:func:`.correct._pseudo_gaps`) is left out of it by taking its frames' terms off
 rather than by fitting again: both estimates of a pseudo-gap are built exactly as those of
 the span, from the clip without the frames they rebuild.
+
+:class:`Departure` is a third regressed estimate, local where these are global: the joint's
+departure from its own cubic bridge (:mod:`.hermite`) regressed on every other joint's
+departure from theirs over the same frames, learnt on the clip's windows of the span's length.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import numpy as np
 from ..rotations import Rotation, quat_conj, quat_mul
 from .detect import _angle
 
-__all__ = ["Regression", "spread_mismatch"]
+__all__ = ["Departure", "Regression", "spread_mismatch"]
 
 #: Frames whose features are built at once (the fit's sums are accumulated block by block).
 BLOCK_FRAMES = 4096
@@ -239,3 +243,120 @@ class Regression:
         if found is None:
             return None
         return found[self.chosen[0]][0], found[self.chosen[1]][1]
+
+
+#: Windows of the span's length the departures are learnt on start every this share of it
+#: (a quarter: each good frame is seen at four places in a window) ...
+WINDOW_STRIDE = 0.25
+#: ... or sparser, so that the windows hold at most this many frames in all (a long clip's
+#: departures, ``frames x joints x 3`` floats, stay within tens of megabytes).
+MAX_WINDOW_FRAMES = 40_000
+#: Windows whose departures are computed at once (the Hermite bridges' temporaries).
+WINDOW_BLOCK = 256
+#: Windows of the clip, at least, that a departure's fit needs (fewer: no estimate).
+MIN_WINDOWS = 10
+
+
+class Departure:
+    r"""Joint :math:`j`'s departure from its own cubic bridge, regressed on the other joints'
+    departures from theirs over the same frames, learnt on the clip's own good windows of
+    the span's length.
+
+    A bridge that follows the joint's speed at both ends (:mod:`.hermite`) misses what the
+    joint did in between: the swing of a knee, the turn of the hips.  Over the same frames
+    every other joint also leaves its own Hermite bridge, and those departures are known
+    under a freeze.  For each window :math:`w` of :math:`n` good frames (every joint kept
+    good on it and on the two frames outside each end), every joint :math:`k`'s departure on
+    frame :math:`i` is :math:`d_k(w, i) = \log(h_k(w, i)^{-1} q_k(w, i))` (radians, in the
+    joint's frame; zero at the window's good ends by construction), and the fit is a ridge
+    regression without intercept (a joint on its bridge says nothing)
+
+    .. math::  \hat d_j = z W, \qquad W = (Z^\top Z / N + \lambda I)^{-1} Z^\top D_j / N
+
+    over the :math:`N` window frames, :math:`z` the other joints' departures (3 each) scaled
+    by their root mean square.  The estimate is :math:`h_j(i) \exp(\hat d_j(i))`: it joins
+    both good ends as the cubic does, plus what the rest of the body's departures say.  Each
+    estimate is fitted without the windows meeting the frames it rebuilds or the two good
+    frames each side (so a pseudo-gap is rebuilt from the rest of the clip, as the span is);
+    the features are clipped to their fitted range, as :class:`Regression`'s are.
+    """
+
+    def __init__(
+        self, R: np.ndarray, animated: list[int], bad: np.ndarray, j: int, s: int, e: int, ridge: float
+    ) -> None:
+        F, n = len(R), e - s + 1
+        self.n = n
+        cols = [k for k in animated if k != j and not bad[max(0, s - 1) : e + 2, k].any()]
+        self.q = R[:, [j] + cols]
+        self.ridges = [ridge * f for f in RIDGE_FACTORS]
+        self.chosen = len(RIDGE_FACTORS) // 2
+        self._done: dict[int, list[np.ndarray] | None] = {}
+        clean = ~bad[:, [j] + cols].any(axis=1)
+        cum = np.concatenate([[0], np.cumsum(~clean)])
+        stride = max(1, int(round(WINDOW_STRIDE * n)), -(-F * n // MAX_WINDOW_FRAMES))
+        starts = np.arange(2, F - n - 1, stride)
+        self.starts = starts[cum[starts + n + 2] == cum[starts - 2]]  # frames a - 2 .. a + n + 1 good
+        self.D = None
+        if cols and len(self.starts):
+            blocks = range(0, len(self.starts), WINDOW_BLOCK)
+            self.D = np.concatenate([self._departures(self.starts[b : b + WINDOW_BLOCK])[1] for b in blocks])
+
+    def _departures(self, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(bridges (W, n, K, 4), departures (W, n, K, 3))`` of the kept joints (joint ``j``
+        first) over the windows starting at ``starts``."""
+        from .hermite import log_between, windows
+
+        H = windows(self.q, starts, self.n)
+        Q = self.q[np.asarray(starts)[:, None] + np.arange(self.n)]
+        return H, log_between(H, Q)
+
+    def _inputs(self, D: np.ndarray) -> np.ndarray:
+        """``(W n, 3 (K - 1))``: the features of windows' departures ``D (W, n, K, 3)``, the
+        other joints' departures on each frame."""
+        return D[:, :, 1:].reshape(D.shape[0] * D.shape[1], -1)
+
+    def _fits(self, a: int) -> list[np.ndarray] | None:
+        """Joint ``j`` on frames ``a .. a + n - 1`` per ridge penalty of ``self.ridges`` (kept
+        for the next call), or None where too few windows are left to fit on."""
+        if a in self._done:
+            return self._done[a]
+        n, out = self.n, None
+        far = (self.starts + n + 1 < a - 2) | (self.starts - 2 > a + n + 1)
+        if self.D is not None and 2 <= a and a + n + 1 < len(self.q) and far.sum() >= MIN_WINDOWS:
+            D = self.D[far]
+            X, Y = self._inputs(D), D[:, :, 0].reshape(-1, 3)
+            sd = np.sqrt(np.mean(X**2, axis=0))
+            k = np.flatnonzero(sd > MIN_SPREAD)
+            if k.size:
+                Z = X[:, k] / sd[k]
+                G, c = Z.T @ Z / len(Z), Z.T @ Y / len(Z)
+                H, d = self._departures(np.array([a]))
+                z = np.clip(self._inputs(d)[:, k] / sd[k], Z.min(axis=0), Z.max(axis=0))
+                try:
+                    preds = [z @ np.linalg.solve(G + lam * np.eye(len(k)), c) for lam in self.ridges]
+                    out = [quat_mul(H[0, :, 0], Rotation.from_rotvec(p).as_quat()) for p in preds]
+                except np.linalg.LinAlgError:  # a singular fit: no estimate
+                    out = None
+        self._done[a] = out
+        return out
+
+    def choose_ridge(self, gaps: list[int]) -> None:
+        """The ridge penalty chosen among ``self.ridges`` by the pseudo-gaps whose first frames
+        are ``gaps`` (:func:`.correct._pseudo_gaps`): the one whose estimate rebuilds joint
+        ``j``'s good rotations there with the least summed squared angle."""
+        err = np.zeros(len(self.ridges))
+        for a in gaps:
+            found = self._fits(a)
+            if found is None:
+                return
+            truth = self.q[a : a + self.n, 0]
+            err += [np.sum(_angle(est, truth) ** 2) for est in found]
+        if gaps:
+            self.chosen = int(np.argmin(err))
+
+    def estimate(self, a: int) -> np.ndarray | None:
+        """``(n, 4)``: joint ``j`` on frames ``a .. a + n - 1`` (the span, or a pseudo-gap of
+        good frames), its cubic bridge plus its regressed departure, with the chosen ridge
+        penalty (:meth:`choose_ridge`); None where it cannot be fitted."""
+        found = self._fits(a)
+        return None if found is None else found[self.chosen]

@@ -22,6 +22,16 @@ SHARED_BVH = [
 WALKS = ["cmu_12_01_walk.bvh", "pymo_walk.bvh"]
 
 
+def load_script(name: str):
+    """The module of ``scripts/<name>.py`` (the scripts are not a package), executed afresh."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def shared_file(name: str) -> Path:
     """Path of a shared recording, or skip the test with a clear reason."""
     path = SHARED_DATA / name

@@ -382,13 +382,9 @@ def test_shortened_benchmark_on_the_bundled_walk(walk):
     """scripts/glitch_benchmark.py's injection, 3 glitches of each type into the bundled walk:
     every type found with recall and precision of at least 0.95 (the walk's own flag, a toe
     stepping 15 degrees in one frame, left out as the benchmark's injected precision does)."""
-    import importlib.util
-    from pathlib import Path
+    from conftest import load_script
 
-    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
-    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("glitch_benchmark")
     names = {n: j for j, n in enumerate(walk.skeleton.names)}
     own = bench._flagged(clean(walk)[1], names)
     assert len({t for _, t in own}) < 0.005 * walk.num_frames
@@ -714,14 +710,9 @@ def test_the_window_correlation_is_summed_in_blocks_of_joints(monkeypatch):
 
 
 def _benchmark():
-    import importlib.util
-    from pathlib import Path
+    from conftest import load_script
 
-    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
-    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+    return load_script("glitch_benchmark")
 
 
 def test_benchmark_leaves_the_reference_own_glitches_out_of_the_error(walk):

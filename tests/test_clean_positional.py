@@ -4,14 +4,13 @@ and the benchmark's positional injection on the bundled walk."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import load_script
 from physmocap.cli import main
 from physmocap.clean import clean
 from physmocap.clean.correct import blend_shares
@@ -27,11 +26,7 @@ def walk():
 
 @pytest.fixture(scope="module")
 def bench():
-    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
-    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("glitch_benchmark")
 
 
 def _tracker_file(walk, tmp_path):

@@ -140,13 +140,9 @@ def test_clean_keeps_an_unglitched_clip_unchanged():
 def test_benchmark_compares_interpolation_and_ik():
     """scripts/glitch_benchmark.py's repair comparison on the bundled walk's injected frozen
     joints: the per-glitch oracle is never worse than interpolation alone or the IK alone."""
-    import importlib.util
-    from pathlib import Path
+    from conftest import load_script
 
-    path = Path(__file__).resolve().parents[1] / "scripts" / "glitch_benchmark.py"
-    spec = importlib.util.spec_from_file_location("glitch_benchmark", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("glitch_benchmark")
     walk = _load("example")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import statistics
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 
+from conftest import load_script
 from physmocap.models import rom
 from physmocap.models.humanoid_builder import humanoid_xml, mapping_toml, scene_xml
 from physmocap.resources import mjcf_dir
@@ -125,10 +124,6 @@ def test_rotation_signs(model):
 
 
 def test_generator_script_check_mode():
-    spec = importlib.util.spec_from_file_location(
-        "generate_humanoid", Path(__file__).resolve().parents[1] / "scripts" / "generate_humanoid.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_script("generate_humanoid")
     for path, text in mod.outputs().items():
         assert path.read_text(encoding="utf-8") == text

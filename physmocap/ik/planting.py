@@ -783,7 +783,7 @@ class Planting:
             self.feet[side] = (self.names.index(ankle), self.names.index(toe), ref[ankle], ref[toe], moved)
         self._has_orientation = (np.zeros(len(self.names), dtype=bool) if has_orientation is None
                                  else np.asarray(has_orientation, dtype=bool))
-        #: offline: turns a foot held at two points towards its target heading (:mod:`.footturn`)
+        #: turns a foot held at two points towards its target heading (:mod:`.footturn`)
         self._turner = self._heading_follower(character)
 
     def _rest_distances(self, character) -> np.ndarray:
@@ -1055,9 +1055,7 @@ class Planting:
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
                               pivoting=toes_only & self._pivot,
                               bending=np.array([bending.get(side, False) for side in self._site_side], dtype=bool))
-            self._turn_holds(positions, orientations, valid, data, flags)
-        if self.anchored:  # a stream turns its held feet with the actor's as offline does
-            self._turn_holds(positions, orientations, valid, data, flags)
+        self._turn_holds(positions, orientations, valid, data, flags)  # offline and streaming alike
         tasks, hard, engaged = self.locks.update(flags, data, hints)
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
             self.locks.free[toes_only & self._release] = False  # rolling, not swinging

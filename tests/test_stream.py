@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
+
 import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, shared_file
@@ -185,6 +187,33 @@ def test_fidelity_of_a_trajectory_without_its_source_is_a_clear_error(walk):
     bare = dataclasses.replace(traj, source_motion=None)
     with pytest.raises(ValueError, match="source_motion and joint_indices"):
         trajectory_fidelity(bare)
+
+
+def test_a_streamed_trajectory_carries_what_it_tracked(walk):
+    """Before: a streamed trajectory had no targets, so its fidelity compared the pelvis's
+    vertical speed with the actor's at root scale 1 (the humanoid's scale on the CMU walk is
+    1.09, the robot's 0.71).  Now ``stream_motion`` keeps the targets the IK was given, frame
+    by frame, with the stream's own root scale: the same scale as offline calibration."""
+    from physmocap.ik.stream import stream_motion
+    from physmocap.ik.targets import build_targets
+    from physmocap.ik.retarget import map_motion
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+
+    clip = walk.slice_frames(0, 40)
+    for name in ("humanoid", "robot"):
+        ch = load_character(name)
+        traj = stream_motion(clip, ch)
+        targets = traj.targets
+        assert targets is not None and targets.num_frames == clip.num_frames
+        assert targets.positions.shape == (clip.num_frames, len(targets.names), 3)
+        assert np.all(np.isfinite(targets.positions))
+        offline = build_targets(clip.slice_frames(1, 40), map_motion(clip), ch)  # frame 0: CMU's T-pose
+        assert targets.scale == pytest.approx(offline.scale, rel=0.02)
+        assert abs(targets.scale - 1.0) > 0.05
+        fid = trajectory_fidelity(traj, floor_contact=False)
+        unscaled = trajectory_fidelity(dataclasses.replace(traj, targets=None), floor_contact=False)
+        assert fid.actor_vz_p99_scaled == pytest.approx(unscaled.actor_vz_p99_scaled * targets.scale)
 
 
 def test_stream_turns_with_the_actor_on_a_planted_foot():

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,7 @@ from .footlevel import FootLeveller
 from .footplan import body_part_target
 from .frame import FrameRetargeter
 from .retarget import map_motion
-from .targets import build_targets, character_rest_frames
+from .targets import Targets, build_targets, character_rest_frames
 
 __all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS"]
 
@@ -145,6 +146,9 @@ class StreamingRetargeter:
         self.reference_speed = 4.0
         self._first_world: np.ndarray | None = None
         self.labels: list[dict[str, bool]] = []
+        #: The last frame's targets as the IK got them (feet levelled, body contacts held): one
+        #: frame of :class:`~physmocap.ik.targets.Targets` (None before the first frame).
+        self.last_targets: Targets | None = None
 
     # -- input ----------------------------------------------------------------
     def _motion(self, rotations, translations, positions, confidence) -> Motion:
@@ -263,6 +267,8 @@ class StreamingRetargeter:
         if self.body_anchors:
             positions, labels = self._hold_body_parts(positions, targets.names, labels, body)
         result = self.pipeline.solve(positions, orientations, targets.valid[0], labels)
+        self.last_targets = replace(targets, positions=np.array(positions)[None], orientations=np.array(orientations)[None],
+                                    source_positions=None, source_recipe=None, calibration=None)
         self.frame += 1
         self.labels.append(labels)
         self.iterations.append(result.iterations)
@@ -299,6 +305,7 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
     The actor's floor is ``config.targets.source_floor`` (or the
     ``source_floor`` option), else the recording's own (``floor_z`` in its
     metadata), else the first frame's.  Returns the trajectory with the
+    targets the IK tracked (its root scale the stream's calibration), the
     streamed contact labels and per-frame solver statistics (latency in
     seconds, the whole frame: targets, contacts and IK)."""
     mapping = options.pop("mapping", None) or motion.meta.get("source_mapping")
@@ -318,6 +325,7 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
         source=motion.source,
     )
     qpos = np.empty((motion.num_frames, retargeter.character.model.nq))
+    tracked: list[Targets] = []
     for t in range(motion.num_frames):
         if motion.is_rotational:
             assert motion.rotations is not None and motion.translations is not None
@@ -326,12 +334,15 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
             assert motion.positions is not None
             conf = None if motion.confidence is None else motion.confidence[t]
             qpos[t] = retargeter.step(positions=motion.positions[t], confidence=conf)
+        assert retargeter.last_targets is not None
+        tracked.append(retargeter.last_targets)
     labels = {k: np.array([frame[k] for frame in retargeter.labels], dtype=bool) for k in (retargeter.labels[0] if retargeter.labels else {})}
     return Trajectory(
         character=retargeter.character,
         qpos=qpos,
         fps=motion.fps,
         source=motion.source,
+        targets=_stacked(tracked, motion.fps),
         contacts=Contacts(labels=labels, fps=motion.fps, source="streamed") if labels else None,
         source_motion=motion,
         joint_indices=retargeter.joint_indices,
@@ -340,4 +351,19 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
             relaxation=np.array(retargeter.relaxations, dtype=np.int8),
             latency=np.array(retargeter.latencies),
         ),
+    )
+
+
+def _stacked(frames: list[Targets], fps: float) -> Targets | None:
+    """The streamed frames' targets as one :class:`Targets` (the root scale of the last
+    calibration: a stream that calibrates again on frame 1 tracks with that one)."""
+    if not frames:
+        return None
+    last = frames[-1]
+    return replace(
+        last,
+        positions=np.concatenate([f.positions for f in frames]),
+        orientations=np.concatenate([f.orientations for f in frames]),
+        valid=np.concatenate([f.valid for f in frames]),
+        fps=float(fps),
     )

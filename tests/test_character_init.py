@@ -577,3 +577,62 @@ def test_twisting_elbow_gives_way_to_the_bending_hinge(tmp_path):
     fid = trajectory_fidelity(traj)
     worst = max(fid.segments[s].median_deg for s in fid.segments if "arm" in s or "thigh" in s)
     assert worst < 12.0, {s: round(v.median_deg, 1) for s, v in fid.segments.items()}
+
+
+def _atlas_like() -> str:
+    """Boston Dynamics Atlas's naming: every leg joint ``l_leg_*``, every arm joint ``l_arm_*``
+    (the limb, not a part), bodies ``uglut``/``lglut``/``uleg``/``lleg``/``talus``/``foot`` and
+    ``clav``/``scap``/``uarm``/``larm``/``ufarm``/``lfarm``/``hand``; the arm lifts at ``scap``
+    and ``uarm``, 12 cm below it, only twists the upper arm."""
+
+    def body(name, pos, joint, axis, inner="", geom=""):
+        return f'<body name="{name}" pos="{pos}"><joint name="{joint}" axis="{axis}" range="-90 90"/>{geom}{inner}</body>'
+
+    def leg(s, sg):
+        foot = body(f"{s}_talus", "0 0 -0.4", f"{s}_leg_aky", "0 1 0",
+                    body(f"{s}_foot", "0 0 0", f"{s}_leg_akx", "1 0 0", "",
+                         '<geom type="box" size="0.1 0.05 0.02" pos="0.04 0 -0.05"/>'))
+        knee = body(f"{s}_lleg", "-0.03 0 -0.4", f"{s}_leg_kny", "0 1 0", foot,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04"/>')
+        return body(f"{s}_uglut", f"0 {0.09 * sg} -0.05", f"{s}_leg_hpz", "0 0 1",
+                    body(f"{s}_lglut", "0 0 0", f"{s}_leg_hpx", "1 0 0",
+                         body(f"{s}_uleg", f"0.03 {0.02 * sg} -0.06", f"{s}_leg_hpy", "0 1 0", knee,
+                              '<geom type="capsule" fromto="0 0 0 -0.03 0 -0.4" size="0.05"/>')))
+
+    def arm(s, sg):
+        hand = body(f"{s}_ufarm", "0 0 -0.28", f"{s}_arm_uwy", "0 0 1",
+                    body(f"{s}_lfarm", "0 0 0", f"{s}_arm_mwx", "1 0 0",
+                         body(f"{s}_hand", "0 0 0", f"{s}_arm_lwy", "0 0 1", "",
+                              '<geom type="box" size="0.03 0.02 0.05" pos="0 0 -0.06"/>')))
+        larm = body(f"{s}_larm", "0 0 -0.16", f"{s}_arm_elx", "0 1 0", hand,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.28" size="0.03"/>')
+        uarm = body(f"{s}_uarm", "0 0 -0.12", f"{s}_arm_ely", "0 0 1", larm,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.16" size="0.035"/>')
+        return body(f"{s}_clav", f"0 {0.15 * sg} 0.45", f"{s}_arm_shz", "0 0 1",
+                    body(f"{s}_scap", f"0 {0.08 * sg} -0.05", f"{s}_arm_shx", "1 0 0", uarm))
+
+    return (
+        '<mujoco model="atlaslike"><compiler angle="degree" boundmass="0.01" boundinertia="0.0001"/><worldbody>'
+        '<body name="pelvis" pos="0 0 1.0"><freejoint/><geom type="box" size="0.08 0.12 0.06"/>'
+        f'{leg("l", 1)}{leg("r", -1)}'
+        '<body name="utorso" pos="0 0 0.1"><joint name="back_bkz" axis="0 0 1" range="-30 30"/>'
+        '<geom type="box" size="0.1 0.15 0.2" pos="0 0 0.25"/>'
+        f'{arm("l", 1)}{arm("r", -1)}</body></body></worldbody></mujoco>'
+    )
+
+
+def test_limb_wide_names_and_abbreviations(tmp_path):
+    """Atlas: ``leg`` in every leg joint's name made every leg body a knee (the knee went to the
+    thigh's body and the rest pose bent the hips 41 degrees to straighten that 'knee'); ``arm``
+    in every arm joint's name, every arm body a shoulder.  A keyword on every articulated body
+    of a chain names the limb and tells no part; ``uleg``/``lleg``/``uarm``/``larm`` are the
+    upper and lower leg and arm; the shoulder is where the arm's hinges meet (``scap``)."""
+    mjcf = _write(tmp_path, _atlas_like(), "atlaslike.xml")
+    pr = propose_mapping(mjcf)
+    want = {"hip": "{s}_uleg", "knee": "{s}_lleg", "ankle": "{s}_foot", "shoulder": "{s}_scap",
+            "elbow": "{s}_larm", "wrist": "{s}_hand"}
+    for side, s in (("left", "l"), ("right", "r")):
+        got = {part: pr.joints[f"{side}_{part}"].name for part in want}
+        assert got == {part: b.format(s=s) for part, b in want.items()}, got
+    assert not any("_leg_" in j for j in pr.rest_joints), pr.rest_joints  # no hip bent to 'straighten' a thigh
+    _loads(tmp_path, pr, mjcf)

@@ -71,13 +71,14 @@ _RIGHT = {"right", "r", "rgt", "rt"}
 _LEG_WORDS = {
     "hip": "hip", "thigh": "hip", "femur": "hip", "upleg": "hip", "upperleg": "hip",
     "knee": "knee", "calf": "knee", "shin": "knee", "shank": "knee", "tibia": "knee",
-    "lowerleg": "knee", "leg": "knee",
+    "lowerleg": "knee", "leg": "knee", "uleg": "hip", "lleg": "knee",
     "ankle": "ankle", "foot": "ankle", "talus": "ankle",
     "toe": "toe", "toes": "toe", "toebase": "toe", "ball": "toe",
 }
 _ARM_WORDS = {
     "clavicle": "clavicle", "collar": "clavicle", "scapula": "clavicle",
-    "shoulder": "shoulder", "upperarm": "shoulder", "humerus": "shoulder", "arm": "shoulder",
+    "shoulder": "shoulder", "upperarm": "shoulder", "humerus": "shoulder", "arm": "shoulder", "uarm": "shoulder",
+    "shld": "shoulder", "elb": "elbow", "larm": "elbow",
     "elbow": "elbow", "forearm": "elbow", "lowerarm": "elbow", "radius": "elbow", "ulna": "elbow",
     "wrist": "wrist", "hand": "hand", "palm": "hand",
 }
@@ -464,16 +465,28 @@ def _pick(t: _Tree, group: list[int], oriented: bool) -> tuple[int, str]:
     return art[best], f"nearest the joint axes' meeting point of {len(art)} bodies"
 
 
+def _limb_words(t: _Tree, chain: list[int], words: dict[str, str]) -> set[str]:
+    """Keywords that name the whole limb, not a part: on every articulated body of the chain
+    (its name or its joints'), three or more (Atlas's ``l_leg_hpz``...``l_leg_akx``: the
+    ``leg`` of each is the limb, not the knee; HRP's ``LLEG_JOINT0..5``)."""
+    art = [b for b in chain if t.articulated(b)]
+    if len(art) < 3:
+        return set()
+    per_body = [{w for n in t.names(b) for w in _tokens(n) if w in words} for b in art]
+    return set.intersection(*per_body)
+
+
 def _named_groups(t: _Tree, chain: list[int], words: dict[str, str]) -> list[tuple[str, list[int]]]:
-    """Consecutive runs of bodies of ``chain`` whose names mention the same part."""
+    """Consecutive runs of bodies of ``chain`` whose names mention the same part (keywords
+    that name the whole limb left out)."""
+    limb = _limb_words(t, chain, words)
     groups: list[tuple[str, list[int]]] = []
     for b in chain:
-        parts = name_parts(t.name(b), words)
-        if not parts:
-            for n in t.names(b)[1:]:
-                parts = name_parts(n, words)
-                if parts:
-                    break
+        parts = []
+        for n in t.names(b):
+            parts = [words[w] for w in _tokens(n) if w in words and w not in limb]
+            if parts:
+                break
         part = parts[0] if parts else None
         if part is None:
             groups.append(("", [b]))
@@ -596,6 +609,33 @@ def _bending_elbow(t: _Tree, chain: list[int], out: dict[str, tuple[int, str]]) 
         if beyond:
             b, _ = _pick(t, beyond[0], oriented=False)
             out["wrist"] = (b, "tree position: articulation point 8 cm or more beyond the elbow")
+
+
+def _shoulder_centre(t: _Tree, chain: list[int], out: dict[str, tuple[int, str]]) -> None:
+    """The shoulder: the body nearest the meeting point of every hinge between the clavicle
+    (or the arm's root) and the elbow, where that is not the body the names gave.
+
+    Atlas names its upper arm's twist body ``uarm``, 19 cm out from the ``scap`` body whose
+    hinge lifts the arm: a shoulder there rides the chest where the arm was, not where it
+    turns.  Where the shoulder's bodies hold all the hinges before the elbow (the usual
+    pitch/roll/yaw bodies) nothing changes.
+    """
+    if "shoulder" not in out or "elbow" not in out:
+        return
+    start = chain.index(out["clavicle"][0]) + 1 if "clavicle" in out else 0
+    e = chain.index(out["elbow"][0])
+    cand = [b for b in chain[start:e] if t.articulated(b)]
+    s0 = out["shoulder"][0]
+    if len(cand) < 2 or s0 not in cand:
+        return
+    p = _axes_point(t, cand)
+    if p is None:
+        return
+    best = min(cand, key=lambda b: (round(float(np.linalg.norm(t.xpos[b] - p)), 3), cand.index(b)))
+    if best == s0 or np.linalg.norm(t.xpos[s0] - p) <= np.linalg.norm(t.xpos[best] - p) + 0.02:
+        return
+    out["shoulder"] = (best, f"joint axes: nearest the meeting point of the {len(cand)} bodies' hinges before the "
+                             f"elbow ({t.name(s0)!r}, named, is {np.linalg.norm(t.xpos[s0] - p) * 100:.0f} cm from it)")
 
 
 def _forearm_ends(t: _Tree, elbows: dict[str, int]) -> dict[str, tuple[str, int, tuple[float, float, float]]]:
@@ -732,6 +772,7 @@ def _arm_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
                     out["wrist"] = (w, "tree position: articulation point 8 cm or more beyond the elbow")
     if "elbow" in out:
         _bending_elbow(t, chain, out)
+        _shoulder_centre(t, chain, out)
     if "wrist" in out:
         last = chain[-1]
         w = out["wrist"][0]

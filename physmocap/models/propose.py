@@ -27,7 +27,10 @@ one, else the zero pose):
    Geometry checks the names: a hip whose bodies are not over the knee in the rest pose (the
    yaw and roll bodies inward of an offset pitch body) takes the body over the knee; an elbow
    whose hinges only turn the arm about its length gives way to the first hinge beyond that
-   bends it; an arm with no wrist joint gets a wrist site at the end of its forearm's geoms.
+   bends it; the shoulder is the body nearest the meeting point of the hinges before the
+   elbow where the named one is further; an arm with no wrist joint gets a wrist site at the
+   end of its forearm's geoms.  A keyword on every articulated body of a limb (Atlas's
+   ``l_leg_*`` joints) names the limb and tells no part.
 6. **Trunk**: articulation points on the tree path between the pelvis and the arms'
    branching body are spine (then chest); a head branch with joints gives neck and head
    (one such body is the head).  A robot whose head has no joint gets no neck, head or head

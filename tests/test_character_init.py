@@ -222,15 +222,21 @@ def test_naming_styles(tmp_path, style):
 def test_robot_without_toes_wrists_or_neck(tmp_path):
     mjcf = _write(tmp_path, _robot(STYLES["left_knee_link"], toes=False, wrists=False, neck=False))
     pr = propose_mapping(mjcf)
-    for canon in ("neck", "head", "left_wrist", "right_wrist", "left_hand_end", "left_toe_end"):
+    for canon in ("neck", "head", "left_hand_end", "left_toe_end"):
         assert canon not in pr.joints and canon in pr.left_out
     joints_table = pr.to_toml().split("[joints]")[1].split("# left out")[0]
-    assert "left_wrist" not in joints_table and "neck" not in joints_table
+    assert "neck" not in joints_table
+    # no wrist joint: the wrist is a site at the end of the forearm's geoms (the capsule's end,
+    # 25 cm below the elbow), so the forearm's direction is tracked
+    for side in ("left", "right"):
+        w = pr.joints[f"{side}_wrist"]
+        assert w.kind == "site" and pr.sites[w.name][0] == f"{side}_elbow_link"
+        assert np.allclose(pr.sites[w.name][1], (0.0, 0.0, -0.25), atol=0.005)  # the end of the capsule
     # a rigid foot still has a ball: a site on the ankle's body, 3/4 of the sole from the heel
     toe = pr.joints["left_toe"]
     assert toe.kind == "site" and pr.sites[toe.name][0] == "left_ankle_roll_link"
     ch = _loads(tmp_path, pr, mjcf)
-    assert "neck" not in ch.tracked and "left_wrist" not in ch.tracked
+    assert "neck" not in ch.tracked and ch.tracked["left_wrist"].name == "left_forearm_end"
     assert ch.tracked["left_elbow"].name == "left_elbow_link"
     rest = ch.rest_positions()
     assert 0.08 < rest["left_toe"][0] - rest["left_ankle"][0] < 0.12 and 0.0 < rest["left_toe"][2] < 0.03
@@ -486,3 +492,147 @@ def test_model_without_a_mapping_file_loads_with_the_proposal(tmp_path):
         warnings.simplefilter("ignore")
         traj = physmocap.retarget(physmocap.load_motion("example"), ch, end=30, progress=False, plant=False)
     assert np.isfinite(traj.qpos).all()
+
+
+# -- real robots' shapes that the styles above lack (issue 13, Menagerie models) ------------------
+
+
+def _offset_robot() -> str:
+    """A humanoid with the Unitree H1's hip (yaw and roll bodies inward, the pitch body 11 cm
+    out, the thigh hung below it) and the Booster T1's arm (the body named ``elbow`` turns
+    about the upper arm; the forearm, named ``hand``, bends at its root; no wrist)."""
+
+    def leg(s, sg):
+        return (
+            f'<body name="{s}_hip_yaw_link" pos="0 {0.09 * sg} -0.08"><joint name="{s}_hip_yaw" axis="0 0 1" range="-30 30"/>'
+            f'<body name="{s}_hip_roll_link" pos="0.04 0 0"><joint name="{s}_hip_roll" axis="1 0 0" range="-30 30"/>'
+            f'<body name="{s}_hip_pitch_link" pos="0 {0.11 * sg} 0"><joint name="{s}_hip_pitch" axis="0 1 0" range="-90 90"/>'
+            '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.05"/>'
+            f'<body name="{s}_knee_link" pos="0 0 -0.4"><joint name="{s}_knee" axis="0 1 0" range="0 150"/>'
+            '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04"/>'
+            f'<body name="{s}_ankle_link" pos="0 0 -0.4"><joint name="{s}_ankle" axis="0 1 0" range="-40 40"/>'
+            '<geom type="box" size="0.1 0.04 0.025" pos="0.04 0 -0.035"/>'
+            "</body></body></body></body></body>"
+        )
+
+    def arm(s, sg):
+        return (
+            f'<body name="{s}_arm1" pos="0 {0.2 * sg} 0.3"><joint name="{s}_shoulder_pitch" axis="0 1 0" range="-180 60"/>'
+            f'<body name="{s}_arm2" pos="0 {0.04 * sg} 0"><joint name="{s}_shoulder_roll" axis="1 0 0" range="-90 90"/>'
+            '<geom type="sphere" size="0.04"/>'
+            f'<body name="{s}_elbow_twist" pos="0 0 -0.06"><joint name="{s}_elbow_yaw" axis="0 0 1" range="-90 90"/>'
+            '<geom type="capsule" fromto="0 0 0 0 0 -0.16" size="0.03"/>'
+            f'<body name="{s}_hand_link" pos="0 0 -0.16"><joint name="{s}_elbow_pitch" axis="0 1 0" range="-120 0"/>'
+            '<geom type="capsule" fromto="0 0 0 0 0 -0.22" size="0.03"/>'
+            "</body></body></body></body>"
+        )
+
+    return (
+        '<mujoco model="offset"><compiler angle="degree" boundmass="0.01" boundinertia="0.0001"/><worldbody>'
+        '<body name="pelvis" pos="0 0 0.95"><freejoint/><geom type="box" size="0.08 0.12 0.06"/>'
+        f'{leg("left", 1)}{leg("right", -1)}'
+        '<body name="torso_link" pos="0 0 0.1"><joint name="waist" axis="0 0 1" range="-60 60"/>'
+        '<geom type="box" size="0.08 0.14 0.15" pos="0 0 0.2"/>'
+        f'{arm("left", 1)}{arm("right", -1)}</body></body></worldbody></mujoco>'
+    )
+
+
+def test_offset_hip_takes_the_body_over_the_knee(tmp_path):
+    """Unitree H1: the hip's three axes meet at the yaw body, 11 cm inward of the thigh; with
+    the hip there, hip -> knee leant 16 degrees and the knees were pulled in (thighs 11-14
+    degrees off the actor on the walks).  The hip is the body over the knee."""
+    mjcf = _write(tmp_path, _offset_robot(), "offset.xml")
+    pr = propose_mapping(mjcf)
+    for side in ("left", "right"):
+        assert pr.joints[f"{side}_hip"].name == f"{side}_hip_pitch_link", pr.joints[f"{side}_hip"]
+        assert "over the knee" in pr.joints[f"{side}_hip"].why
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    d = rest["left_knee"] - rest["left_hip"]
+    assert np.hypot(d[0], d[1]) < 1e-6  # the thigh straight down in the rest pose
+
+
+def test_twisting_elbow_gives_way_to_the_bending_hinge(tmp_path):
+    """Booster T1: the body named elbow turns about the upper arm and the forearm (named hand)
+    bends at its root.  Tracked as named, the upper arms were 21-29 degrees off the actor and
+    the forearm swung out.  The elbow is the hinge that bends the arm; with no wrist beyond
+    it, the wrist is a site at the end of the forearm's geoms."""
+    mjcf = _write(tmp_path, _offset_robot(), "offset.xml")
+    pr = propose_mapping(mjcf)
+    for side in ("left", "right"):
+        e, w = pr.joints[f"{side}_elbow"], pr.joints[f"{side}_wrist"]
+        assert e.name == f"{side}_hand_link" and "bends the arm" in e.why, e
+        assert w.kind == "site" and pr.sites[w.name][0] == f"{side}_hand_link"
+        assert np.allclose(pr.sites[w.name][1], (0.0, 0.0, -0.22), atol=0.005)
+        assert pr.joints[f"{side}_shoulder"].name in (f"{side}_arm1", f"{side}_arm2")
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    assert rest["left_elbow"][2] - rest["left_wrist"][2] == pytest.approx(0.22, abs=0.005)
+    from physmocap import load_motion, retarget
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=90)
+    fid = trajectory_fidelity(traj)
+    worst = max(fid.segments[s].median_deg for s in fid.segments if "arm" in s or "thigh" in s)
+    assert worst < 12.0, {s: round(v.median_deg, 1) for s, v in fid.segments.items()}
+
+
+def _atlas_like() -> str:
+    """Boston Dynamics Atlas's naming: every leg joint ``l_leg_*``, every arm joint ``l_arm_*``
+    (the limb, not a part), bodies ``uglut``/``lglut``/``uleg``/``lleg``/``talus``/``foot`` and
+    ``clav``/``scap``/``uarm``/``larm``/``ufarm``/``lfarm``/``hand``; the arm lifts at ``scap``
+    and ``uarm``, 12 cm below it, only twists the upper arm."""
+
+    def body(name, pos, joint, axis, inner="", geom=""):
+        return f'<body name="{name}" pos="{pos}"><joint name="{joint}" axis="{axis}" range="-90 90"/>{geom}{inner}</body>'
+
+    def leg(s, sg):
+        foot = body(f"{s}_talus", "0 0 -0.4", f"{s}_leg_aky", "0 1 0",
+                    body(f"{s}_foot", "0 0 0", f"{s}_leg_akx", "1 0 0", "",
+                         '<geom type="box" size="0.1 0.05 0.02" pos="0.04 0 -0.05"/>'))
+        knee = body(f"{s}_lleg", "-0.03 0 -0.4", f"{s}_leg_kny", "0 1 0", foot,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.4" size="0.04"/>')
+        return body(f"{s}_uglut", f"0 {0.09 * sg} -0.05", f"{s}_leg_hpz", "0 0 1",
+                    body(f"{s}_lglut", "0 0 0", f"{s}_leg_hpx", "1 0 0",
+                         body(f"{s}_uleg", f"0.03 {0.02 * sg} -0.06", f"{s}_leg_hpy", "0 1 0", knee,
+                              '<geom type="capsule" fromto="0 0 0 -0.03 0 -0.4" size="0.05"/>')))
+
+    def arm(s, sg):
+        hand = body(f"{s}_ufarm", "0 0 -0.28", f"{s}_arm_uwy", "0 0 1",
+                    body(f"{s}_lfarm", "0 0 0", f"{s}_arm_mwx", "1 0 0",
+                         body(f"{s}_hand", "0 0 0", f"{s}_arm_lwy", "0 0 1", "",
+                              '<geom type="box" size="0.03 0.02 0.05" pos="0 0 -0.06"/>')))
+        larm = body(f"{s}_larm", "0 0 -0.16", f"{s}_arm_elx", "0 1 0", hand,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.28" size="0.03"/>')
+        uarm = body(f"{s}_uarm", "0 0 -0.12", f"{s}_arm_ely", "0 0 1", larm,
+                    '<geom type="capsule" fromto="0 0 0 0 0 -0.16" size="0.035"/>')
+        return body(f"{s}_clav", f"0 {0.15 * sg} 0.45", f"{s}_arm_shz", "0 0 1",
+                    body(f"{s}_scap", f"0 {0.08 * sg} -0.05", f"{s}_arm_shx", "1 0 0", uarm))
+
+    return (
+        '<mujoco model="atlaslike"><compiler angle="degree" boundmass="0.01" boundinertia="0.0001"/><worldbody>'
+        '<body name="pelvis" pos="0 0 1.0"><freejoint/><geom type="box" size="0.08 0.12 0.06"/>'
+        f'{leg("l", 1)}{leg("r", -1)}'
+        '<body name="utorso" pos="0 0 0.1"><joint name="back_bkz" axis="0 0 1" range="-30 30"/>'
+        '<geom type="box" size="0.1 0.15 0.2" pos="0 0 0.25"/>'
+        f'{arm("l", 1)}{arm("r", -1)}</body></body></worldbody></mujoco>'
+    )
+
+
+def test_limb_wide_names_and_abbreviations(tmp_path):
+    """Atlas: ``leg`` in every leg joint's name made every leg body a knee (the knee went to the
+    thigh's body and the rest pose bent the hips 41 degrees to straighten that 'knee'); ``arm``
+    in every arm joint's name, every arm body a shoulder.  A keyword on every articulated body
+    of a chain names the limb and tells no part; ``uleg``/``lleg``/``uarm``/``larm`` are the
+    upper and lower leg and arm; the shoulder is where the arm's hinges meet (``scap``)."""
+    mjcf = _write(tmp_path, _atlas_like(), "atlaslike.xml")
+    pr = propose_mapping(mjcf)
+    want = {"hip": "{s}_uleg", "knee": "{s}_lleg", "ankle": "{s}_foot", "shoulder": "{s}_scap",
+            "elbow": "{s}_larm", "wrist": "{s}_hand"}
+    for side, s in (("left", "l"), ("right", "r")):
+        got = {part: pr.joints[f"{side}_{part}"].name for part in want}
+        assert got == {part: b.format(s=s) for part, b in want.items()}, got
+    assert not any("_leg_" in j for j in pr.rest_joints), pr.rest_joints  # no hip bent to 'straighten' a thigh
+    _loads(tmp_path, pr, mjcf)

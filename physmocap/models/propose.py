@@ -24,6 +24,13 @@ one, else the zero pose):
    to 66 degrees on the PyMO walk, against 35 this way).
    A hand body fixed at the forearm's end is the wrist.  A foot without a toe body gets a
    ball-of-foot site on its ankle body (``[sites]``; foot planting needs a toe point).
+   Geometry checks the names: a hip whose bodies are not over the knee in the rest pose (the
+   yaw and roll bodies inward of an offset pitch body) takes the body over the knee; an elbow
+   whose hinges only turn the arm about its length gives way to the first hinge beyond that
+   bends it; the shoulder is the body nearest the meeting point of the hinges before the
+   elbow where the named one is further; an arm with no wrist joint gets a wrist site at the
+   end of its forearm's geoms.  A keyword on every articulated body of a limb (Atlas's
+   ``l_leg_*`` joints) names the limb and tells no part.
 6. **Trunk**: articulation points on the tree path between the pelvis and the arms'
    branching body are spine (then chest); a head branch with joints gives neck and head
    (one such body is the head).  A robot whose head has no joint gets no neck, head or head
@@ -67,13 +74,14 @@ _RIGHT = {"right", "r", "rgt", "rt"}
 _LEG_WORDS = {
     "hip": "hip", "thigh": "hip", "femur": "hip", "upleg": "hip", "upperleg": "hip",
     "knee": "knee", "calf": "knee", "shin": "knee", "shank": "knee", "tibia": "knee",
-    "lowerleg": "knee", "leg": "knee",
+    "lowerleg": "knee", "leg": "knee", "uleg": "hip", "lleg": "knee",
     "ankle": "ankle", "foot": "ankle", "talus": "ankle",
     "toe": "toe", "toes": "toe", "toebase": "toe", "ball": "toe",
 }
 _ARM_WORDS = {
     "clavicle": "clavicle", "collar": "clavicle", "scapula": "clavicle",
-    "shoulder": "shoulder", "upperarm": "shoulder", "humerus": "shoulder", "arm": "shoulder",
+    "shoulder": "shoulder", "upperarm": "shoulder", "humerus": "shoulder", "arm": "shoulder", "uarm": "shoulder",
+    "shld": "shoulder", "elb": "elbow", "larm": "elbow",
     "elbow": "elbow", "forearm": "elbow", "lowerarm": "elbow", "radius": "elbow", "ulna": "elbow",
     "wrist": "wrist", "hand": "hand", "palm": "hand",
 }
@@ -460,16 +468,28 @@ def _pick(t: _Tree, group: list[int], oriented: bool) -> tuple[int, str]:
     return art[best], f"nearest the joint axes' meeting point of {len(art)} bodies"
 
 
+def _limb_words(t: _Tree, chain: list[int], words: dict[str, str]) -> set[str]:
+    """Keywords that name the whole limb, not a part: on every articulated body of the chain
+    (its name or its joints'), three or more (Atlas's ``l_leg_hpz``...``l_leg_akx``: the
+    ``leg`` of each is the limb, not the knee; HRP's ``LLEG_JOINT0..5``)."""
+    art = [b for b in chain if t.articulated(b)]
+    if len(art) < 3:
+        return set()
+    per_body = [{w for n in t.names(b) for w in _tokens(n) if w in words} for b in art]
+    return set.intersection(*per_body)
+
+
 def _named_groups(t: _Tree, chain: list[int], words: dict[str, str]) -> list[tuple[str, list[int]]]:
-    """Consecutive runs of bodies of ``chain`` whose names mention the same part."""
+    """Consecutive runs of bodies of ``chain`` whose names mention the same part (keywords
+    that name the whole limb left out)."""
+    limb = _limb_words(t, chain, words)
     groups: list[tuple[str, list[int]]] = []
     for b in chain:
-        parts = name_parts(t.name(b), words)
-        if not parts:
-            for n in t.names(b)[1:]:
-                parts = name_parts(n, words)
-                if parts:
-                    break
+        parts = []
+        for n in t.names(b):
+            parts = [words[w] for w in _tokens(n) if w in words and w not in limb]
+            if parts:
+                break
         part = parts[0] if parts else None
         if part is None:
             groups.append(("", [b]))
@@ -530,12 +550,165 @@ def _leg_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
                 i = min(between, key=lambda i: abs(heights[i] - mid))
                 b, _ = _pick(t, pts[i], oriented=False)
                 out["knee"] = (b, "tree position: articulation point at mid-leg")
+    if "hip" in out and "knee" in out:
+        out["hip"] = _hip_over_knee(t, chain, out["hip"], out["knee"][0])
     if "toe" not in out and "ankle" in out:
         after = chain[chain.index(out["ankle"][0]) + 1:]
         art = [b for b in after if t.articulated(b)]
         if art:
             out["toe"] = (art[0], "tree position: articulated body beyond the ankle")
     return out
+
+
+def _distal(t: _Tree, chain: list[int], b: int) -> np.ndarray | None:
+    """Unit direction from ``b``'s origin to the limb beyond it in the rest pose: the furthest
+    body origin after it on the chain, else the middle of its own geoms (None: nothing beyond)."""
+    after = [x for x in chain[chain.index(b) + 1:] if np.linalg.norm(t.xpos[x] - t.xpos[b]) > 0.02]
+    if after:
+        v = max((t.xpos[x] - t.xpos[b] for x in after), key=lambda v: float(np.linalg.norm(v)))
+    else:
+        geoms = [g for g in range(t.m.ngeom) if int(t.m.geom_bodyid[g]) in set(t.subtree(b))]
+        if not geoms:
+            return None
+        v = np.mean([t.data.geom_xpos[g] for g in geoms], axis=0) - t.xpos[b]
+    n = float(np.linalg.norm(v))
+    return v / n if n > 0.02 else None
+
+
+def _bends(t: _Tree, chain: list[int], b: int) -> bool:
+    """Whether a hinge of ``b`` bends the limb (its axis more than 45 degrees off the limb beyond
+    it) rather than turning it about its own length.  True where it cannot be told."""
+    hinges = [j for j in t.joints(b) if int(t.m.jnt_type[j]) == _HINGE]
+    d = _distal(t, chain, b)
+    if not hinges or d is None:
+        return True
+    return any(abs(float(t.data.xaxis[j] @ d)) / (np.linalg.norm(t.data.xaxis[j]) + 1e-12) < math.cos(math.radians(45))
+               for j in hinges)
+
+
+def _bending_elbow(t: _Tree, chain: list[int], out: dict[str, tuple[int, str]]) -> None:
+    """Move the elbow onto the first hinge that bends the arm, where the elbow's bodies only twist.
+
+    Some vendors name the upper arm's twist body ``elbow`` and the forearm ``hand`` (its hinge
+    at the forearm's root is the one that bends the arm).  Tracking the twist body as the elbow
+    swings the real forearm out of the actor's.  The wrist then moves beyond the new elbow:
+    the next articulation point 8 cm or more on, or none (the forearm ends the arm; its end
+    becomes the wrist site in :func:`propose_mapping`).
+    """
+    e = out["elbow"][0]
+    group = next((p for p in _points(t, chain) if e in p), [e])
+    if any(_bends(t, chain, b) for b in group):
+        return
+    later = [b for b in chain[chain.index(group[-1]) + 1:] if t.articulated(b)]
+    new = next((b for b in later if _bends(t, chain, b)), None)
+    if new is None:
+        return
+    out["elbow"] = (new, f"joint axes: the first hinge that bends the arm ({t.name(e)!r} turns about the upper arm)")
+    w = out.get("wrist")
+    if w is not None and chain.index(w[0]) <= chain.index(new):
+        del out["wrist"]
+        beyond = [p for p in _points(t, chain) if chain.index(p[0]) > chain.index(new)
+                  and np.linalg.norm(t.xpos[p[0]] - t.xpos[new]) > 0.08]
+        if beyond:
+            b, _ = _pick(t, beyond[0], oriented=False)
+            out["wrist"] = (b, "tree position: articulation point 8 cm or more beyond the elbow")
+
+
+def _shoulder_centre(t: _Tree, chain: list[int], out: dict[str, tuple[int, str]]) -> None:
+    """The shoulder: the body nearest the meeting point of every hinge between the clavicle
+    (or the arm's root) and the elbow, where that is not the body the names gave.
+
+    Atlas names its upper arm's twist body ``uarm``, 19 cm out from the ``scap`` body whose
+    hinge lifts the arm: a shoulder there rides the chest where the arm was, not where it
+    turns.  Where the shoulder's bodies hold all the hinges before the elbow (the usual
+    pitch/roll/yaw bodies) nothing changes.
+    """
+    if "shoulder" not in out or "elbow" not in out:
+        return
+    start = chain.index(out["clavicle"][0]) + 1 if "clavicle" in out else 0
+    e = chain.index(out["elbow"][0])
+    cand = [b for b in chain[start:e] if t.articulated(b)]
+    s0 = out["shoulder"][0]
+    if len(cand) < 2 or s0 not in cand:
+        return
+    p = _axes_point(t, cand)
+    if p is None:
+        return
+    best = min(cand, key=lambda b: (round(float(np.linalg.norm(t.xpos[b] - p)), 3), cand.index(b)))
+    if best == s0 or np.linalg.norm(t.xpos[s0] - p) <= np.linalg.norm(t.xpos[best] - p) + 0.02:
+        return
+    out["shoulder"] = (best, f"joint axes: nearest the meeting point of the {len(cand)} bodies' hinges before the "
+                             f"elbow ({t.name(s0)!r}, named, is {np.linalg.norm(t.xpos[s0] - p) * 100:.0f} cm from it)")
+
+
+def _forearm_ends(t: _Tree, elbows: dict[str, int]) -> dict[str, tuple[str, int, tuple[float, float, float]]]:
+    """Side -> (site name, elbow body, position in its frame) of the end of a forearm with no
+    wrist: the furthest point of its geoms (collision ones if any) along the forearm."""
+    from .geometry import geom_candidates, is_visual_only
+
+    taken = {t.m.site(i).name for i in range(t.m.nsite)}
+    out = {}
+    for side, e in elbows.items():
+        bodies = set(t.subtree(e))
+        geoms = [g for g in range(t.m.ngeom) if int(t.m.geom_bodyid[g]) in bodies]
+        solid = [g for g in geoms if not is_visual_only(t.m, g) and (t.m.geom_contype[g] or t.m.geom_conaffinity[g])]
+        pts = []
+        for g in solid or geoms:
+            cand = geom_candidates(t.m, g)
+            if len(cand):
+                R = t.data.geom_xmat[g].reshape(3, 3)
+                pts.append(t.data.geom_xpos[g] + cand[:, :3] @ R.T)
+        if not pts:
+            continue
+        P = np.concatenate(pts)
+        x = t.xpos[e]
+        d = P.mean(axis=0) - x
+        if np.linalg.norm(d) < 0.02:
+            continue
+        d /= np.linalg.norm(d)
+        reach = float(np.max((P - x) @ d))
+        if reach < 0.08:
+            continue
+        Rb = t.data.xmat[e].reshape(3, 3)
+        local = Rb.T @ (reach * d)
+        name = f"{side}_forearm_end"
+        while name in taken:
+            name += "_proposed"
+        out[side] = (name, e, tuple(round(float(v), 4) + 0.0 for v in local))
+    return out
+
+
+def _hip_over_knee(t: _Tree, chain: list[int], hip: tuple[int, str], knee: int) -> tuple[int, str]:
+    """The hip's body, moved along the hip's bodies onto the thigh's line where the hip is offset.
+
+    A hip whose yaw and roll bodies sit inward of its pitch body (a thigh hung on an offset
+    flexion joint) puts the knee 10 cm or more sideways of the axes' meeting point in the
+    standing rest pose: hip -> knee is then no longer the thigh's direction, and an actor's
+    straight leg pulls the knee inwards (hip roll at its limit).  Among the articulated bodies
+    from the hip down to the knee and level with the hip (within a quarter of the thigh), the
+    hip keeps its body unless its origin is further, horizontally, from the knee than the
+    nearest one by more than max(2 cm, 10 % of the thigh); then the nearest of those takes it.
+    """
+    b0, why = hip
+    if b0 not in chain or knee not in chain:
+        return hip
+    thigh = float(np.linalg.norm(t.xpos[knee] - t.xpos[b0]))
+    if thigh < 1e-6:
+        return hip
+    cand = [b for b in chain[chain.index(b0): chain.index(knee)]
+            if t.articulated(b) and abs(t.h[b] - t.h[b0]) <= 0.25 * thigh]
+
+    def off(b: int) -> float:
+        v = t.xpos[knee] - t.xpos[b]
+        return float(np.linalg.norm(v - (v @ t.up) * t.up))
+
+    if len(cand) < 2:
+        return hip
+    best = min(cand, key=lambda b: (round(off(b), 3), cand.index(b)))
+    if off(b0) <= off(best) + max(0.02, 0.1 * thigh):
+        return hip
+    return best, (f"{why.split(',')[0]}, the hip body over the knee "
+                  f"({off(b0) * 100:.0f} cm sideways of it from {t.name(b0)!r})")
 
 
 def _arm_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
@@ -600,6 +773,9 @@ def _arm_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
                     w, _ = _pick(t, [x for i in far2 for x in pts[i]
                                      if np.linalg.norm(t.xpos[x] - t.xpos[pts[far2[0]][0]]) < 0.1], oriented=False)
                     out["wrist"] = (w, "tree position: articulation point 8 cm or more beyond the elbow")
+    if "elbow" in out:
+        _bending_elbow(t, chain, out)
+        _shoulder_centre(t, chain, out)
     if "wrist" in out:
         last = chain[-1]
         w = out["wrist"][0]
@@ -682,6 +858,10 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
                 body, why = parts[part]
                 put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
 
+    ends = _forearm_ends(t, {side: model.body(joints[f"{side}_elbow"].name).id for side in ("left", "right")
+                             if f"{side}_wrist" not in joints})
+    for side, (site, body, pos) in ends.items():
+        joints[f"{side}_wrist"] = Guess(f"{side}_wrist", "site", site, "no wrist joint: the end of the forearm's geoms")
     if (_axis_name(t.up), _axis_name(forward)) == ("Z", "X"):
         sites = _ball_sites(t, {side: model.body(joints[f"{side}_ankle"].name).id
                                 for side in ("left", "right") if f"{side}_toe" not in joints})
@@ -774,7 +954,7 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         rest_joints=rest_joints,
         rest_note=rest_note,
         notes=notes,
-        sites={site: (model.body(body).name, pos) for site, body, pos in sites.values()},
+        sites={site: (model.body(body).name, pos) for site, body, pos in list(sites.values()) + list(ends.values())},
     )
 
 

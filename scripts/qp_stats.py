@@ -18,7 +18,7 @@ frame:
 The counters only wrap the solver's methods; they change nothing it computes.
 
 Usage:  python scripts/qp_stats.py [--clips cmu_12_01_walk pymo_walk] [--characters humanoid robot]
-        [--frames N] [--per-frame out.json]
+        [--frames N] [--per-frame out.json] [--set contact_overshoot=0.0005]
 """
 
 from __future__ import annotations

@@ -106,13 +106,14 @@ class SolverOptions:
             still halved.  Off (0) by default: the default output is unchanged.  With 5e-4
             the whole retarget takes 4.95 instead of 6.42 QPs a frame on the PyMO walk
             humanoid (CMU walk 4.97 instead of 5.57; Bandai walk 6.6 instead of 13.0),
-            failed line searches fall from 2.7 to 0.1 a frame, every clip tracks its targets
-            more closely (Bandai punch humanoid 0.90 -> 0.68 cm) and no planted contact ends
-            a first-pass frame above ``constraint_tolerance``; but the answers change, joint
-            acceleration rises by 0-12 % (frames converge instead of lagging at the
+            failed line searches fall from 2.7 to 0.1 a frame, no planted contact ends a
+            first-pass frame above ``constraint_tolerance`` and most clips track their targets
+            more closely (Bandai punch humanoid 0.90 -> 0.68 cm); but the answers change: joint
+            acceleration rises by up to 12 % (frames converge instead of stopping short at the
             iteration cap), the Bandai punch robot's left elbow reaches its velocity cap on
-            3 % of frames (it follows the jab) and geom slip rises on the Bandai clips
-            (docs/history.md, "Step acceptance").
+            3 % of frames (it follows the jab), geom slip rises on the Bandai clips and the
+            robot's neck turns another way on half the PyMO walk (docs/history.md, "Step
+            acceptance (stop 31)").
         trust_region: Largest change of any coordinate in one QP step (rad or m).
         self_collision: Keep the limbs' collision geoms out of each other and out of
             the trunk (:class:`~physmocap.ik.limits.SelfCollisionLimit`, pairs from

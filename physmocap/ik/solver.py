@@ -107,8 +107,10 @@ class SolverOptions:
             the whole retarget takes 4.95 instead of 6.42 QPs a frame on the PyMO walk
             humanoid (CMU walk 4.97 instead of 5.57; Bandai walk 6.6 instead of 13.0),
             failed line searches fall from 2.7 to 0.1 a frame, no planted contact ends a
-            first-pass frame above ``constraint_tolerance`` and most clips track their targets
-            more closely (Bandai punch humanoid 0.90 -> 0.68 cm); but the answers change: joint
+            first-pass frame above ``constraint_tolerance`` and the Bandai clips and the PyMO
+            walk humanoid track their targets more closely (Bandai punch humanoid 0.90 -> 0.68
+            cm; the OptiTrack humanoid 0.55 -> 0.58, PyMO robot 1.09 -> 1.11, the others
+            equal); but the answers change: joint
             acceleration rises by up to 12 % (frames converge instead of stopping short at the
             iteration cap), the Bandai punch robot's left elbow reaches its velocity cap on
             3 % of frames (it follows the jab), geom slip rises on the Bandai clips and the

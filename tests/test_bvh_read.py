@@ -458,6 +458,28 @@ def test_lying_rest_pose_of_a_standing_motion_stays_y_up(tmp_path):
         assert read_bvh(lying).file_up == "Z"
 
 
+def test_z_up_file_with_a_root_wrapper_left_behind(tmp_path):
+    """A Z-up file whose root wrapper stays at the origin while the body walks 4 m away (Bandai
+    Namco's joint_Root): the wrapper is no part of the figure's size, so the walk still reads
+    as standing along Z."""
+    body = _stick_figure(tmp_path, root_x_deg=0.0).read_text()
+    head, rows = body.split("Frame Time: 0.033333\n")
+    head = head.replace("ROOT Hips\n{\n  OFFSET 0 0 0\n", "ROOT Root\n{\n  OFFSET 0 0 0\n"
+                        "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+                        "  JOINT Hips {\n  OFFSET 0 0 0\n", 1)
+    head = head.replace("\n}\nMOTION", "\n}\n}\nMOTION")
+    head = head.replace("Frames: 4", "Frames: 40")
+    lines = []
+    for f in range(40):
+        vals = [0.0] * 6 + [0.0, 10.0 * f, 90.0, 0.0, 0.0, 0.0] + [2.0 * np.sin(f + k) for k in range(8 * 3)]
+        lines.append(" ".join(f"{v:.4f}" for v in vals))
+    p = tmp_path / "wrapped.bvh"
+    p.write_text(head + "Frame Time: 0.033333\n" + "\n".join(lines) + "\n")
+    with pytest.warns(PhysmocapWarning, match="read it as Z-up"):
+        m = read_bvh(p)
+    assert m.file_up == "Z"
+
+
 def test_retarget_in_up_option(tmp_path, monkeypatch):
     """retarget passes --in-up to the BVH reader as its up axis and refuses it on other inputs."""
     import physmocap.sources as sources

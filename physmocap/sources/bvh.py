@@ -903,7 +903,11 @@ def _z_up_file(offsets_file: np.ndarray, parents: np.ndarray, end_sites: np.ndar
     probe = Skeleton(tuple(names), parents, offsets_file @ m.T, end_sites)
     idx = np.unique(np.linspace(0, len(rotations) - 1, min(len(rotations), _UP_PROBE_FRAMES)).astype(int))
     pos, _ = forward_kinematics(probe, rotations[idx], translations[idx], lay.pos_joints, with_rotations=False)
-    ext = np.ptp(pos, axis=1)  # (frames, 3) in world axes: world Z = file Y, world Y = -file Z
+    # Each frame's extent over the joints between their 5th and 95th percentiles along each
+    # axis (world Z = file Y, world Y = -file Z): a root wrapper left at the origin while the
+    # body walks away (Bandai Namco's joint_Root) is not part of the figure's size
+    # ("nearest": a skeleton of 14 points still drops its outermost one at each end).
+    ext = np.percentile(pos, 95.0, axis=1, method="nearest") - np.percentile(pos, 5.0, axis=1, method="nearest")
     return bool(np.median(ext[:, 1]) > np.median(ext[:, 2]))
 
 

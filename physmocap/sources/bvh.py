@@ -15,7 +15,9 @@ Conventions this reader assumes (they are what every exporter we know writes):
   parent's frame and **replace** the ``OFFSET`` components they animate (the
   components a joint does not animate keep their offset).  They are applied
   before the joint's rotation, wherever they appear in the channel list.
-* The file is Y-up unless told otherwise (``up="Z"``).  Lengths are in the
+* The file is Y-up unless told otherwise (``up="Z"``) or unless both its rest pose and its
+  motion stand much taller along Z than along Y (a Z-up export, such as MakeHuman's; read as
+  Z-up with a warning naming ``up="Y"``).  Lengths are in the
   file's unit, detected from the size of the rest pose unless given
   (:func:`detect_units`).
 
@@ -923,7 +925,8 @@ def read_bvh(
         units: The file's length unit: a name (``"m"``, ``"cm"``, ``"mm"``,
             ``"inch"``, ``"ft"``, ``"cmu"``) or metres per file unit as a
             number.  ``None`` detects it from the rest pose (:func:`detect_units`).
-        up: The file's up axis, ``"Y"`` (the BVH convention, the default) or ``"Z"``.
+        up: The file's up axis, ``"Y"`` (the BVH convention) or ``"Z"``; ``None`` reads it as
+            Y-up unless the rest pose and the motion both stand along Z (:func:`_z_up_file`).
 
     Returns:
         The motion in metres, Z-up, with x-y-z-w local rotations.  ``meta``

@@ -377,10 +377,10 @@ def test_up_override():
         read_bvh(path, up="X")
 
 
-def test_z_up_looking_file_warns(tmp_path):
-    """A file whose rest pose stands along Z gets a hint to pass up='Z'."""
+def _z_up_offsets_variant(tmp_path: Path) -> Path:
+    """edge_cases.bvh with the Y and Z components of every OFFSET swapped: a rest pose (and,
+    its rotations being small, a motion) that stands along Z."""
     src = (FIXTURES / "edge_cases.bvh").read_text()
-    # Swap the Y and Z offset components of every OFFSET line.
     out = []
     for line in src.splitlines(keepends=True):
         s = line.strip()
@@ -393,12 +393,112 @@ def test_z_up_looking_file_warns(tmp_path):
             x, y, z = rest.split()[:3]
             line = f"{head}OFFSET {x} {z} {y} {tail}".rstrip() + "\n"
         out.append(line)
-    p = _variant(tmp_path, "".join(out).encode())
-    with pytest.warns(PhysmocapWarning, match="up='Z'"):
-        read_bvh(p)
+    return _variant(tmp_path, "".join(out).encode())
+
+
+def test_z_up_file_is_detected(tmp_path):
+    """A file whose rest pose and motion both stand along Z is read as Z-up (with a note
+    naming the override), exactly as up='Z' reads it; up='Y' still forces Y-up."""
+    p = _z_up_offsets_variant(tmp_path)
+    with pytest.warns(PhysmocapWarning, match="read it as Z-up"):
+        auto = read_bvh(p)
     with warnings.catch_warnings():
         warnings.simplefilter("error", PhysmocapWarning)
-        read_bvh(p, up="Z")
+        z = read_bvh(p, up="Z")
+        y = read_bvh(p, up="Y")
+    assert auto.file_up == "Z" and y.file_up == "Y"
+    np.testing.assert_array_equal(auto.rotations, z.rotations)
+    np.testing.assert_array_equal(auto.translations, z.translations)
+    np.testing.assert_array_equal(auto.skeleton.offsets, z.skeleton.offsets)
+
+
+def _stick_figure(tmp_path: Path, root_x_deg: float) -> Path:
+    """A Y-up file of a stick figure whose offsets stand along +Z (head up +Z, legs down -Z);
+    every frame turns the root ``root_x_deg`` about X."""
+    hier = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Spine { OFFSET 0 0 25 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT Head { OFFSET 0 0 30 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 0 20 } }
+    JOINT LeftArm { OFFSET 18 0 25 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 0 -55 } }
+    JOINT RightArm { OFFSET -18 0 25 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 0 -55 } }
+  }
+  JOINT LeftUpLeg { OFFSET 10 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT LeftLeg { OFFSET 0 0 -45 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 0 -45 } } }
+  JOINT RightUpLeg { OFFSET -10 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT RightLeg { OFFSET 0 0 -45 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 0 -45 } } }
+}
+MOTION
+Frames: 4
+Frame Time: 0.033333
+"""
+    rows = []
+    for f in range(4):
+        vals = [3.0 * f, 0.0, 90.0, 0.0, root_x_deg, 0.0] + [2.0 * np.sin(f + k) for k in range(8 * 3)]
+        rows.append(" ".join(f"{v:.4f}" for v in vals))
+    p = tmp_path / "stick.bvh"
+    p.write_text(hier + "\n".join(rows) + "\n")
+    return p
+
+
+def test_lying_rest_pose_of_a_standing_motion_stays_y_up(tmp_path):
+    """A Y-up file whose rest pose lies along Z but whose motion stands along Y (the root turns
+    the body up) stays Y-up, with a hint that up='Z' exists; the same figure unturned (standing
+    along Z in the motion too) is read as Z-up."""
+    standing = _stick_figure(tmp_path, root_x_deg=-90.0)
+    with pytest.warns(PhysmocapWarning, match="up='Z'"):
+        m = read_bvh(standing)
+    assert m.file_up == "Y"
+    pos = m.world_positions()
+    assert np.ptp(pos[..., 2], axis=1).min() > 1.5 * np.ptp(pos[..., 1], axis=1).max()  # stands along world Z
+    lying = _stick_figure(tmp_path, root_x_deg=0.0)
+    with pytest.warns(PhysmocapWarning, match="read it as Z-up"):
+        assert read_bvh(lying).file_up == "Z"
+
+
+def test_z_up_file_with_a_root_wrapper_left_behind(tmp_path):
+    """A Z-up file whose root wrapper stays at the origin while the body walks 4 m away (Bandai
+    Namco's joint_Root): the wrapper is no part of the figure's size, so the walk still reads
+    as standing along Z."""
+    body = _stick_figure(tmp_path, root_x_deg=0.0).read_text()
+    head, rows = body.split("Frame Time: 0.033333\n")
+    head = head.replace("ROOT Hips\n{\n  OFFSET 0 0 0\n", "ROOT Root\n{\n  OFFSET 0 0 0\n"
+                        "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+                        "  JOINT Hips {\n  OFFSET 0 0 0\n", 1)
+    head = head.replace("\n}\nMOTION", "\n}\n}\nMOTION")
+    head = head.replace("Frames: 4", "Frames: 40")
+    lines = []
+    for f in range(40):
+        vals = [0.0] * 6 + [0.0, 10.0 * f, 90.0, 0.0, 0.0, 0.0] + [2.0 * np.sin(f + k) for k in range(8 * 3)]
+        lines.append(" ".join(f"{v:.4f}" for v in vals))
+    p = tmp_path / "wrapped.bvh"
+    p.write_text(head + "Frame Time: 0.033333\n" + "\n".join(lines) + "\n")
+    with pytest.warns(PhysmocapWarning, match="read it as Z-up"):
+        m = read_bvh(p)
+    assert m.file_up == "Z"
+
+
+def test_retarget_in_up_option(tmp_path, monkeypatch):
+    """retarget passes --in-up to the BVH reader as its up axis and refuses it on other inputs."""
+    import physmocap.sources as sources
+    from physmocap.cli import main
+    from physmocap.errors import InputError
+
+    seen = {}
+
+    def fake_load(path, **opts):
+        seen.update(opts)
+        raise InputError("stop here", path=path)
+
+    monkeypatch.setattr(sources, "load_motion", fake_load)
+    p = _stick_figure(tmp_path, root_x_deg=0.0)
+    assert main(["retarget", str(p), "-o", str(tmp_path / "o.bvh"), "--in-up", "y"]) == 2
+    assert seen.get("up") == "Y"
+    seen.clear()
+    assert main(["retarget", str(tmp_path / "x.trc"), "-o", str(tmp_path / "o2.bvh"), "--in-up", "Z"]) == 2
+    assert "up" not in seen
 
 
 def test_detect_units_bounds():

@@ -42,6 +42,9 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", help="force the source skeleton's naming profile")
     p.add_argument("--source-map", metavar="MAP.toml", help="source skeleton mapping file (TOML)")
     p.add_argument("--in-units", metavar="UNIT", help="override the input's length unit: m, dm, cm, mm, inch, ft, cmu (CMU BVH), or metres per unit as a number (default: detect)")
+    p.add_argument("--in-up", metavar="AXIS", choices=["Y", "Z", "y", "z"],
+                   help="a BVH input's up axis, Y or Z (default: Y, or Z where the rest pose and the motion are "
+                        "both much taller along Z)")
     add_marker_read_options(p)
     add_clean_option(p)
     p.add_argument("--start", type=int, help="first source frame (inclusive)")
@@ -336,6 +339,10 @@ def retarget_from_args(args: argparse.Namespace):
     config = config_from_args(args)
     check_option_files(args)  # here, not in config_from_args: a batch manifest's missing file fails its own job
     read_opts = {"units": args.in_units} if args.in_units else {}
+    if getattr(args, "in_up", None):
+        if Path(str(args.input)).suffix.lower() != ".bvh":
+            raise OptionError("--in-up: for BVH files only", path=args.input)
+        read_opts["up"] = args.in_up.upper()
     read_opts.update(marker_read_options(args))
     from ..markers.motion import LegsNotCapturedError
 

@@ -15,7 +15,9 @@ Conventions this reader assumes (they are what every exporter we know writes):
   parent's frame and **replace** the ``OFFSET`` components they animate (the
   components a joint does not animate keep their offset).  They are applied
   before the joint's rotation, wherever they appear in the channel list.
-* The file is Y-up unless told otherwise (``up="Z"``).  Lengths are in the
+* The file is Y-up unless told otherwise (``up="Z"``) or unless both its rest pose and its
+  motion stand much taller along Z than along Y (a Z-up export, such as MakeHuman's; read as
+  Z-up with a warning naming ``up="Y"``).  Lengths are in the
   file's unit, detected from the size of the rest pose unless given
   (:func:`detect_units`).
 
@@ -875,6 +877,42 @@ def _read_rows(fh, header: _Header, lay: _Layout, leftover: bytes, path: Path, s
 # public entry point
 
 
+#: Frames of the motion sampled to confirm a Z-up file (forward kinematics of each).
+_UP_PROBE_FRAMES = 64
+
+
+def _rest_taller_along_z(offsets_file: np.ndarray, parents: np.ndarray) -> bool:
+    """Whether the rest pose (file axes) is much taller along Z than along Y: over twice its
+    Y extent and a real part of the figure's size (not a flat or degenerate skeleton)."""
+    rest = np.zeros_like(offsets_file)
+    for j in range(len(parents)):
+        rest[j] = offsets_file[j] if parents[j] < 0 else rest[parents[j]] + offsets_file[j]
+    ext = np.ptp(rest, axis=0)
+    return bool(ext[2] > 2.0 * max(ext[1], 1e-12) and ext[2] > 0.3 * ext.max())
+
+
+def _z_up_file(offsets_file: np.ndarray, parents: np.ndarray, end_sites: np.ndarray,
+               names: list[str], rotations: np.ndarray, translations: np.ndarray,
+               lay: "_Layout") -> bool:
+    """Whether a file read as Y-up is a Z-up file: the rest pose is much taller along the
+    file's Z than along its Y (:func:`_rest_taller_along_z`), and so is the motion (the
+    median over sampled frames of each frame's extent along Z exceeds that along Y).  Both
+    must agree: a Y-up file whose rest pose lies along Z (a non-standing reference pose)
+    still stands along Y while it moves, and is left Y-up."""
+    if len(rotations) == 0 or not _rest_taller_along_z(offsets_file, parents):
+        return False
+    m = up_axis_matrix("Y", "Z")  # world = m @ file, as the rows were read
+    probe = Skeleton(tuple(names), parents, offsets_file @ m.T, end_sites)
+    idx = np.unique(np.linspace(0, len(rotations) - 1, min(len(rotations), _UP_PROBE_FRAMES)).astype(int))
+    pos, _ = forward_kinematics(probe, rotations[idx], translations[idx], lay.pos_joints, with_rotations=False)
+    # Each frame's extent over the joints between their 5th and 95th percentiles along each
+    # axis (world Z = file Y, world Y = -file Z): a root wrapper left at the origin while the
+    # body walks away (Bandai Namco's joint_Root) is not part of the figure's size
+    # ("nearest": a skeleton of 14 points still drops its outermost one at each end).
+    ext = np.percentile(pos, 95.0, axis=1, method="nearest") - np.percentile(pos, 5.0, axis=1, method="nearest")
+    return bool(np.median(ext[:, 1]) > np.median(ext[:, 2]))
+
+
 def read_bvh(
     path: str | os.PathLike,
     units: str | float | None = None,
@@ -887,7 +925,8 @@ def read_bvh(
         units: The file's length unit: a name (``"m"``, ``"cm"``, ``"mm"``,
             ``"inch"``, ``"ft"``, ``"cmu"``) or metres per file unit as a
             number.  ``None`` detects it from the rest pose (:func:`detect_units`).
-        up: The file's up axis, ``"Y"`` (the BVH convention, the default) or ``"Z"``.
+        up: The file's up axis, ``"Y"`` (the BVH convention) or ``"Z"``; ``None`` reads it as
+            Y-up unless the rest pose and the motion both stand along Z (:func:`_z_up_file`).
 
     Returns:
         The motion in metres, Z-up, with x-y-z-w local rotations.  ``meta``
@@ -948,10 +987,21 @@ def read_bvh(
             f"read the {rows} rows present"
         )
     rotations, translations = store.arrays()
+    parents = np.array([j.parent for j in joints], dtype=np.int64)
+    end_sites = np.array([j.end_site for j in joints], dtype=bool)
+    if up is None and _z_up_file(offsets_file, parents, end_sites, names, rotations, translations, lay):
+        # Read as Y-up (world = M file); the file is Z-up: take the rows back to file axes
+        # (a quaternion's vector part and a translation both turn by M^T) and keep them.
+        m = up_axis_matrix("Y", "Z")
+        rotations[..., :3] = rotations[..., :3] @ m
+        translations[...] = translations @ m
+        file_up = "Z"
+        perm, sign = axis_permutation(up_axis_matrix(file_up, "Z"))
+        warn(f"{path}: the rest pose and the motion are both much taller along Z than along Y: "
+             "read it as Z-up (pass up='Y' / --in-up Y to read it as Y-up)")
 
     # Rest pose in world axes, file units.
     offsets_world = offsets_file[:, perm] * sign
-    parents = np.array([j.parent for j in joints], dtype=np.int64)
     rest = np.zeros((J, 3))
     for j in range(J):
         rest[j] = offsets_world[j] if parents[j] < 0 else rest[parents[j]] + offsets_world[j]
@@ -970,15 +1020,9 @@ def read_bvh(
             unit_name, scale = detect_units(extent)
     else:
         unit_name, scale = unit_choice
-    if up is None:
-        # Heights in file axes: Y extent vs Z extent of the rest pose.
-        file_rest = np.zeros((J, 3))
-        for j in range(J):
-            file_rest[j] = offsets_file[j] if parents[j] < 0 else file_rest[parents[j]] + offsets_file[j]
-        ext_file = np.ptp(file_rest, axis=0)
-        if ext_file[2] > 2.0 * max(ext_file[1], 1e-12) and ext_file[2] > 0.3 * extent:
-            warn(f"{path}: the rest pose is much taller along Z than along Y; if the file is Z-up "
-                 "read it with up='Z' (--in-up Z)")
+    if up is None and file_up == "Y" and _rest_taller_along_z(offsets_file, parents):
+        warn(f"{path}: the rest pose is much taller along Z than along Y (the motion is not); if the "
+             "file is Z-up read it with up='Z' (--in-up Z)")
 
     if scale != 1.0:
         translations *= scale

@@ -305,7 +305,13 @@ def _facing(left_hip: np.ndarray, right_hip: np.ndarray) -> np.ndarray:
 
 
 #: The segment direction that calibrates each torso segment's rest posture.
-TORSO_UP = {"spine": ("chest", "neck"), "chest": ("neck", "head"), "head": ("head_end",)}
+TORSO_UP = {"spine": ("chest", "neck"), "chest": ("neck", "head")}
+#: The torso segments whose calibration the head takes, nearest first: the head is held
+#: neutral on the trunk in the calibration pose.  Its own "top of the head" is no
+#: direction to calibrate on: vendors put it anywhere (Mixamo's HeadTop_End sits 17-19
+#: degrees forward of the head joint, CMU's end site 2-7 degrees back), and aligning the
+#: character's head-to-top direction on it bowed the character's head by that much.
+HEAD_CARRIERS = ("chest", "spine", "pelvis")
 
 
 def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: np.ndarray) -> np.ndarray:
@@ -313,12 +319,16 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
     facing yaw) onto the actor's rest segment direction, x-y-z-w.
 
     The segment runs from ``c`` to its first canonical child (limbs) or up the
-    torso (:data:`TORSO_UP`; the pelvis on the trunk line); a limb's end with no child
+    torso (:data:`TORSO_UP`; the pelvis on the trunk line; the head as the torso segment
+    carrying it, :data:`HEAD_CARRIERS`); a limb's end with no child
     on both sides, from its parent to ``c``.  It calibrates a
     rest posture that differs between actor and character: T-pose arms against
     arms down, a rest spine that leans.
     """
     ident = np.array([0.0, 0.0, 0.0, 1.0])
+    if c == "head":
+        carrier = next((x for x in HEAD_CARRIERS if x in present), None)
+        return ident if carrier is None else _rest_alignment(carrier, present, actor_pts, char_pts, yaw)
     if c == "pelvis":
         # The pelvis is aligned on the whole trunk line, mid-hip to neck: skeletons place
         # the hip centres differently relative to the lumbar joint (CMU's sit 6 cm in front

@@ -499,6 +499,9 @@ def test_retarget_in_up_option(tmp_path, monkeypatch):
     seen.clear()
     assert main(["retarget", str(tmp_path / "x.trc"), "-o", str(tmp_path / "o2.bvh"), "--in-up", "Z"]) == 2
     assert "up" not in seen
+    seen.clear()  # the bundled clip is a BVH file ("--in-up: for BVH files only" before)
+    assert main(["retarget", "example", "-o", str(tmp_path / "o3.bvh"), "--in-up", "Y"]) == 2
+    assert seen.get("up") == "Y"
 
 
 def test_detect_units_bounds():

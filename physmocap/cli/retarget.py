@@ -340,7 +340,9 @@ def retarget_from_args(args: argparse.Namespace):
     check_option_files(args)  # here, not in config_from_args: a batch manifest's missing file fails its own job
     read_opts = {"units": args.in_units} if args.in_units else {}
     if getattr(args, "in_up", None):
-        if Path(str(args.input)).suffix.lower() != ".bvh":
+        from ..resources import resolve_input
+
+        if resolve_input(args.input).suffix.lower() != ".bvh":  # "example" is the bundled BVH
             raise OptionError("--in-up: for BVH files only", path=args.input)
         read_opts["up"] = args.in_up.upper()
     read_opts.update(marker_read_options(args))

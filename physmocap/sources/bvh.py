@@ -993,8 +993,9 @@ def read_bvh(
         # Read as Y-up (world = M file); the file is Z-up: take the rows back to file axes
         # (a quaternion's vector part and a translation both turn by M^T) and keep them.
         m = up_axis_matrix("Y", "Z")
-        rotations[..., :3] = rotations[..., :3] @ m
-        translations[...] = translations @ m
+        for a in range(0, rows, 4096):  # a block at a time: a long clip's rows are not copied whole
+            rotations[a : a + 4096, :, :3] = rotations[a : a + 4096, :, :3] @ m
+            translations[a : a + 4096] = translations[a : a + 4096] @ m
         file_up = "Z"
         perm, sign = axis_permutation(up_axis_matrix(file_up, "Z"))
         warn(f"{path}: the rest pose and the motion are both much taller along Z than along Y: "

@@ -325,7 +325,7 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
         source=motion.source,
     )
     qpos = np.empty((motion.num_frames, retargeter.character.model.nq))
-    tracked: list[Targets] = []
+    tracked = _TargetTrack(motion.num_frames, motion.fps)
     for t in range(motion.num_frames):
         if motion.is_rotational:
             assert motion.rotations is not None and motion.translations is not None
@@ -335,14 +335,14 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
             conf = None if motion.confidence is None else motion.confidence[t]
             qpos[t] = retargeter.step(positions=motion.positions[t], confidence=conf)
         assert retargeter.last_targets is not None
-        tracked.append(retargeter.last_targets)
+        tracked.put(t, retargeter.last_targets)
     labels = {k: np.array([frame[k] for frame in retargeter.labels], dtype=bool) for k in (retargeter.labels[0] if retargeter.labels else {})}
     return Trajectory(
         character=retargeter.character,
         qpos=qpos,
         fps=motion.fps,
         source=motion.source,
-        targets=_stacked(tracked, motion.fps),
+        targets=tracked.targets(),
         contacts=Contacts(labels=labels, fps=motion.fps, source="streamed") if labels else None,
         source_motion=motion,
         joint_indices=retargeter.joint_indices,
@@ -354,16 +354,30 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
     )
 
 
-def _stacked(frames: list[Targets], fps: float) -> Targets | None:
-    """The streamed frames' targets as one :class:`Targets` (the root scale of the last
-    calibration: a stream that calibrates again on frame 1 tracks with that one)."""
-    if not frames:
-        return None
-    last = frames[-1]
-    return replace(
-        last,
-        positions=np.concatenate([f.positions for f in frames]),
-        orientations=np.concatenate([f.orientations for f in frames]),
-        valid=np.concatenate([f.valid for f in frames]),
-        fps=float(fps),
-    )
+class _TargetTrack:
+    """The streamed frames' targets gathered into one :class:`Targets` of ``F`` frames, in
+    arrays allocated once (a list of per-frame objects would hold about a kilobyte a frame
+    more); the root scale is the last calibration's (a stream that calibrates again on frame 1
+    tracks with that one)."""
+
+    def __init__(self, frames: int, fps: float) -> None:
+        self.frames, self.fps = int(frames), float(fps)
+        self.last: Targets | None = None
+        self.positions = self.orientations = self.valid = None
+
+    def put(self, t: int, frame: Targets) -> None:
+        if self.positions is None:
+            n = len(frame.names)
+            self.positions = np.empty((self.frames, n, 3))
+            self.orientations = np.empty((self.frames, n, 4))
+            self.valid = np.empty((self.frames, n), dtype=bool)
+        self.positions[t] = frame.positions[0]
+        self.orientations[t] = frame.orientations[0]
+        self.valid[t] = frame.valid[0]
+        self.last = frame
+
+    def targets(self) -> Targets | None:
+        if self.last is None:
+            return None
+        return replace(self.last, positions=self.positions, orientations=self.orientations, valid=self.valid,
+                       fps=self.fps)

@@ -812,3 +812,28 @@ def test_an_arm_is_mapped_whole_or_not_at_all(tmp_path):
         warnings.simplefilter("ignore")
         traj = retarget(load_motion("example"), ch, progress=False, end=20)
     assert np.all(np.isfinite(traj.qpos))
+
+
+@pytest.mark.parametrize("key, used", [("stand", "stand"), ("Standing", "Standing"), ("home_pose", "home_pose"),
+                                       ("crouch", None)])
+def test_rest_pose_from_a_keyframe_named_like_standing(tmp_path, key, used):
+    """Apptronik Apollo's standing keyframe is ``stand``: before, only ``rest`` and ``home``
+    were taken and Apollo got the zero pose.  A keyframe whose name says nothing of standing
+    is not a rest pose."""
+    pr = propose_mapping(_write(tmp_path, _robot(STYLES["L_KNEE"], keyframe=key)))
+    assert pr.rest_keyframe == used
+    if used is None:
+        assert "zero pose" in pr.rest_note and "'stand'" in pr.rest_note
+    else:
+        assert pr.rest_note == f"keyframe {used!r}" and f'[rest]\nkeyframe = "{used}"' in pr.to_toml()
+        # the character says which pose it stands in (`character info`)
+        assert _loads(tmp_path, pr, tmp_path / "robot.xml").rest_pose == f"keyframe {used!r}"
+
+
+def test_character_says_where_its_rest_pose_comes_from(tmp_path, capsys):
+    bent = _write(tmp_path, _robot(STYLES["left_knee_link"], bent_elbows=True), "bent.xml")
+    ch = _loads(tmp_path, propose_mapping(bent), bent)
+    assert ch.rest_pose == "zero pose (no keyframe), 2 joint(s) set by [rest.joints]"
+    assert load_character("robot").rest_pose == "keyframe 'home'"
+    assert main(["character", "info", "humanoid"]) == 0
+    assert "rest pose  keyframe 'rest'\n" in capsys.readouterr().out

@@ -123,6 +123,7 @@ def describe(ch) -> dict:
         "mapping": None if ch.map_path is None else str(ch.map_path),
         "mapping_proposed": bool(getattr(ch, "mapping_proposed", False)),
         "root_joint": ch.root_joint,
+        "rest_pose": getattr(ch, "rest_pose", ""),
         "height": ch.height,
         "hip_height": ch.hip_height,
         "total_mass": ch.total_mass,
@@ -160,6 +161,8 @@ def print_info(desc: dict, out: TextIO) -> None:
     )
     w(f"mapping    {desc['mapping'] or implicit}\n")
     w(f"root       {desc['root_joint']} (free joint), {desc['dof']} degrees of freedom\n")
+    if desc.get("rest_pose"):
+        w(f"rest pose  {desc['rest_pose']}\n")
     w(f"height     {desc['height']:.3f} m    hip height {desc['hip_height']:.3f} m    "
       f"total mass {desc['total_mass']:.2f} kg\n")
 

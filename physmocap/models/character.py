@@ -97,6 +97,8 @@ class Character:
         total_mass: kg.
         mapping_proposed: True when no mapping file was found and the mapping is the
             one :func:`~physmocap.models.propose.propose_mapping` proposed.
+        rest_pose: Where the rest pose comes from, in words (``keyframe 'home'``, ``zero
+            pose``; ``, 2 joints set by [rest.joints]``).
     """
 
     name: str
@@ -115,6 +117,7 @@ class Character:
     total_mass: float
     mapping_proposed: bool = False
     velocity_groups: tuple[tuple[str, ...], ...] = ()
+    rest_pose: str = ""
     _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def rest_positions(self) -> dict[str, np.ndarray]:
@@ -496,6 +499,7 @@ def load_character(
         joint_limits=joint_limits,
         velocity_limits=velocity_limits,
         velocity_groups=velocity_groups,
+        rest_pose=_rest_words(mp, model),
         segment_lengths=segments,
         hip_height=float(np.mean(hips)),
         height=float(height),
@@ -561,11 +565,27 @@ def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: 
     return model, _resolve_frames(mp, model)
 
 
+def _rest_key(mp: Mapping, model: mujoco.MjModel) -> str | None:
+    """The keyframe the rest pose starts from: the mapping's ``[rest] keyframe``, else one named
+    ``rest``, else none (the zero pose).  A mapping file proposed by ``character init`` names the
+    standing keyframe it found (``home``, ``stand``...)."""
+    if mp.rest_keyframe is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "rest") >= 0:
+        return "rest"
+    return mp.rest_keyframe
+
+
+def _rest_words(mp: Mapping, model: mujoco.MjModel) -> str:
+    """Where the rest pose comes from, in words (:attr:`Character.rest_pose`)."""
+    key = _rest_key(mp, model)
+    out = f"keyframe {key!r}" if key is not None else "zero pose (no keyframe)"
+    if mp.rest_joints:
+        out += f", {len(mp.rest_joints)} joint(s) set by [rest.joints]"
+    return out
+
+
 def _rest_qpos(mp: Mapping, model: mujoco.MjModel, root: int, mjcf: Path, where: Path) -> np.ndarray:
     qpos = model.qpos0.copy()
-    key_name = mp.rest_keyframe
-    if key_name is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "rest") >= 0:
-        key_name = "rest"
+    key_name = _rest_key(mp, model)
     if key_name is not None:
         k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key_name)
         if k < 0:

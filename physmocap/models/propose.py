@@ -1,8 +1,9 @@
 """Propose a mapping file for a humanoid MJCF from its body names and kinematic tree.
 
 ``physmocap character init ROBOT.xml`` calls :func:`propose_mapping`, which works on
-the compiled model in its rest pose (a ``rest`` or ``home`` keyframe if the model has
-one, else the zero pose):
+the compiled model in its rest pose (a keyframe named for a standing pose, ``rest``,
+``home``, ``stand`` or ``standing``, if the model has one (:func:`rest_keyframe`), else
+the zero pose):
 
 1. **Root**: the body of the free joint.  Up is against gravity (``opt.gravity``).
 2. **Legs**: descending from the root, the first body with two child branches that
@@ -66,7 +67,7 @@ import numpy as np
 from ..canonical import CANONICAL_NAMES
 from ..errors import InputError, MappingError
 
-__all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts"]
+__all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts", "rest_keyframe", "REST_KEY_WORDS"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
@@ -310,11 +311,31 @@ def _load(path: Path) -> mujoco.MjModel:
         raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
 
 
+#: Words that name a standing keyframe, in order of preference (Menagerie's models use
+#: ``home``; Apptronik Apollo's is ``stand``).
+REST_KEY_WORDS = ("rest", "home", "stand", "standing")
+
+
+def rest_keyframe(model: mujoco.MjModel) -> str | None:
+    """The keyframe that is the model's standing pose: one named a word of
+    :data:`REST_KEY_WORDS` (any case; the earlier word first), else the first whose name's
+    tokens hold one (``stand_pose``, ``HomePose``); None if there is none."""
+    names = [model.key(k).name for k in range(model.nkey)]
+    for word in REST_KEY_WORDS:
+        hit = next((n for n in names if n.lower() == word), None)
+        if hit is not None:
+            return hit
+    for word in REST_KEY_WORDS:
+        hit = next((n for n in names if word in _tokens(n)), None)
+        if hit is not None:
+            return hit
+    return None
+
+
 def _rest(model: mujoco.MjModel) -> tuple[np.ndarray, str | None]:
-    for key in ("rest", "home"):
-        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)
-        if k >= 0:
-            return model.key_qpos[k].copy(), key
+    key = rest_keyframe(model)
+    if key is not None:
+        return model.key_qpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)].copy(), key
     return model.qpos0.copy(), None
 
 
@@ -1248,7 +1269,7 @@ def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None,
                 fixes[m.joint(j).name] = float(deg)
                 notes.append(f"{m.joint(j).name} = {deg} deg straightens the {side} {limb} "
                              f"(bent {bend:.0f} deg at zero)")
-    note = "zero pose (no 'rest' or 'home' keyframe)"
+    note = f"zero pose (no keyframe named {', '.join(repr(w) for w in REST_KEY_WORDS)})"
     if notes:
         note += ", with " + "; ".join(notes)
     return fixes, note

@@ -837,3 +837,20 @@ def test_character_says_where_its_rest_pose_comes_from(tmp_path, capsys):
     assert load_character("robot").rest_pose == "keyframe 'home'"
     assert main(["character", "info", "humanoid"]) == 0
     assert "rest pose  keyframe 'rest'\n" in capsys.readouterr().out
+
+
+def test_arms_without_elbows_are_left_out(tmp_path):
+    """Rigid arms on a shoulder (no joint beyond it, no names): no elbow to track, so the arms
+    are left out, said in a note, and the rest is a character (before: "no recognisable arms")."""
+    import re
+
+    xml = _robot(STYLES["anonymous"], wrists=False)
+    xml = re.sub(r'(<body name="b11[ab]" pos="[^"]*">)<joint[^>]*/>', r"\1", xml)  # the elbows welded
+    mjcf = _write(tmp_path, xml)
+    pr = propose_mapping(mjcf)
+    assert not set(_ARM_JOINTS) & set(pr.joints), pr.report()
+    assert any(n.startswith("no arms: the arms of the actor are not tracked (cannot tell the elbow")
+               for n in pr.notes), pr.notes
+    from physmocap.models.character import untracked_limbs
+
+    assert untracked_limbs(_loads(tmp_path, pr, mjcf).tracked) == ("left_arm", "right_arm")

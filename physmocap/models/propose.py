@@ -910,18 +910,20 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
     else:
         arm_root, arm_a, arm_b = arms
         left_arm, right_arm, arm_how = _sides(t, arm_a, arm_b, lateral)
+        untold: dict[str, str] = {}  # side -> why its arm is left out
         for side, chain in (("left", left_arm), ("right", right_arm)):
             parts = _arm_parts(t, chain)
             lack = [part for part in ("shoulder", "elbow") if part not in parts]
             if lack:
-                _leave_out_arms((side,), f"cannot tell the {' or '.join(lack)} on the chain "
-                                f"{', '.join(t.name(b) for b in chain)}", left_out, notes)
+                untold[side] = f"cannot tell the {' or '.join(lack)} on the chain {', '.join(t.name(b) for b in chain)}"
                 continue
             arm_chains[side] = chain
             for part in ("clavicle", "shoulder", "elbow", "wrist", "hand_end"):
                 if part in parts:
                     body, why = parts[part]
                     put(f"{side}_{part}", body, why + ("" if arm_how == "name" else "; side by position"))
+        if untold:
+            _leave_out_arms(tuple(untold), "; ".join(untold.values()), left_out, notes)
 
     ends = _forearm_ends(t, {side: model.body(joints[f"{side}_elbow"].name).id for side in arm_chains
                              if f"{side}_wrist" not in joints})

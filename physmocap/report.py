@@ -21,12 +21,16 @@ writes the JSON (atomically, keys sorted, no NaN: missing figures are
 
 JSON layout (``format`` is ``physmocap-report/1``)::
 
-    {"format": ..., "character": {"name", "mjcf_path"},
+    {"format": ..., "character": {"name", "mjcf_path", "untracked_limbs"?},
      "source": {"path", "frames", "fps", "floor_m", "floor_slope"} | null,
      "contacts": {"origin": "detected" | CSV path,
                   "labels": {label: {"frames", "share", "segments"}}} | null,
      "metrics": {"source": {...} | null, "result": {...}}}
 
+``character.untracked_limbs`` (present only for a character without some optional limb,
+:data:`physmocap.models.character.OPTIONAL_LIMBS`) lists the limbs whose actor's motion is
+not tracked, e.g. ``["left_arm", "right_arm"]`` for a legs-only robot; the fidelity figures
+hold no segment of them.
 ``metrics.result`` holds :func:`physmocap.metrics.trajectory_metrics`,
 ``metrics.source`` :func:`physmocap.metrics.source_metrics`; units are in the
 key names (``_cm_s``, ``_mm``, ``_deg``, ``_cm``) or rad, rad/s, rad/s^2,
@@ -182,13 +186,19 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             velocity_limits=getattr(ch, "velocity_limits", None),
             velocity_groups=getattr(ch, "velocity_groups", ()),
         ).as_dict()
+    character = {
+        "name": str(getattr(ch, "name", "")),
+        "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),
+    }
+    from .models.character import untracked_limbs
+
+    untracked = untracked_limbs(getattr(ch, "tracked", {}))
+    if untracked:
+        character["untracked_limbs"] = list(untracked)
     return {
         "format": REPORT_FORMAT,
         "fidelity": fid,
-        "character": {
-            "name": str(getattr(ch, "name", "")),
-            "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),
-        },
+        "character": character,
         "source": source_info,
         "contacts": _contacts_summary(contacts),
         "metrics": {
@@ -284,6 +294,9 @@ def format_report(report: dict) -> str:
     elif res:
         title += f" ({res.get('frames')} frames at {_fmt(res.get('fps'))} Hz, no source)"
     out.append(title)
+    if ch.get("untracked_limbs"):
+        limbs = ", ".join(x.replace("_", " ") for x in ch["untracked_limbs"])
+        out.append(f"not tracked: {limbs} (the character has none; no figure covers them)")
     if s and s.get("floor_m") is not None:
         slope = s.get("floor_slope") or [0.0, 0.0]
         out.append(

@@ -397,12 +397,9 @@ def test_retarget_onto_a_model_without_legs_says_why(tmp_path, capsys):
     assert not (tmp_path / "x.npz").exists()
 
 
-def test_missing_file_and_armless_robot(tmp_path):
+def test_missing_file(tmp_path):
     with pytest.raises(InputError, match="not found"):
         propose_mapping(tmp_path / "nope.xml")
-    armless = _write(tmp_path, _robot(STYLES["L_KNEE"], arms=False))
-    with pytest.raises(MappingError, match="no recognisable arms"):
-        propose_mapping(armless)
 
 
 # -- the Unitree G1 (shared data) ---------------------------------------------------------------
@@ -636,3 +633,225 @@ def test_limb_wide_names_and_abbreviations(tmp_path):
         assert got == {part: b.format(s=s) for part, b in want.items()}, got
     assert not any("_leg_" in j for j in pr.rest_joints), pr.rest_joints  # no hip bent to 'straighten' a thigh
     _loads(tmp_path, pr, mjcf)
+
+
+# -- robots without arms (issue 13: joints the robot does not have are optional) -------------
+
+_ARM_JOINTS = tuple(f"{side}_{part}" for side in ("left", "right")
+                    for part in ("clavicle", "shoulder", "elbow", "wrist", "hand_end"))
+
+
+@pytest.mark.parametrize("style", ["left_knee_link", "L_KNEE", "anonymous"])
+def test_armless_robot_maps_legs_pelvis_and_trunk(tmp_path, style):
+    """Before: "no recognisable arms", exit 2.  A legs-only biped with a waist, a torso and a
+    head gets its legs, pelvis and trunk; the arms are left out and said to be."""
+    mjcf = _write(tmp_path, _robot(STYLES[style], arms=False))
+    pr = propose_mapping(mjcf)
+    got = {c: g.name for c, g in pr.joints.items()}
+    for canon, body in _expected(style).items():
+        if canon not in _ARM_JOINTS and canon not in ("neck", "head"):
+            assert got.get(canon) == body, (canon, got.get(canon), body, "\n".join(pr.report()))
+    names = STYLES[style]
+    if style != "anonymous":
+        assert (got.get("spine"), got.get("chest")) == (names["waist"], names["torso"])
+        assert (got["neck"], got["head"]) == (names["neck"], names["head"])
+    else:  # with no arms, only a name tells the head from the chest: the whole trunk is spine to chest
+        assert (got.get("spine"), got.get("chest")) == (names["waist"], names["head"])
+    assert not set(_ARM_JOINTS) & set(pr.joints)
+    assert all(pr.left_out[c] == "no arms" for c in _ARM_JOINTS)
+    assert any(n.startswith("no arms: the arms of the actor are not tracked") for n in pr.notes)
+    ch = _loads(tmp_path, pr, mjcf)  # unedited
+    from physmocap.models.character import untracked_limbs
+
+    assert untracked_limbs(ch.tracked) == ("left_arm", "right_arm")
+    assert set(ch.contacts) == {"left", "right"}
+
+
+def test_armless_robot_retargets_the_legs(tmp_path):
+    """The proposal of a legs-only robot retargets the walk: legs within 10 degrees of the
+    actor's (median), feet on the floor, no arm figure in the fidelity."""
+    from physmocap import load_motion, retarget
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    mjcf = _write(tmp_path, _robot(STYLES["left_knee_link"], arms=False))
+    ch = _loads(tmp_path, propose_mapping(mjcf), mjcf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=120)
+    fid = trajectory_fidelity(traj)
+    assert np.all(np.isfinite(traj.qpos))
+    assert set(fid.segments) == {"torso", "left_thigh", "right_thigh", "left_shank", "right_shank"}
+    assert fid.worst_segment_median_deg < 10.0, fid.segments
+    assert fid.share_any_over_45 == 0.0
+
+
+def test_armless_robot_cli_init_retarget_and_report(tmp_path, capsys):
+    """`character init` says what it did not find; `retarget` runs with the proposed file and
+    without any, and its report names the limbs it does not track."""
+    import json
+
+    mjcf = _write(tmp_path, _robot(STYLES["L_KNEE"], arms=False), "legs.xml")
+    out = tmp_path / "legs.toml"
+    assert main(["character", "init", str(mjcf), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "note: no arms: the arms of the actor are not tracked" in err and "checked: loads" in err
+    assert "left_shoulder" not in out.read_text().split("[joints]")[1].split("# left out")[0]
+    for extra in (["--map", str(out)], []):
+        report = tmp_path / "r.json"
+        csv = tmp_path / "walk.csv"
+        with warnings.catch_warnings(record=True) as said:
+            warnings.simplefilter("always")
+            assert main(["retarget", "example", "--character", str(mjcf), *extra, "--end", "40", "--quiet",
+                         "--format", "robot-csv", "-o", str(csv), "--report", str(report)]) == 0
+        told = any("no arms: the actor's are not tracked" in str(w.message) for w in said)
+        assert told == (not extra), [str(w.message) for w in said]
+        rep = json.loads(report.read_text())
+        assert rep["character"]["untracked_limbs"] == ["left_arm", "right_arm"]
+        assert not any("arm" in seg for seg in rep["fidelity"]["segments"])
+        assert csv.exists()
+
+
+def _small_biped(torso_joint: bool = False) -> str:
+    """A legs-only biped shaped like the Berkeley Humanoid (Menagerie): the free-joint trunk
+    carries two legs whose hip yaw, roll and pitch hinges sit on bodies at separate origins,
+    names that tell neither side nor part (``ll_hr``...``ll_faa``), an ankle 5 cm above the
+    sole, no arms and no head."""
+    def leg(s: str, y: float) -> str:
+        return (
+            f'<body name="l{s}_hr" pos="0 {y} 0"><joint name="L{s.upper()}_HR" axis="0 0 1" range="-35 35"/>'
+            f'<body name="l{s}_haa" pos="-0.035 0 -0.057"><joint name="L{s.upper()}_HAA" axis="1 0 0" range="-35 35"/>'
+            f'<geom type="cylinder" size="0.05 0.025" quat="0.707 0 0.707 0"/>'
+            f'<body name="l{s}_hfe" pos="0.045 {0.016 if y > 0 else -0.016} -0.046">'
+            f'<joint name="L{s.upper()}_HFE" axis="0 1 0" range="-100 30"/>'
+            f'<geom type="capsule" fromto="0 0 0 0 0 -0.2" size="0.04"/>'
+            f'<body name="l{s}_kfe" pos="0 {0.074 if y > 0 else -0.074} -0.22">'
+            f'<joint name="L{s.upper()}_KFE" axis="0 1 0" range="0 120"/>'
+            f'<geom type="box" size="0.015 0.02 0.08" pos="0 0 -0.08"/>'
+            f'<body name="l{s}_ffe" pos="0 0 -0.18"><joint name="L{s.upper()}_FFE" axis="0 1 0" range="-30 40"/>'
+            f'<body name="l{s}_faa" pos="0.017 0 0"><joint name="L{s.upper()}_FAA" axis="1 0 0" range="-30 30"/>'
+            f'<geom type="box" size="0.08 0.0275 0.006" pos="0.01 0 -0.045"/>'
+            "</body></body></body></body></body></body>"
+        )
+    waist = ('<body name="torso_link" pos="0 0 0.05"><joint name="waist_yaw" axis="0 0 1" range="-60 60"/>'
+             '<geom type="box" size="0.09 0.12 0.1" pos="0.02 0 0.12"/></body>') if torso_joint else \
+        '<geom type="box" size="0.09 0.125 0.125" pos="0.02 0 0.12"/>'
+    return (
+        '<mujoco model="small_biped"><compiler angle="degree" boundmass="0.01" boundinertia="0.0001"/><worldbody>'
+        f'<body name="torso" pos="0 0 0.6"><freejoint/>{waist}{leg("l", 0.07)}{leg("r", -0.07)}</body>'
+        "</worldbody></mujoco>"
+    )
+
+
+def test_legs_only_biped_with_spread_hip_and_short_shank(tmp_path):
+    """Berkeley-Humanoid-like (Menagerie): no arms, no names that tell sides or parts, hip
+    yaw/roll/pitch on bodies at separate origins, an ankle 5 cm above the sole.  Before: the
+    knee was the hip's pitch body and the ankle the knee (the shank's end was taken for a toe
+    joint level with the sole)."""
+    mjcf = tmp_path / "small.xml"
+    mjcf.write_text(_small_biped())
+    pr = propose_mapping(mjcf)
+    got = {c: g.name for c, g in pr.joints.items()}
+    for side, s in (("left", "l"), ("right", "r")):
+        assert got[f"{side}_hip"] == f"l{s}_hfe"  # nearest the hip's axes' meeting point
+        assert got[f"{side}_ankle"] == f"l{s}_faa"
+        assert pr.joints[f"{side}_toe"].kind == "site"  # the ball of the rigid foot
+        # the knee body's origin sits 7.4 cm out along its hinge: a site on the hip-ankle line
+        knee = pr.joints[f"{side}_knee"]
+        assert knee.kind == "site" and pr.sites[knee.name][0] == f"l{s}_kfe"
+    assert got["pelvis"] == "torso" and "spine" not in got
+    ch = _loads(tmp_path, pr, mjcf)
+    rest = ch.rest_positions()
+    assert rest["left_hip"][2] > rest["left_knee"][2] > rest["left_ankle"][2] > 0.04
+    data = ch.rest_data()
+    for side, s in (("left", "l"), ("right", "r")):  # the knee on the hip-ankle line, its body 7 cm off
+        h, k, a = (rest[f"{side}_{x}"] for x in ("hip", "knee", "ankle"))
+        body = data.body(f"l{s}_kfe").xpos
+        assert np.linalg.norm(np.cross(k - h, a - h)) / np.linalg.norm(a - h) < 0.01
+        assert np.linalg.norm(np.cross(body - h, a - h)) / np.linalg.norm(a - h) > 0.03
+    # and the legs follow the actor's: 4-5 degrees off (median) on the bundled walk, 10-11 with
+    # the knee bodies tracked
+    from physmocap import load_motion, retarget
+    from physmocap.metrics.fidelity import trajectory_fidelity
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fid = trajectory_fidelity(retarget(load_motion("example"), ch, progress=False, end=120))
+    assert set(fid.segments) == {"left_thigh", "right_thigh", "left_shank", "right_shank"}
+    assert fid.worst_segment_median_deg < 7.0, fid.segments
+
+    torso = tmp_path / "small_torso.xml"
+    torso.write_text(_small_biped(torso_joint=True))
+    pr = propose_mapping(torso)
+    assert pr.joints["spine"].name == "torso_link" and "chest" not in pr.joints
+
+
+def test_an_arm_is_mapped_whole_or_not_at_all(tmp_path):
+    """The loader's rule for optional limbs: an arm is its shoulder and elbow, both or neither;
+    a wrist needs its arm.  One arm alone is a character (its other arm not tracked)."""
+    from physmocap.models.character import untracked_limbs
+
+    mjcf = _write(tmp_path, _robot(STYLES["L_KNEE"], toes=False))
+    text = propose_mapping(mjcf).to_toml()
+    mp = tmp_path / "m.map.toml"
+
+    def without(*canons):
+        keep = [ln for ln in text.splitlines() if not any(ln.startswith(c + " ") for c in canons)]
+        mp.write_text("\n".join(keep) + "\n")
+        return mp
+
+    with pytest.raises(MappingError, match=r"left_shoulder mapped without left_elbow: the left arm is tracked "
+                                           r"from its shoulder and elbow") as exc:
+        load_character(mjcf, without("left_elbow"))
+    assert str(mp) in str(exc.value) and exc.value.line is not None
+    with pytest.raises(MappingError, match="right_wrist mapped without the right arm"):
+        load_character(mjcf, without("right_shoulder", "right_elbow", "right_hand_end"))
+    ch = load_character(mjcf, without("right_shoulder", "right_elbow", "right_wrist"))
+    assert untracked_limbs(ch.tracked) == ("right_arm",) and "left_elbow" in ch.tracked
+    from physmocap import load_motion, retarget
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        traj = retarget(load_motion("example"), ch, progress=False, end=20)
+    assert np.all(np.isfinite(traj.qpos))
+
+
+@pytest.mark.parametrize("key, used", [("stand", "stand"), ("Standing", "Standing"), ("home_pose", "home_pose"),
+                                       ("crouch", None)])
+def test_rest_pose_from_a_keyframe_named_like_standing(tmp_path, key, used):
+    """Apptronik Apollo's standing keyframe is ``stand``: before, only ``rest`` and ``home``
+    were taken and Apollo got the zero pose.  A keyframe whose name says nothing of standing
+    is not a rest pose."""
+    pr = propose_mapping(_write(tmp_path, _robot(STYLES["L_KNEE"], keyframe=key)))
+    assert pr.rest_keyframe == used
+    if used is None:
+        assert "zero pose" in pr.rest_note and "'stand'" in pr.rest_note
+    else:
+        assert pr.rest_note == f"keyframe {used!r}" and f'[rest]\nkeyframe = "{used}"' in pr.to_toml()
+        # the character says which pose it stands in (`character info`)
+        assert _loads(tmp_path, pr, tmp_path / "robot.xml").rest_pose == f"keyframe {used!r}"
+
+
+def test_character_says_where_its_rest_pose_comes_from(tmp_path, capsys):
+    bent = _write(tmp_path, _robot(STYLES["left_knee_link"], bent_elbows=True), "bent.xml")
+    ch = _loads(tmp_path, propose_mapping(bent), bent)
+    assert ch.rest_pose == "zero pose (no keyframe), 2 joint(s) set by [rest.joints]"
+    assert load_character("robot").rest_pose == "keyframe 'home'"
+    assert main(["character", "info", "humanoid"]) == 0
+    assert "rest pose  keyframe 'rest'\n" in capsys.readouterr().out
+
+
+def test_arms_without_elbows_are_left_out(tmp_path):
+    """Rigid arms on a shoulder (no joint beyond it, no names): no elbow to track, so the arms
+    are left out, said in a note, and the rest is a character (before: "no recognisable arms")."""
+    import re
+
+    xml = _robot(STYLES["anonymous"], wrists=False)
+    xml = re.sub(r'(<body name="b11[ab]" pos="[^"]*">)<joint[^>]*/>', r"\1", xml)  # the elbows welded
+    mjcf = _write(tmp_path, xml)
+    pr = propose_mapping(mjcf)
+    assert not set(_ARM_JOINTS) & set(pr.joints), pr.report()
+    assert any(n.startswith("no arms: the arms of the actor are not tracked (cannot tell the elbow")
+               for n in pr.notes), pr.notes
+    from physmocap.models.character import untracked_limbs
+
+    assert untracked_limbs(_loads(tmp_path, pr, mjcf).tracked) == ("left_arm", "right_arm")

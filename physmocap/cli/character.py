@@ -82,7 +82,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def describe(ch) -> dict:
-    """A JSON-ready description of a :class:`~physmocap.models.Character` (degrees, metres, kg)."""
+    """A JSON-ready description of a :class:`~physmocap.models.Character` (degrees, metres, kg);
+    ``untracked_limbs`` only for a character without some optional limb."""
+    from ..models.character import untracked_limbs
+
     model = ch.model
     data = ch.rest_data()
     bodies = []
@@ -113,12 +116,14 @@ def describe(ch) -> dict:
         for s in range(model.nsite)
     ]
     rest = ch.rest_positions()
+    untracked = {"untracked_limbs": list(limbs)} if (limbs := untracked_limbs(ch.tracked)) else {}
     return {
         "name": ch.name,
         "mjcf": str(ch.mjcf_path),
         "mapping": None if ch.map_path is None else str(ch.map_path),
         "mapping_proposed": bool(getattr(ch, "mapping_proposed", False)),
         "root_joint": ch.root_joint,
+        "rest_pose": getattr(ch, "rest_pose", ""),
         "height": ch.height,
         "hip_height": ch.hip_height,
         "total_mass": ch.total_mass,
@@ -131,6 +136,7 @@ def describe(ch) -> dict:
             c: {"kind": tf.kind, "name": tf.name, "rest_position": [float(x) for x in rest[c]]}
             for c, tf in ch.tracked.items()
         },
+        **untracked,
         "contacts": {side: list(names) for side, names in ch.contacts.items()},
         "segment_lengths": [
             {"parent": p, "child": c, "length": length} for (p, c), length in ch.segment_lengths.items()
@@ -155,6 +161,8 @@ def print_info(desc: dict, out: TextIO) -> None:
     )
     w(f"mapping    {desc['mapping'] or implicit}\n")
     w(f"root       {desc['root_joint']} (free joint), {desc['dof']} degrees of freedom\n")
+    if desc.get("rest_pose"):
+        w(f"rest pose  {desc['rest_pose']}\n")
     w(f"height     {desc['height']:.3f} m    hip height {desc['hip_height']:.3f} m    "
       f"total mass {desc['total_mass']:.2f} kg\n")
 
@@ -186,6 +194,9 @@ def print_info(desc: dict, out: TextIO) -> None:
     for c, t in desc["tracked"].items():
         x, y, z = t["rest_position"]
         w(f"  {c:<16} {t['kind']:<4} {t['name']:<22} {x:7.3f} {y:7.3f} {z:7.3f}\n")
+    if desc.get("untracked_limbs"):
+        limbs = ", ".join(x.replace("_", " ") for x in desc["untracked_limbs"])
+        w(f"  not tracked: {limbs} (the character has none: the actor's are not retargeted)\n")
 
     w("\ncontact points (sites)\n")
     for side, names in desc["contacts"].items():

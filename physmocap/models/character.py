@@ -42,6 +42,8 @@ __all__ = [
     "bundled_characters",
     "DEFAULT_CHARACTER",
     "CHARACTER_REQUIRED",
+    "OPTIONAL_LIMBS",
+    "untracked_limbs",
 ]
 
 #: Name of the default character.
@@ -49,10 +51,21 @@ DEFAULT_CHARACTER = "humanoid"
 
 _LIMITED = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
 
-#: Canonical joints a character must map.  A source skeleton must provide every
-#: required joint (:data:`physmocap.canonical.REQUIRED_JOINTS`), but a robot may lack
-#: a neck or wrists: those are optional on the character's side.
-CHARACTER_OPTIONAL = ("neck", "left_wrist", "right_wrist")
+#: Limbs a character may lack, each side on its own: limb -> (the joints that make it, all
+#: mapped or none; the joints that hang on it, mapped only with it).  A robot without arms
+#: (a legs-only biped) is a character whose arms are not tracked; legs are required (the
+#: retargeter plants feet).
+OPTIONAL_LIMBS: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    f"{side}_arm": ((f"{side}_shoulder", f"{side}_elbow"), (f"{side}_clavicle", f"{side}_wrist", f"{side}_hand_end"))
+    for side in ("left", "right")
+}
+
+#: Canonical joints a character may leave unmapped although a source skeleton must provide
+#: them (:data:`physmocap.canonical.REQUIRED_JOINTS`): a robot may lack a neck, wrists, or
+#: whole arms (:data:`OPTIONAL_LIMBS`).
+CHARACTER_OPTIONAL: tuple[str, ...] = ("neck",) + tuple(
+    j for core, hung in OPTIONAL_LIMBS.values() for j in core + hung
+)
 CHARACTER_REQUIRED: tuple[str, ...] = tuple(j for j in REQUIRED_JOINTS if j not in CHARACTER_OPTIONAL)
 
 
@@ -84,6 +97,8 @@ class Character:
         total_mass: kg.
         mapping_proposed: True when no mapping file was found and the mapping is the
             one :func:`~physmocap.models.propose.propose_mapping` proposed.
+        rest_pose: Where the rest pose comes from, in words (``keyframe 'home'``, ``zero
+            pose``; ``, 2 joints set by [rest.joints]``).
     """
 
     name: str
@@ -102,6 +117,7 @@ class Character:
     total_mass: float
     mapping_proposed: bool = False
     velocity_groups: tuple[tuple[str, ...], ...] = ()
+    rest_pose: str = ""
     _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def rest_positions(self) -> dict[str, np.ndarray]:
@@ -296,9 +312,11 @@ def _proposed_mapping(mjcf: Path):
         proposal = propose_mapping(mjcf)
     except (MappingError, InputError) as exc:
         return getattr(exc, "message", None) or str(exc)
+    untracked = untracked_limbs(proposal.joints)
+    lacks = f"; {_limbs_phrase(untracked)}: the actor's are not tracked" if untracked else ""
     warn(
         f"{mjcf}: no mapping file found: using the mapping `physmocap character init` proposes "
-        f"({len(proposal.joints)} joints; run `physmocap character init {mjcf} -o "
+        f"({len(proposal.joints)} joints{lacks}; run `physmocap character init {mjcf} -o "
         f"{mjcf.with_name(mjcf.stem + '.map.toml')}` to see, edit and keep it)"
     )
     return mapping_from_text(proposal.to_toml(), mjcf.with_name(f"{mjcf.stem}.map.toml (proposed)"))
@@ -317,7 +335,7 @@ def load_character(
             ``"robot"``), or an MJCF file.
         map_path: mapping file; default ``<stem>.map.toml`` beside the MJCF.
             A model without one maps its sites named like canonical joints, or,
-            if that leaves required joints unmapped, takes the mapping
+            if that leaves required joints or the arms unmapped, takes the mapping
             :func:`~physmocap.models.propose.propose_mapping` proposes (with a warning).
         range_policy: ``"default"`` or ``"strict"``: for joints in the
             range-of-motion table (:mod:`physmocap.models.rom`), replace their
@@ -327,7 +345,8 @@ def load_character(
     Raises:
         InputError: the MJCF or the mapping file cannot be read.
         MappingError: the mapping names a missing site/body/joint, leaves a
-            required canonical joint unmapped, or a joint lacks required limits.
+            required canonical joint unmapped, maps part of an optional limb
+            (:data:`OPTIONAL_LIMBS`), or a joint lacks required limits.
     """
     mjcf = _resolve(path)
     mp_file = _find_map(mjcf, map_path)
@@ -338,7 +357,8 @@ def load_character(
         model = _load_model(mjcf)
         mp = implicit_mapping(model)
     why = None  # why no mapping could be proposed
-    if mp_file is None and any(j not in _resolve_frames(mp, model) for j in CHARACTER_REQUIRED):
+    wanted = CHARACTER_REQUIRED + tuple(j for core, _ in OPTIONAL_LIMBS.values() for j in core)
+    if mp_file is None and any(j not in _resolve_frames(mp, model) for j in wanted):
         proposed = _proposed_mapping(mjcf)
         if isinstance(proposed, str):
             why = proposed
@@ -354,6 +374,7 @@ def load_character(
         raise MappingError(
             f"{hint} required canonical joint(s) not mapped: {', '.join(missing)}{reason}", path=where
         )
+    _check_limbs(tracked, mp, where)
     for side, sites in mp.contacts.items():
         for s in sites:
             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, s) < 0:
@@ -478,12 +499,49 @@ def load_character(
         joint_limits=joint_limits,
         velocity_limits=velocity_limits,
         velocity_groups=velocity_groups,
+        rest_pose=_rest_words(mp, model),
         segment_lengths=segments,
         hip_height=float(np.mean(hips)),
         height=float(height),
         total_mass=total_mass,
         _rest=rest,
     )
+
+
+def untracked_limbs(tracked) -> tuple[str, ...]:
+    """The optional limbs (:data:`OPTIONAL_LIMBS`) a character does not map, in table order:
+    ``("left_arm", "right_arm")`` for a legs-only robot.  ``tracked``: canonical joint names
+    (a :class:`Character`'s ``tracked``)."""
+    return tuple(limb for limb, (core, _) in OPTIONAL_LIMBS.items() if not any(j in tracked for j in core))
+
+
+def _limbs_phrase(limbs: tuple[str, ...]) -> str:
+    """``no arms`` for both arms, ``no left arm`` for one (:func:`untracked_limbs`)."""
+    kinds = {x.split("_", 1)[1] for x in limbs}
+    if len(limbs) == 2 * len(kinds):
+        return "no " + " or ".join(sorted(k + "s" for k in kinds))
+    return "no " + " or ".join(x.replace("_", " ") for x in limbs)
+
+
+def _check_limbs(tracked: dict[str, TrackedFrame], mp: Mapping, where: Path) -> None:
+    """An optional limb is mapped whole or not at all: its core joints all or none, the joints
+    hanging on it only with it (a wrist with no elbow tracks nothing the targets can reach)."""
+
+    def error(message: str, key: str) -> MappingError:
+        return mp.error(message, "joints", key) if mp.path is not None else MappingError(message, path=where)
+
+    for limb, (core, hung) in OPTIONAL_LIMBS.items():
+        what = limb.replace("_", " ")
+        have = [j for j in core if j in tracked]
+        lack = [j for j in core if j not in tracked]
+        if have and lack:
+            raise error(f"{', '.join(have)} mapped without {', '.join(lack)}: the {what} is tracked from its "
+                        f"{' and '.join(j.split('_', 1)[1] for j in core)} (map all of them, or none for a robot "
+                        f"without a {what})", have[0])
+        stray = [j for j in hung if j in tracked and not have]
+        if stray:
+            raise error(f"{', '.join(stray)} mapped without the {what} ({', '.join(core)}): map the {what} too, "
+                        f"or leave {', '.join(stray)} out", stray[0])
 
 
 def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: dict, where: Path):
@@ -507,11 +565,27 @@ def _add_foot_contacts(mjcf: Path, mp: Mapping, model: mujoco.MjModel, tracked: 
     return model, _resolve_frames(mp, model)
 
 
+def _rest_key(mp: Mapping, model: mujoco.MjModel) -> str | None:
+    """The keyframe the rest pose starts from: the mapping's ``[rest] keyframe``, else one named
+    ``rest``, else none (the zero pose).  A mapping file proposed by ``character init`` names the
+    standing keyframe it found (``home``, ``stand``...)."""
+    if mp.rest_keyframe is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "rest") >= 0:
+        return "rest"
+    return mp.rest_keyframe
+
+
+def _rest_words(mp: Mapping, model: mujoco.MjModel) -> str:
+    """Where the rest pose comes from, in words (:attr:`Character.rest_pose`)."""
+    key = _rest_key(mp, model)
+    out = f"keyframe {key!r}" if key is not None else "zero pose (no keyframe)"
+    if mp.rest_joints:
+        out += f", {len(mp.rest_joints)} joint(s) set by [rest.joints]"
+    return out
+
+
 def _rest_qpos(mp: Mapping, model: mujoco.MjModel, root: int, mjcf: Path, where: Path) -> np.ndarray:
     qpos = model.qpos0.copy()
-    key_name = mp.rest_keyframe
-    if key_name is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "rest") >= 0:
-        key_name = "rest"
+    key_name = _rest_key(mp, model)
     if key_name is not None:
         k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key_name)
         if k < 0:

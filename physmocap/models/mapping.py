@@ -3,7 +3,8 @@
 A mapping file sits beside its model as ``<stem>.map.toml``
 (``physmocap character init MODEL.xml`` proposes one, :mod:`physmocap.models.propose`).
 Every table is optional except ``[joints]``; a character must map the pelvis, hips,
-knees, ankles, shoulders and elbows (neck and wrists are optional)::
+knees and ankles; the neck, wrists and arms are optional (an arm is its shoulder and elbow,
+both or neither; a robot without arms leaves them out)::
 
     [character]
     name = "robot"            # default: the MJCF file's stem

@@ -1,25 +1,32 @@
 """Propose a mapping file for a humanoid MJCF from its body names and kinematic tree.
 
 ``physmocap character init ROBOT.xml`` calls :func:`propose_mapping`, which works on
-the compiled model in its rest pose (a ``rest`` or ``home`` keyframe if the model has
-one, else the zero pose):
+the compiled model in its rest pose (a keyframe named for a standing pose, ``rest``,
+``home``, ``stand`` or ``standing``, if the model has one (:func:`rest_keyframe`), else
+the zero pose):
 
 1. **Root**: the body of the free joint.  Up is against gravity (``opt.gravity``).
 2. **Legs**: descending from the root, the first body with two child branches that
    both reach the lowest body origins is the pelvis; each branch, followed down to its
    lowest leaf, is a leg.
 3. **Arms**: among the branches left (not legs, not above the pelvis's path to the
-   root), the pair of chains on opposite sides with the longest similar reach.
+   root), the pair of chains on opposite sides with the longest similar reach.  A robot
+   with no such pair (a legs-only biped), or an arm whose shoulder or elbow cannot be told,
+   gets no arm on that side: it is left out with a note ("no arms: the arms of the actor
+   are not tracked"), and the loader takes the character without it
+   (:data:`~physmocap.models.character.OPTIONAL_LIMBS`).
 4. **Sides** from name tokens (``left_``, ``l_``, ``L_``, ``_l``, ``Left``...) of the
    chain's bodies and joints; when the names do not tell, from the lateral position in
    the rest pose (MuJoCo's convention: a model faces +X, its left is +Y).
 5. **Parts** along each chain by name keywords (hip, thigh, knee, calf, shin, shank,
    ankle, foot, toe, shoulder, upper_arm, elbow, forearm, wrist, hand...), else by chain
-   position (hip first, knee at mid-height, ankle last articulation point).  Among the
+   position (hip first, knee at mid-height, ankle the last articulation point above the
+   sole, or one the leg reaches going more down than forward: a toe lies along the foot).  Among the
    bodies of one part (a 3-DOF hip is often three bodies), a joint centre takes the body
    nearest the point closest to the part's joint axes (ties: the earlier body); the ankle
    takes the last articulated body, whose frame turns with every DOF of the foot (the sole
-   must lie flat).  The wrist is a joint centre: the hand's end, when the model has one,
+   must lie flat); a hip told by position is the body nearest the meeting point of the
+   hinge axes before the knee.  The wrist is a joint centre: the hand's end, when the model has one,
    steers the wrist's last DOF (tracking the whole hand frame swung the G1's wrist roll
    to 66 degrees on the PyMO walk, against 35 this way).
    A hand body fixed at the forearm's end is the wrist.  A foot without a toe body gets a
@@ -34,7 +41,9 @@ one, else the zero pose):
 6. **Trunk**: articulation points on the tree path between the pelvis and the arms'
    branching body are spine (then chest); a head branch with joints gives neck and head
    (one such body is the head).  A robot whose head has no joint gets no neck, head or head
-   end (the loader treats the neck as optional).
+   end (the loader treats the neck as optional).  Without arms the trunk runs up to the
+   highest body outside the legs; from the first body on it named neck or head, it is the
+   head's (without such a name, all of it is trunk: nothing else tells a chest from a head).
 7. **Rest pose**: with no keyframe, a joint whose zero is outside its range takes the
    nearest end, and an elbow or knee that the zero pose bends by more than 20 degrees is
    straightened (``[rest.joints]``).
@@ -58,7 +67,7 @@ import numpy as np
 from ..canonical import CANONICAL_NAMES
 from ..errors import InputError, MappingError
 
-__all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts"]
+__all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts", "rest_keyframe", "REST_KEY_WORDS"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
@@ -302,11 +311,31 @@ def _load(path: Path) -> mujoco.MjModel:
         raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
 
 
+#: Words that name a standing keyframe, in order of preference (Menagerie's models use
+#: ``home``; Apptronik Apollo's is ``stand``).
+REST_KEY_WORDS = ("rest", "home", "stand", "standing")
+
+
+def rest_keyframe(model: mujoco.MjModel) -> str | None:
+    """The keyframe that is the model's standing pose: one named a word of
+    :data:`REST_KEY_WORDS` (any case; the earlier word first), else the first whose name's
+    tokens hold one (``stand_pose``, ``HomePose``); None if there is none."""
+    names = [model.key(k).name for k in range(model.nkey)]
+    for word in REST_KEY_WORDS:
+        hit = next((n for n in names if n.lower() == word), None)
+        if hit is not None:
+            return hit
+    for word in REST_KEY_WORDS:
+        hit = next((n for n in names if word in _tokens(n)), None)
+        if hit is not None:
+            return hit
+    return None
+
+
 def _rest(model: mujoco.MjModel) -> tuple[np.ndarray, str | None]:
-    for key in ("rest", "home"):
-        k = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)
-        if k >= 0:
-            return model.key_qpos[k].copy(), key
+    key = rest_keyframe(model)
+    if key is not None:
+        return model.key_qpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, key)].copy(), key
     return model.qpos0.copy(), None
 
 
@@ -537,6 +566,10 @@ def _leg_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
             top = t.h[out["hip"][0]]
             cand = [i for i, p in enumerate(pts) if heights[i] > sole + 0.02 * (top - sole) or i == 0]
             i_ank = cand[-1] if len(cand) > 2 else len(pts) - 1
+            # a point the leg reaches going more down than forward is no toe: the shank of a
+            # small robot ends a few cm above the sole (the Berkeley Humanoid's, 5 cm)
+            while i_ank < len(pts) - 1 and not _foot_step(t, pts[i_ank][0], pts[i_ank + 1][0]):
+                i_ank += 1
             b, _ = _pick(t, pts[i_ank], oriented=True)
             out["ankle"] = (b, "tree position: last articulation point above the sole")
             if "toe" not in out and i_ank < len(pts) - 1:
@@ -550,6 +583,8 @@ def _leg_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
                 i = min(between, key=lambda i: abs(heights[i] - mid))
                 b, _ = _pick(t, pts[i], oriented=False)
                 out["knee"] = (b, "tree position: articulation point at mid-leg")
+    if "hip" in out and "knee" in out and out["hip"][1].startswith("tree position"):
+        out["hip"] = _hip_centre(t, chain, out["hip"], out["knee"][0])
     if "hip" in out and "knee" in out:
         out["hip"] = _hip_over_knee(t, chain, out["hip"], out["knee"][0])
     if "toe" not in out and "ankle" in out:
@@ -558,6 +593,31 @@ def _leg_parts(t: _Tree, chain: list[int]) -> dict[str, tuple[int, str]]:
         if art:
             out["toe"] = (art[0], "tree position: articulated body beyond the ankle")
     return out
+
+
+def _hip_centre(t: _Tree, chain: list[int], hip: tuple[int, str], knee: int) -> tuple[int, str]:
+    """A hip told by tree position: among the articulated bodies before the knee (a hip whose
+    yaw, roll and pitch hinges sit on bodies at separate origins, as the Berkeley Humanoid's),
+    the body nearest the point closest to all their hinge axes (:func:`_axes_point`; ties: the
+    earlier body), as a hip named by its bodies takes it."""
+    if hip[0] not in chain or knee not in chain:
+        return hip
+    cand = [b for b in chain[chain.index(hip[0]): chain.index(knee)] if t.articulated(b)]
+    p = _axes_point(t, cand) if len(cand) >= 2 else None
+    if p is None:
+        return hip
+    best = min(cand, key=lambda b: (round(float(np.linalg.norm(t.xpos[b] - p)), 3), cand.index(b)))
+    if best == hip[0]:
+        return hip
+    return best, f"tree position: nearest the joint axes' meeting point of the {len(cand)} bodies before the knee"
+
+
+def _foot_step(t: _Tree, a: int, b: int) -> bool:
+    """Whether going from body ``a``'s origin to ``b``'s in the rest pose goes further along the
+    floor than down (ankle to toe along the foot), not down a segment (knee to ankle)."""
+    d = t.xpos[b] - t.xpos[a]
+    down = abs(float(d @ t.up))
+    return float(np.linalg.norm(d - (d @ t.up) * t.up)) > down
 
 
 def _distal(t: _Tree, chain: list[int], b: int) -> np.ndarray | None:
@@ -792,7 +852,7 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
 
     Raises:
         InputError: the file is missing or MuJoCo cannot load it.
-        MappingError: no free joint, no recognisable legs or arms.
+        MappingError: no free joint, no recognisable legs (arms are optional).
     """
     p = Path(path)
     model = _load(p)
@@ -823,12 +883,6 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         notes.append("legs told apart by position: the model is assumed to face +X (MuJoCo's convention)")
     lateral = np.cross(t.up, forward)
 
-    arms = _find_arms(t, root, pelvis, [left_leg, right_leg])
-    if arms is None:
-        raise MappingError("no recognisable arms: no pair of chains on opposite sides of the trunk", path=p)
-    arm_root, arm_a, arm_b = arms
-    left_arm, right_arm, arm_how = _sides(t, arm_a, arm_b, lateral)
-
     joints: dict[str, Guess] = {}
     left_out: dict[str, str] = {}
 
@@ -847,18 +901,31 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
             if part in parts:
                 body, why = parts[part]
                 put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
-    for side, chain, how in (("left", left_arm, arm_how), ("right", right_arm, arm_how)):
-        parts = _arm_parts(t, chain)
-        for part in ("shoulder", "elbow"):
-            if part not in parts:
-                raise MappingError(f"no recognisable arms: cannot tell the {side} {part} on the chain "
-                                   f"{', '.join(t.name(b) for b in chain)}", path=p)
-        for part in ("clavicle", "shoulder", "elbow", "wrist", "hand_end"):
-            if part in parts:
-                body, why = parts[part]
-                put(f"{side}_{part}", body, why + ("" if how == "name" else "; side by position"))
 
-    ends = _forearm_ends(t, {side: model.body(joints[f"{side}_elbow"].name).id for side in ("left", "right")
+    arms = _find_arms(t, root, pelvis, [left_leg, right_leg])
+    arm_chains: dict[str, list[int]] = {}
+    if arms is None:
+        _leave_out_arms(("left", "right"), "no pair of chains on opposite sides of the trunk", left_out, notes)
+        arm_root = None
+    else:
+        arm_root, arm_a, arm_b = arms
+        left_arm, right_arm, arm_how = _sides(t, arm_a, arm_b, lateral)
+        untold: dict[str, str] = {}  # side -> why its arm is left out
+        for side, chain in (("left", left_arm), ("right", right_arm)):
+            parts = _arm_parts(t, chain)
+            lack = [part for part in ("shoulder", "elbow") if part not in parts]
+            if lack:
+                untold[side] = f"cannot tell the {' or '.join(lack)} on the chain {', '.join(t.name(b) for b in chain)}"
+                continue
+            arm_chains[side] = chain
+            for part in ("clavicle", "shoulder", "elbow", "wrist", "hand_end"):
+                if part in parts:
+                    body, why = parts[part]
+                    put(f"{side}_{part}", body, why + ("" if arm_how == "name" else "; side by position"))
+        if untold:
+            _leave_out_arms(tuple(untold), "; ".join(untold.values()), left_out, notes)
+
+    ends = _forearm_ends(t, {side: model.body(joints[f"{side}_elbow"].name).id for side in arm_chains
                              if f"{side}_wrist" not in joints})
     for side, (site, body, pos) in ends.items():
         joints[f"{side}_wrist"] = Guess(f"{side}_wrist", "site", site, "no wrist joint: the end of the forearm's geoms")
@@ -870,66 +937,26 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
                                           "3/4 of the sole from the heel, 1/3 of the ankle height up")
     else:
         sites = {}
+    centres = _hinge_centres(t, joints, {n: (b, pos) for n, b, pos in list(sites.values()) + list(ends.values())})
+    for canon, (site, body, pos) in centres.items():
+        joints[canon] = Guess(canon, "site", site, joints[canon].why + "; moved along its hinge onto the limb's line")
 
-    # trunk: the tree path from the pelvis to the arms' branching body (through their common
-    # ancestor: the arms may hang on the pelvis's parent, as when the free body is the torso)
-    up_a = t.path_up(pelvis, 0)
-    up_b = t.path_up(arm_root, 0)
-    lca = next(x for x in up_a if x in set(up_b))
-    rising = up_a[: up_a.index(lca) + 1]  # pelvis ... lca
-    falling = list(reversed(up_b[: up_b.index(lca)]))  # below lca ... arm_root
-    trunk = rising[1:] + falling
-    moves = {rising[i + 1]: t.articulated(rising[i]) for i in range(len(rising) - 1)}  # turns on its child's joints
-    moves.update({b: t.articulated(b) for b in falling})
-    trunk = [b for b in trunk if b > 0]
-    groups: list[list[int]] = []
-    for b in trunk:
-        if not moves[b] and not groups:
-            continue
-        if np.linalg.norm(t.xpos[b] - t.xpos[pelvis]) < 0.02:
-            continue  # a joint at the pelvis itself (a waist yaw body sharing its origin)
-        if groups and (not moves[b] or np.linalg.norm(t.xpos[b] - t.xpos[groups[-1][-1]]) < 0.02):
-            groups[-1].append(b)
-        else:
-            groups.append([b])
+    legs = [left_leg, right_leg]
+    if arm_root is not None:
+        trunk = _trunk_path(t, pelvis, arm_root)
+        head_chain = _head_branch(t, arm_root, list(arms[1:]), trunk + [pelvis], legs)
+        below = " below the arms"
+    else:
+        trunk = _trunk_path(t, pelvis, _trunk_top(t, root, legs))
+        trunk, head_chain = _split_named_head(t, trunk)
+        below = ""
+    groups = _trunk_groups(t, pelvis, trunk)
     if groups:
         put("spine", groups[0][-1], "tree position: first trunk joint above the pelvis")
         if len(groups) >= 2:
-            put("chest", groups[-1][-1], "tree position: last trunk joint below the arms")
-    # head: articulated branch of the arms' body going up, not an arm
-    arm_set = set(t.subtree(left_arm[0])) | set(t.subtree(right_arm[0]))
-    trunk_set = set(trunk) | {pelvis} | set(t.subtree(left_leg[0])) | set(t.subtree(right_leg[0]))
-    shoulder_h = 0.5 * (t.h[left_arm[0]] + t.h[right_arm[0]])
-    head_chain: list[int] = []
-    for c in t.children[arm_root]:
-        if c in arm_set or c in trunk_set:
-            continue
-        sub = [x for x in t.subtree(c) if t.articulated(x)]
-        if not sub:
-            continue
-        chain = _descend_longest(t, c)
-        if max(t.h[x] for x in chain) > shoulder_h and len(chain) > len(head_chain):
-            head_chain = chain
+            put("chest", groups[-1][-1], "tree position: last trunk joint" + below)
     if head_chain:
-        pts = _points(t, head_chain)
-        by_name = {part: g for part, g in _named_groups(t, head_chain, _HEAD_WORDS) if part}
-        if len(pts) == 1:
-            # neck and head turn in one body: it is the head (its frame follows the actor's head)
-            b = _pick(t, pts[0], oriented=True)[0]
-            put("head", b, _by_name(t, b, _HEAD_WORDS, "the only joint of the head branch")
-                if "head" in by_name or "neck" in by_name else "tree position: the only joint of the head branch")
-            left_out["neck"] = "no neck joint apart from the head's"
-        else:
-            neck_pt = next((g for g in pts if any(x in by_name.get("neck", []) for x in g)), pts[0])
-            head_pt = next((g for g in reversed(pts) if any(x in by_name.get("head", []) for x in g)), pts[-1])
-            if head_pt is neck_pt:
-                head_pt = pts[-1]
-            b = _pick(t, neck_pt, oriented=False)[0]
-            put("neck", b, _by_name(t, b, _HEAD_WORDS, "") if "neck" in by_name else
-                "tree position: first joint of the head branch")
-            b = _pick(t, head_pt, oriented=True)[0]
-            put("head", b, _by_name(t, b, _HEAD_WORDS, "") if "head" in by_name else
-                "tree position: last joint of the head branch")
+        _put_head(t, head_chain, put, left_out)
     else:
         reason = "no head joint" if any(
             "head" in name_parts(t.name(b), _HEAD_WORDS) or "neck" in name_parts(t.name(b), _HEAD_WORDS)
@@ -941,7 +968,7 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         if canon not in joints and canon not in left_out:
             left_out[canon] = _missing_reason(canon)
 
-    rest_joints, rest_note = _rest_fix(t, joints, key)
+    rest_joints, rest_note = _rest_fix(t, joints, key, {c: b for c, (_, b, _) in centres.items()})
     name = p.stem
     return Proposal(
         mjcf=p,
@@ -954,8 +981,184 @@ def propose_mapping(path: str | os.PathLike) -> Proposal:
         rest_joints=rest_joints,
         rest_note=rest_note,
         notes=notes,
-        sites={site: (model.body(body).name, pos) for site, body, pos in list(sites.values()) + list(ends.values())},
+        sites={site: (model.body(body).name, pos)
+               for site, body, pos in list(sites.values()) + list(ends.values()) + list(centres.values())},
     )
+
+
+#: Canonical joints of one side's arm, as the proposal leaves them out.
+_ARM_PARTS = ("clavicle", "shoulder", "elbow", "wrist", "hand_end")
+
+
+def _leave_out_arms(sides: tuple[str, ...], why: str, left_out: dict[str, str], notes: list[str]) -> None:
+    """Leave ``sides``' arms out of the proposal (the loader takes a character without them,
+    :data:`~physmocap.models.character.OPTIONAL_LIMBS`), saying so in a note."""
+    what = "no arms" if len(sides) == 2 else f"no {sides[0]} arm"
+    for side in sides:
+        for part in _ARM_PARTS:
+            left_out[f"{side}_{part}"] = what
+    whose = "the arms of the actor are" if len(sides) == 2 else f"the actor's {sides[0]} arm is"
+    notes.append(f"{what}: {whose} not tracked ({why})")
+
+
+def _trunk_path(t: _Tree, pelvis: int, top: int) -> list[int]:
+    """The bodies on the tree path from the pelvis (excluded) to ``top`` (included), through
+    their common ancestor: the top may hang on the pelvis's parent, as when the free body is
+    the torso and the legs hang from a waist below it."""
+    up_a = t.path_up(pelvis, 0)
+    up_b = t.path_up(top, 0)
+    lca = next(x for x in up_a if x in set(up_b))
+    rising = up_a[: up_a.index(lca) + 1]  # pelvis ... lca
+    falling = list(reversed(up_b[: up_b.index(lca)]))  # below lca ... top
+    return [b for b in rising[1:] + falling if b > 0]
+
+
+def _turns(t: _Tree, pelvis: int, b: int) -> bool:
+    """Whether trunk body ``b`` turns relative to the body below it on the way up from the
+    pelvis: its own joints where it is below the pelvis's ancestors, else (on the pelvis's
+    path to the root, where the pelvis turns under it) its child's on that path."""
+    up = t.path_up(pelvis, 0)
+    if b in up:
+        return t.articulated(up[up.index(b) - 1])
+    return t.articulated(b)
+
+
+def _trunk_groups(t: _Tree, pelvis: int, trunk: list[int]) -> list[list[int]]:
+    """Articulation points of the trunk above the pelvis: bodies that turn, merged with the
+    fixed bodies above them and with bodies within 2 cm; none at the pelvis's own origin (a
+    waist yaw body sharing it)."""
+    groups: list[list[int]] = []
+    for b in trunk:
+        moves = _turns(t, pelvis, b)
+        if not moves and not groups:
+            continue
+        if np.linalg.norm(t.xpos[b] - t.xpos[pelvis]) < 0.02:
+            continue  # a joint at the pelvis itself (a waist yaw body sharing its origin)
+        if groups and (not moves or np.linalg.norm(t.xpos[b] - t.xpos[groups[-1][-1]]) < 0.02):
+            groups[-1].append(b)
+        else:
+            groups.append([b])
+    return groups
+
+
+def _head_branch(t: _Tree, arm_root: int, arms: list[list[int]], trunk: list[int], legs: list[list[int]]) -> list[int]:
+    """The head of a robot with arms: the longest articulated branch of the arms' body, not
+    an arm, the trunk or a leg, rising above the shoulders (empty if none)."""
+    arm_set = set(t.subtree(arms[0][0])) | set(t.subtree(arms[1][0]))
+    trunk_set = set(trunk) | set(t.subtree(legs[0][0])) | set(t.subtree(legs[1][0]))
+    shoulder_h = 0.5 * (t.h[arms[0][0]] + t.h[arms[1][0]])
+    head_chain: list[int] = []
+    for c in t.children[arm_root]:
+        if c in arm_set or c in trunk_set:
+            continue
+        if not any(t.articulated(x) for x in t.subtree(c)):
+            continue
+        chain = _descend_longest(t, c)
+        if max(t.h[x] for x in chain) > shoulder_h and len(chain) > len(head_chain):
+            head_chain = chain
+    return head_chain
+
+
+def _trunk_top(t: _Tree, root: int, legs: list[list[int]]) -> int:
+    """The top of the trunk of a robot without arms: the highest body origin of the free
+    body's tree outside the legs (the earlier body on a tie); the pelvis's side of the tree
+    when nothing rises above it."""
+    legs_set = set(t.subtree(legs[0][0])) | set(t.subtree(legs[1][0]))
+    rest = [b for b in sorted(t.subtree(root)) if b not in legs_set]
+    return max(rest, key=lambda b: (round(float(t.h[b]), 6), -b))
+
+
+def _split_named_head(t: _Tree, trunk: list[int]) -> tuple[list[int], list[int]]:
+    """(trunk, head chain) of a trunk path with no arms to tell where the chest ends: the head
+    chain starts at the first body whose name (or its joints') says neck or head; with no
+    such name the whole path is trunk."""
+    for i, b in enumerate(trunk):
+        if any(part in ("neck", "head") for n in t.names(b) for part in name_parts(n, _HEAD_WORDS)):
+            return trunk[:i], trunk[i:]
+    return trunk, []
+
+
+def _put_head(t: _Tree, head_chain: list[int], put, left_out: dict[str, str]) -> None:
+    """Neck and head on a head chain (its articulation points); a single one is the head."""
+    pts = _points(t, head_chain)
+    if not pts:
+        for c in ("neck", "head"):
+            left_out[c] = "no head joint"
+        return
+    by_name = {part: g for part, g in _named_groups(t, head_chain, _HEAD_WORDS) if part}
+    if len(pts) == 1:
+        # neck and head turn in one body: it is the head (its frame follows the actor's head)
+        b = _pick(t, pts[0], oriented=True)[0]
+        put("head", b, _by_name(t, b, _HEAD_WORDS, "the only joint of the head branch")
+            if "head" in by_name or "neck" in by_name else "tree position: the only joint of the head branch")
+        left_out["neck"] = "no neck joint apart from the head's"
+        return
+    neck_pt = next((g for g in pts if any(x in by_name.get("neck", []) for x in g)), pts[0])
+    head_pt = next((g for g in reversed(pts) if any(x in by_name.get("head", []) for x in g)), pts[-1])
+    if head_pt is neck_pt:
+        head_pt = pts[-1]
+    b = _pick(t, neck_pt, oriented=False)[0]
+    put("neck", b, _by_name(t, b, _HEAD_WORDS, "") if "neck" in by_name else
+        "tree position: first joint of the head branch")
+    b = _pick(t, head_pt, oriented=True)[0]
+    put("head", b, _by_name(t, b, _HEAD_WORDS, "") if "head" in by_name else
+        "tree position: last joint of the head branch")
+
+
+#: A knee or elbow whose body origin is further than this (m) from its hinge's point on the
+#: limb's line gets a site there (as articulation points closer than this are one).
+_OFF_LINE = 0.02
+
+
+def _hinge_centres(t: _Tree, joints: dict[str, Guess], sites: dict[str, tuple[int, tuple]]):
+    """Canonical -> (site name, body, position in its frame) for each knee or elbow whose body
+    origin sits along its hinge's axis away from the limb (the Berkeley Humanoid's knee body, 3
+    cm out from the line from hip to ankle): a site at the point of the hinge axis nearest the
+    line from the limb's first to its last joint (closest points of two lines), where that point
+    is more than :data:`_OFF_LINE` from the origin.
+
+    Tracking the origin bows the limb in the frontal plane: on the CMU walk the Berkeley
+    Humanoid's shanks were 12 degrees off the actor's, 3 to 6 with the site.  A body with
+    more than one hinge (a knee that also turns) is left as it is: no one axis to slide along.
+    """
+    def point(canon: str) -> np.ndarray | None:
+        g = joints.get(canon)
+        if g is None:
+            return None
+        if g.kind == "body":
+            return t.xpos[t.m.body(g.name).id]
+        body, pos = sites[g.name]
+        return t.data.xpos[body] + t.data.xmat[body].reshape(3, 3) @ np.asarray(pos, dtype=float)
+
+    taken = {t.m.site(i).name for i in range(t.m.nsite)} | set(sites)
+    out = {}
+    for side in ("left", "right"):
+        for first, mid, last in (("hip", "knee", "ankle"), ("shoulder", "elbow", "wrist")):
+            g = joints.get(f"{side}_{mid}")
+            a, c = point(f"{side}_{first}"), point(f"{side}_{last}")
+            if g is None or g.kind != "body" or a is None or c is None:
+                continue
+            b = t.m.body(g.name).id
+            hinges = [j for j in t.joints(b) if int(t.m.jnt_type[j]) == _HINGE]
+            if len(hinges) != 1 or np.linalg.norm(c - a) < 1e-6:
+                continue
+            u = t.data.xaxis[hinges[0]] / np.linalg.norm(t.data.xaxis[hinges[0]])
+            d = (c - a) / np.linalg.norm(c - a)
+            w = t.data.xanchor[hinges[0]] - a
+            den = 1.0 - float(u @ d) ** 2
+            if den < 1e-6:
+                continue  # the axis along the limb: no nearest point
+            k = (float(u @ d) * float(d @ w) - float(u @ w)) / den
+            centre = t.data.xanchor[hinges[0]] + k * u
+            if np.linalg.norm(centre - t.xpos[b]) <= _OFF_LINE:
+                continue
+            local = t.data.xmat[b].reshape(3, 3).T @ (centre - t.xpos[b])
+            name = f"{side}_{mid}_centre"
+            while name in taken:
+                name += "_proposed"
+            taken.add(name)
+            out[f"{side}_{mid}"] = (name, b, tuple(round(float(v), 4) + 0.0 for v in local))
+    return out
 
 
 def _ball_sites(t: _Tree, ankles: dict[str, int]) -> dict[str, tuple[str, int, tuple[float, float, float]]]:
@@ -986,7 +1189,7 @@ def _missing_reason(canon: str) -> str:
     stem = canon.split("_", 1)[1] if canon.startswith(("left_", "right_")) else canon
     return {
         "chest": "one trunk joint at most",
-        "spine": "no trunk joint between the pelvis and the arms",
+        "spine": "no trunk joint above the pelvis",
         "head_end": "no head tip body",
         "clavicle": "no clavicle body",
         "wrist": "no wrist body",
@@ -1003,14 +1206,17 @@ def _bend_deg(t: _Tree, d: mujoco.MjData, a: int, b: int, c: int) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
 
 
-def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None) -> tuple[dict[str, float], str]:
-    """With no keyframe: straighten elbows and knees the zero pose bends (hinge of the middle body)."""
+def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None,
+              site_bodies: dict[str, int] | None = None) -> tuple[dict[str, float], str]:
+    """With no keyframe: straighten elbows and knees the zero pose bends (hinge of the middle body).
+    ``site_bodies``: canonical joint -> body of a site proposed on it (a knee's centre)."""
     if key is not None:
         return {}, f"keyframe {key!r}"
     m = t.m
     d = mujoco.MjData(m)
     d.qpos[:] = t.data.qpos
     body = {c: m.body(g.name).id for c, g in joints.items() if g.kind == "body"}
+    body.update(site_bodies or {})
     fixes: dict[str, float] = {}
     notes = []
     # a zero outside a joint's range: the nearest bound (0.1 degree inside, as the file rounds)
@@ -1065,7 +1271,7 @@ def _rest_fix(t: _Tree, joints: dict[str, Guess], key: str | None) -> tuple[dict
                 fixes[m.joint(j).name] = float(deg)
                 notes.append(f"{m.joint(j).name} = {deg} deg straightens the {side} {limb} "
                              f"(bent {bend:.0f} deg at zero)")
-    note = "zero pose (no 'rest' or 'home' keyframe)"
+    note = f"zero pose (no keyframe named {', '.join(repr(w) for w in REST_KEY_WORDS)})"
     if notes:
         note += ", with " + "; ".join(notes)
     return fixes, note

@@ -230,6 +230,12 @@ class PlanHints:
         bending: The site's foot's toe targets bend up on this frame (the toe segment's
             pitch above the foot's grows): a ball held next to its held toe tip may let go
             softly (:meth:`FootPlanter.update`).  None: unknown (never lets go softly).
+        released: Streaming: the site lets go with its label instead of staying held while
+            low (``PlantOptions.lock_low``): the heel of a foot rolling over its toes (held
+            with its ball, two holds on one rigid body keep the foot flat, and a trailing leg
+            with a flat foot drags the pelvis down) and every site of a foot whose toe has let
+            go (:meth:`Planting._toes_moving`: the foot lifts as a whole instead of its ball
+            staying held while the toes sweep forward over the floor).  None: no such site.
     """
 
     rolling: np.ndarray
@@ -237,6 +243,7 @@ class PlanHints:
     lifting: np.ndarray | None = None
     pivoting: np.ndarray | None = None
     bending: np.ndarray | None = None
+    released: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -516,7 +523,8 @@ class FootPlanter:
             # the air is pulled down first: holding it in the air would keep it from
             # reaching the floor).  With lock_low it lasts, label or not, until the
             # site lifts clear of the band, so a foot rises before it moves.
-            engaged[k] = low and (flags[k] or (opt.lock_low and self.locked[k])) and (hints is None or bool(hints.holdable[k]))
+            lock_low = opt.lock_low and (hints is None or hints.released is None or not hints.released[k])
+            engaged[k] = low and (flags[k] or (lock_low and self.locked[k])) and (hints is None or bool(hints.holdable[k]))
             if engaged[k]:
                 if not self.locked[k]:
                     self.anchor[k, :2] = self._anchor_for(k, data.site_xpos[sid, :2])
@@ -731,6 +739,10 @@ class Planting:
         self._foot_bodies = {side: feet_bodies.get(side, []) for side in ("left", "right")}
         roles = {k: v for side in ("left", "right") for k, v in self._toe_roles(model, character, side).items()}
         self._release = np.array([roles.get(site) == "release" for site in self.sites], dtype=bool)
+        #: streaming: per side, whether its heel has been labelled since its toes came down
+        #: (a foot down on its toes alone after that rolls over them; one landing toes first
+        #: does not)
+        self._heel_down = {"left": False, "right": False}
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
         #: the side (left, right) of each site
         self._site_side = ["left" if s in character.contacts.get("left", ()) else "right" for s in self.sites]
@@ -744,6 +756,9 @@ class Planting:
         has_release = {side: any(self._release[k] for k in ks) for side, ks in self._side_sites.items()}
         #: sites on a toe segment of a foot that also has sites on its own body
         self._toe_segment = held & np.array([has_release[side] for side in self._site_side], dtype=bool)
+        #: sites on the heel's body of a foot with a toe segment, other than its ball: the
+        #: points that lift as the foot rolls over its toes
+        self._heel_sites = ~held & ~self._release & np.array([has_release[side] for side in self._site_side], dtype=bool)
         rolling = set(self.toe_contacts())
         #: toe-segment sites whose height the offline plan sets while only the toes are down
         self._rolling = held & np.array([side in rolling for side in self._site_side], dtype=bool)
@@ -1002,6 +1017,38 @@ class Planting:
             if turns.get(side, 0.0) != 0.0:
                 self.locks.turn(s, turns[side], heights, labelled)
 
+    def _stream_hints(self, positions: np.ndarray, labels: Mapping[str, bool], toe: np.ndarray, heel: np.ndarray,
+                      first: bool) -> PlanHints:
+        """What a causal foot knows about each site this frame (:class:`PlanHints`; streaming).
+
+        A foot whose heel label has ended while its toes stay down, after its heel was down
+        in this contact, rolls over its toes as offline (without the plan's toe heights):
+        its heel lets go with its label, its ball is held where it rests but not pulled
+        down, and lets go softly while the toe targets bend up.  A foot whose toe has let go
+        (:meth:`_toes_moving`) lets go of every site at once.  Measured on the streamed PyMO
+        walk (humanoid): the pelvis sank up to 8 cm below its target in late stance and
+        rose 5-7 cm in two frames at every toe-off (vertical speed p99 2.89 m/s against the
+        actor's 0.61); with these holds 0.74 m/s, no such rise (docs/history.md, stop 32).
+        """
+        rolled = np.array([self._heel_down[side] for side in self._site_side], dtype=bool)
+        for side in ("left", "right"):
+            if not labels.get(f"{side}_toe", False):
+                self._heel_down[side] = False
+            elif labels.get(f"{side}_heel", False):
+                self._heel_down[side] = True
+        rolling_foot = toe & ~heel & rolled
+        bending = self._toes_bending(positions, first)
+        bends = np.array([bending.get(side, False) for side in self._site_side], dtype=bool)
+        gone = np.array([self._toe_gone[side] for side in self._site_side], dtype=bool)
+        n = len(self.sites)
+        return PlanHints(
+            rolling=np.zeros(n, dtype=bool),
+            holdable=np.ones(n, dtype=bool),
+            lifting=rolling_foot & self._release,
+            bending=rolling_foot & bends,
+            released=(rolling_foot & self._heel_sites) | gone,
+        )
+
     def _toes_bending(self, positions: np.ndarray, first: bool) -> dict[str, bool]:
         """Side -> whether its toe targets bend up on this frame: the pitch of ``toe ->
         toe_end`` above that of ``ankle -> toe`` grows from the previous frame's (False on
@@ -1041,7 +1088,9 @@ class Planting:
         heel = np.array([bool(labels.get(f"{side}_heel", False)) for side in self._site_side], dtype=bool)
         toes_only = np.zeros(len(self.sites), dtype=bool) if self.anchored else toe & ~heel
         hints = None
-        if not self.anchored:
+        if self.anchored:
+            hints = self._stream_hints(positions, labels, toe, heel, first)
+        else:
             # heel up, toes down: the foot rolls over its toes; its ball is held where it rests
             # (not pulled down) until it lifts, so it rolls about its contact instead of sliding
             # round the toe joint above it
@@ -1057,8 +1106,9 @@ class Planting:
                               bending=np.array([bending.get(side, False) for side in self._site_side], dtype=bool))
         self._turn_holds(positions, orientations, valid, data, flags)  # offline and streaming alike
         tasks, hard, engaged = self.locks.update(flags, data, hints)
+        if hints is not None and hints.lifting is not None:
+            self.locks.free[hints.lifting] = False  # a ball rolling, not swinging
         if not self.anchored:  # planned targets (.footplan): the site locks and height pulls only
-            self.locks.free[toes_only & self._release] = False  # rolling, not swinging
             pivots = {self.locks.tasks[k].site_id for k in np.flatnonzero(toes_only & self._pivot)}
             # a rigid foot rolling over its front edge: its pivot is pulled down only softly, so
             # the foot pitches over the edge rather than tipping onto its side (a weak pull lets

@@ -234,7 +234,8 @@ def test_frames_away_from_contact_changes_take_one_qp_in_the_last_pass(monkeypat
     """Away from the windows the last pass's answer is the first pass's shifted by a slowly
     changing offset (its holds' anchors, set near a change, a millimetre off the first pass's);
     started from the first pass's pose alone such frames took two QPs, carried they take one
-    (the bundled walk: 1.85 -> 1.24 a frame)."""
+    (the bundled walk: 1.85 -> 1.24 a frame).  Frames whose targets the pass moves (a swing foot
+    eased round the other leg) are not such frames."""
     import importlib
 
     from physmocap.resources import example_clip
@@ -244,14 +245,70 @@ def test_frames_away_from_contact_changes_take_one_qp_in_the_last_pass(monkeypat
     seen = {}
     original = module._retrack
 
-    def spy(last, first, config, progress, labels, guides, label):
-        again = original(last, first, config, progress, labels, guides, label)
+    def spy(last, first, config, progress, labels, guides, label, **extra):
+        again = original(last, first, config, progress, labels, guides, label, **extra)
         if isinstance(guides, TransitionGuides):
-            seen.update(near=guides.near.copy(), iterations=again.solver.iterations.copy())
+            moved = np.zeros(len(guides), dtype=bool)  # frames whose targets the pass moves (eased_foot_shifts)
+            for offsets, _ in extra.get("shift") or ():
+                moved |= np.abs(offsets).sum(axis=1) > 0
+            seen.update(near=guides.near | moved, iterations=again.solver.iterations.copy())
         return again
 
     monkeypatch.setattr(module, "_retrack", spy)
     module.retarget(load_motion(example_clip()), load_character("humanoid"), progress=False, arm_branches=False)
     far = ~seen["near"]
-    assert far.sum() > 50
+    assert far.sum() > 40, far.sum()
     assert seen["iterations"][far].mean() < 1.5, seen["iterations"][far].mean()
+
+
+def test_an_offset_a_hold_snaps_out_of_is_eased_in_and_out():
+    """A foot held 6 cm off its target for 20 frames and let go at once: the eased offsets
+    equal it where it is held, ramp to it and back at the given speed, and are zero on the
+    frames the foot is pinned (in contact) and far away."""
+    from physmocap.ik.transitions import eased_offsets
+
+    fps, speed = 120.0, 0.25
+    x = np.zeros((200, 3))
+    x[80:100, 1] = -0.06
+    pinned = np.zeros(200, dtype=bool)
+    pinned[150:] = True
+    e = eased_offsets(x, fps, speed, tolerance=0.005, pinned=pinned)
+    np.testing.assert_allclose(e[80:100], x[80:100], atol=1e-12)
+    step = np.abs(np.diff(e, axis=0)).max()
+    assert step <= speed / fps + 1e-12, step  # before: a 6 cm step in one frame
+    assert np.all(e[150:] == 0.0) and np.all(e[:20] == 0.0)
+    assert e[70, 1] < -0.03  # on its way in before the hold
+    # a slowly changing offset is left as it is: nothing to ease
+    slow = np.zeros((200, 3))
+    slow[:, 0] = np.linspace(0.0, 0.02, 200)
+    assert not eased_offsets(slow, fps, speed, tolerance=0.005).any()
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_a_swing_foot_the_other_leg_holds_back_does_not_snap_when_it_clears_it():
+    """Before: on the PyMO walk the robot's left swing foot slid along its stance foot's box
+    (at the self-collision margin), fell 6 cm behind its target over frames 671-674 and
+    jumped 9 cm in one frame when it cleared it (the actor's foot: 2.9 cm).  Now the foot's
+    targets are moved round the other foot, eased in and out (eased_foot_shifts)."""
+    import importlib
+
+    import mujoco
+
+    from conftest import shared_file
+    from physmocap.sources import load_motion
+
+    rt = importlib.import_module("physmocap.ik.retarget")
+    ch = load_character("robot")
+    motion = load_motion(shared_file("pymo_walk.bvh")).slice_frames(600, 760)
+    traj = rt.retarget(motion, ch, progress=False, start=0)
+    model = ch.model
+    data = mujoco.MjData(model)
+    frame = ch.tracked["left_ankle"]
+    ankle = np.empty((traj.qpos.shape[0], 3))
+    for t in range(traj.qpos.shape[0]):
+        data.qpos[:] = traj.qpos[t]
+        mujoco.mj_kinematics(model, data)
+        ankle[t] = data.site_xpos[frame.object_id(model)] if frame.kind == "site" else data.xpos[frame.object_id(model)]
+    target = np.asarray(traj.targets.positions[:, list(traj.targets.names).index("left_ankle")])
+    excess = np.linalg.norm(np.diff(ankle, axis=0), axis=1) - np.linalg.norm(np.diff(target, axis=0), axis=1)
+    assert excess.max() < 0.02, (excess.max(), int(excess.argmax()))

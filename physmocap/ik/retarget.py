@@ -19,6 +19,7 @@ import warnings
 from functools import partial
 from typing import Any, Callable
 
+import mujoco
 import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
@@ -45,7 +46,7 @@ from .rigidfoot import level_roll
 from .solver import RELAXATION_LEVELS, SolverOptions
 from .targets import Targets, build_targets, character_rest_frames
 from .toetips import extend_toe_tips
-from .transitions import TransitionGuides, carried_targets, moving_joints
+from .transitions import TransitionGuides, carried_targets, eased_foot_shifts, moving_joints
 
 __all__ = ["retarget", "solve_targets", "map_motion", "RetargetConfig"]
 
@@ -263,11 +264,11 @@ def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None
 
 
 def _retrack(last: Trajectory, first: Trajectory, config: RetargetConfig, progress: bool | None,
-             labels: dict[str, np.ndarray] | None, guides: dict, label: str) -> Trajectory:
+             labels: dict[str, np.ndarray] | None, guides: dict, label: str, shift=None) -> Trajectory:
     """``last``'s targets retargeted again with ``guides``, carrying ``first``'s contacts,
     source motion and source frames."""
     again = _track(last.targets, last.character, config.solver, last.source, progress, labels, config.plant,
-                   guides, label=label)
+                   guides, label=label, shift=shift)
     for name in ("contacts", "source_motion", "joint_indices", "source_start"):
         setattr(again, name, getattr(first, name))
     return again
@@ -291,7 +292,9 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
                               opt.transition_tolerance, arm_guides, traj.targets.valid)
     if not guides.near.any():
         return traj
-    again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed")
+    shift = eased_foot_shifts(traj, labels, config.solver)
+    again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed",
+                     shift=shift)
     softened = int(np.count_nonzero(again.solver.relaxation)) > int(np.count_nonzero(traj.solver.relaxation))
     return traj if softened or _relaxed(again) > _relaxed(traj) else again
 
@@ -535,6 +538,7 @@ def _track(
     plant: PlantOptions,
     guides=None,
     label: str = "retarget",
+    shift=None,
 ) -> Trajectory:
     """Run the per-frame pipeline over (planned) targets, holding the contact points of
     ``labels`` (None: track the targets as they are), with ``guides`` (``guides.get(frame)``:
@@ -554,7 +558,12 @@ def _track(
     with Progress(F, label, enabled=progress) as bar:
         for t in range(F):
             frame_labels = {k: bool(v[t]) for k, v in labels.items()} if labels is not None else None
-            result = pipeline.solve(targets.positions[t], targets.orientations[t], targets.valid[t], frame_labels,
+            positions = targets.positions[t]
+            for offsets, cols in shift or ():
+                if offsets[t].any():
+                    positions = np.array(positions, dtype=float)
+                    positions[cols] += offsets[t]
+            result = pipeline.solve(positions, targets.orientations[t], targets.valid[t], frame_labels,
                                     guides.get(t))
             qpos[t] = result.qpos
             iterations[t] = result.iterations

@@ -31,7 +31,10 @@ pulled (a posture pull of ``transition_cost`` per radian or metre, a
    last contact change).
 
 Every hard constraint holds as before: the holds still hold, the floor and the limits
-still bound.  An arm's own guide from the arm passes keeps its joints.  Every frame's
+still bound.  A swing foot that a hard constraint held off its target in the first pass (the
+other leg, through self-collision avoidance) and that snapped back when it was let go has
+its targets moved by that offset spread out in time (:func:`eased_offsets`), so it goes
+round instead of catching up in one frame (:func:`eased_foot_shifts`).  An arm's own guide from the arm passes keeps its joints.  Every frame's
 iterations start from the first pass's pose on that frame (within the frame's velocity
 band), not from the previous frame's: the answer is nearer, so it takes fewer iterations
 (the PyMO walk: 2.7 a frame against 4.2) and ends better converged (its acceleration
@@ -63,7 +66,7 @@ from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 from ..spill import release
 from .branches import MOVING_TYPES, Guide
 
-__all__ = ["change_windows", "moving_joints", "carried_targets", "TransitionGuides"]
+__all__ = ["change_windows", "moving_joints", "carried_targets", "TransitionGuides", "eased_offsets", "eased_foot_shifts"]
 
 #: Frames of the reference low-passed at a time (a long clip's reference is never whole).
 BLOCK_FRAMES = 4096
@@ -80,6 +83,150 @@ def change_windows(labels: Mapping[str, np.ndarray], num_frames: int, window_fra
         for e in np.flatnonzero(x[1:] != x[:-1]):  # the label changes between e and e + 1
             near[max(0, e - window_frames) : e + window_frames + 2] = True
     return near
+
+
+def _envelope(x: np.ndarray, step: float, upper: bool) -> np.ndarray:
+    r"""The tightest curve on one side of ``x (F,)`` whose slope is at most ``step`` per frame:
+    :math:`\max_s (x_s - r|t - s|)` (``upper``) or :math:`\min_s (x_s + r|t - s|)`,
+    by one pass each way."""
+    y = np.array(x, dtype=float)
+    sign = 1.0 if upper else -1.0
+    y *= sign
+    for t in range(1, len(y)):
+        y[t] = max(y[t], y[t - 1] - step)
+    for t in range(len(y) - 2, -1, -1):
+        y[t] = max(y[t], y[t + 1] - step)
+    return sign * y
+
+
+def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: float,
+                  pinned: np.ndarray | None = None) -> np.ndarray:
+    r"""``(F, 3)`` offsets to add to a body's targets so that it eases into and out of the
+    offsets ``(F, 3)`` the first pass left it at (metres; the pelvis off its target where a
+    hold kept it), instead of jumping there in a frame.
+
+    Per axis, the offset is spread outwards in time at ``speed`` (m/s): where it is positive
+    its upper envelope of slope ``speed / fps`` per frame, where negative its lower one
+    (:func:`_envelope`), the larger in magnitude; a slowly changing offset is its own
+    envelope.  The result is applied only around the frames where it differs from the
+    offset by more than ``tolerance`` (metres), faded in and out over as many frames as the
+    largest difference takes at ``speed``: elsewhere the targets are the actor's.  On the
+    ``pinned (F,)`` frames (a foot in contact, held by its plan) the result is 0, and it
+    reaches 0 there at ``speed``: within :math:`k` frames of one it is at most
+    :math:`k \cdot speed / fps`."""
+    x = np.asarray(offsets, dtype=float)
+    F = x.shape[0]
+    if F < 3 or speed <= 0:
+        return np.zeros_like(x)
+    step = speed / fps
+    up = np.stack([_envelope(x[:, i], step, True) for i in range(x.shape[1])], axis=1)
+    low = np.stack([_envelope(x[:, i], step, False) for i in range(x.shape[1])], axis=1)
+    e = np.where(np.abs(up) >= np.abs(low), up, low)
+    if pinned is not None and np.any(pinned):
+        # frames to the nearest pinned frame, both ways
+        gap = np.full(F, float(F))
+        last = -np.inf
+        for t in range(F):
+            last = t if pinned[t] else last
+            gap[t] = t - last
+        last = np.inf
+        for t in range(F - 1, -1, -1):
+            last = t if pinned[t] else last
+            gap[t] = min(gap[t], last - t)
+        e = np.clip(e, -gap[:, None] * step, gap[:, None] * step)
+    differs = np.linalg.norm(e - x, axis=1) > tolerance
+    if not differs.any():
+        return np.zeros_like(x)
+    reach = int(np.ceil(float(np.abs(e - x).max()) / step)) + 1
+    near = np.convolve(differs.astype(float), np.ones(2 * reach + 1), mode="same") > 0
+    weight = gaussian_filter1d(near.astype(float), max(reach / 2.0, 1.0), mode="nearest")
+    weight = np.clip(2.0 * weight, 0.0, 1.0)
+    return e * weight[:, None]
+
+
+#: m/s at which a swing foot eases into (and out of) the offset from its target at which the
+#: other leg holds it (self-collision avoidance).
+EASE_SPEED = 0.25
+#: Metres an eased offset must differ from the first pass's before a target moves.
+EASE_TOLERANCE = 0.005
+#: m/s: a held-off foot's offset that changes faster than this at the start or end of its hold
+#: snaps (the robot's left foot on the PyMO walk: 7.4 m/s); slower ones are left alone.
+SNAP_SPEED = 2.0
+
+
+def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndarray:
+    """``(F,)`` bool: the frames of the runs of ``held`` whose ``offsets (F, 3)`` (zero off the
+    runs) change faster than :data:`SNAP_SPEED` between the run's first frame and the one
+    before it, or its last and the one after."""
+    F = len(held)
+    out = np.zeros(F, dtype=bool)
+    speed = np.zeros(F + 1)
+    speed[1:F] = np.linalg.norm(np.diff(offsets, axis=0), axis=1) * fps  # speed[t]: frames t-1 -> t
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):  # the run is frames a .. b-1
+        if max(speed[a], speed[b]) > SNAP_SPEED:
+            out[a:b] = True
+    return out
+
+
+def eased_foot_shifts(traj, labels: Mapping[str, np.ndarray], options) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per swing foot that the other leg held off its target in ``traj`` (one of its collision
+    geoms at the self-collision margin, within a millimetre) and that snapped back (its offset
+    changing faster than :data:`SNAP_SPEED` as the hold began or ended), ``((F, 3) shift,
+    columns)``: its ankle's horizontal offsets from its target on those frames, eased in time
+    (:func:`eased_offsets`; zero on the frames the foot is labelled in contact), for its
+    ankle, toe and toe tip targets.  The foot then goes round the other leg instead of
+    sliding along it behind its target and snapping back when it clears it (the robot's left
+    foot on the PyMO walk, 6 cm in one frame).  ``traj``: a
+    :class:`~physmocap.trajectory.Trajectory` with its targets; ``options``: its
+    :class:`~physmocap.ik.solver.SolverOptions`."""
+    if not options.self_collision:
+        return []
+    from ..models.geometry import foot_bodies
+    from ..models.selfcollision import pair_distances, self_collision_pairs
+
+    character = traj.character
+    model = character.model
+    names = list(traj.targets.names)
+    feet = foot_bodies(model, character.contacts)
+    pairs = self_collision_pairs(character)
+    sides = {}
+    for side in ("left", "right"):
+        ankle = f"{side}_ankle"
+        mine = [p for p in pairs if {int(model.geom_bodyid[g]) for g in p} & set(feet.get(side, ()))]
+        if ankle in names and ankle in character.tracked and mine:
+            sides[side] = (character.tracked[ankle], mine)
+    if not sides:
+        return []
+    data = mujoco.MjData(model)
+    F = traj.qpos.shape[0]
+    where = {side: np.empty((F, 3)) for side in sides}
+    blocked = {side: np.zeros(F, dtype=bool) for side in sides}
+    for t in range(F):
+        data.qpos[:] = traj.qpos[t]
+        mujoco.mj_kinematics(model, data)
+        for side, (frame, mine) in sides.items():
+            i = frame.object_id(model)
+            where[side][t] = data.site_xpos[i] if frame.kind == "site" else data.xpos[i]
+            blocked[side][t] = float(pair_distances(model, data, mine).min()) <= options.self_collision_margin + 1e-3
+    out = []
+    for side in sides:
+        if not blocked[side].any():
+            continue
+        ankle = f"{side}_ankle"
+        offsets = where[side] - np.asarray(traj.targets.positions[:, names.index(ankle)], dtype=float)
+        offsets[:, 2] = 0.0
+        down = np.zeros(F, dtype=bool)
+        for part in ("heel", "toe"):
+            if f"{side}_{part}" in labels:
+                down |= np.asarray(labels[f"{side}_{part}"], dtype=bool)[:F]
+        offsets[~blocked[side] | down] = 0.0
+        offsets[~_snapping_runs(offsets, blocked[side] & ~down, traj.fps)] = 0.0
+        shift = eased_offsets(offsets, traj.fps, EASE_SPEED, EASE_TOLERANCE, pinned=down)
+        if shift.any():
+            cols = np.array([names.index(n) for n in (ankle, f"{side}_toe", f"{side}_toe_end") if n in names], dtype=int)
+            out.append((shift, cols))
+    return out
 
 
 def moving_joints(model: mujoco.MjModel) -> list[int]:

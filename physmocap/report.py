@@ -265,6 +265,11 @@ def _fidelity_table(fid: dict | None) -> list[str]:
         ["any segment > 45 deg", "% frames", _fmt(100 * fid["share_any_segment_over_45"])],
         ["facing error median / p95", "deg", f"{_fmt(face['median_deg'])} / {_fmt(face['p95_deg'])}"],
         ["pelvis path deviation mean / max", "cm", f"{_fmt(path['mean_cm'])} / {_fmt(path['max_cm'])}"],
+    ]
+    drift = fid.get("pelvis_drift") or {}
+    if drift.get("mean_cm") is not None:
+        rows.append(["pelvis drift from its target mean / max", "cm", f"{_fmt(drift['mean_cm'])} / {_fmt(drift['max_cm'])}"])
+    rows += [
         [
             "pelvis vertical speed p99 (actor scaled)",
             "m/s",

@@ -417,3 +417,27 @@ def test_a_fast_limb_at_a_low_frame_rate_keeps_up():
     fid = trajectory_fidelity(traj, floor_contact=False)
     assert fid.share_any_over_45 == 0.0, fid.frames_any_over_45
     assert fid.facing_p95_deg < 8.0
+
+
+def test_pelvis_drift_is_the_distance_to_the_pelvis_target_with_no_fit():
+    """The path deviation's similarity fit takes in a body that walks beside the actor; the
+    drift does not (docs/metrics.md)."""
+    import dataclasses
+    import importlib
+
+    from physmocap.metrics.fidelity import character_joint_positions, pelvis_drift, trajectory_fidelity
+    from physmocap.models import load_character
+    from physmocap.resources import example_clip
+    from physmocap.sources import load_motion
+
+    rt = importlib.import_module("physmocap.ik.retarget")
+    traj = rt.retarget(load_motion(example_clip()), load_character(), progress=False, end=80)
+    fid = trajectory_fidelity(traj, floor_contact=False)
+    assert fid.drift_mean_cm is not None and fid.drift_mean_cm < 1.0  # offline the pelvis tracks its target
+    assert "pelvis_drift" in fid.as_dict()
+    pelvis = character_joint_positions(traj, {"pelvis"})["pelvis"]
+    moved = np.array(traj.targets.positions, dtype=float)
+    moved[:, :, 0] += 0.10  # the targets 10 cm along x: a body 10 cm behind them
+    shifted = dataclasses.replace(traj, targets=dataclasses.replace(traj.targets, positions=moved))
+    mean, most = pelvis_drift(shifted, pelvis)
+    assert abs(mean - 10.0) < 1.0 and most < 11.0, (mean, most)

@@ -34,7 +34,9 @@ combined by :class:`Planting`:
 * The body follows its planted feet: a root offset relaxes (time constant
   ``root_follow_time``) towards the mean offset of the held feet, so a source
   whose feet slide does not stretch the stance leg and drag the pelvis.  Swing
-  feet hand back to this root offset rather than to zero.
+  feet hand back to this root offset rather than to zero, less ``drift_correction``
+  towards zero, so each step lands a little nearer the actor's path and the body,
+  following, does not drift away from it for good.
 
 If holding a site makes a QP infeasible (velocity limits, joint limits), the
 solver's first relaxation softens the equalities into tasks of cost
@@ -127,6 +129,15 @@ class PlantOptions:
             path (0: the body keeps the actor's path and only the feet are
             offset).  Offline retargeting never moves the body
             (:mod:`physmocap.ik.footplan`).
+        drift_correction: Streaming only: metres by which a swing foot's target offset is
+            handed back nearer the actor's path than the body's root offset (its size less
+            this, at most to none), so each step lands up to that much closer and the body,
+            following its feet, comes back to the actor's path instead of keeping every
+            offset it ever took (feet anchored where they land behind their targets, the body
+            following them: the streamed PyMO walk's pelvis drifted a mean 15 cm from the
+            actor's scaled path, the robot's 24; with 3 cm, 5 and 11).  5 cm took the drift
+            further (3 and 7) but made the CMU jumps' streamed robot slip 1.13 cm/s and face
+            9 degrees off (p95) where the actor lands from its jumps.  0: none.
         ease_time: Offline only: seconds over which a foot's plant offset eases
             in before a contact and out after it (:mod:`physmocap.ik.footplan`).
         pivot_cost: Offline only: cost per metre of the pull that keeps a rigid
@@ -176,6 +187,7 @@ class PlantOptions:
     clearance: float = 0.012
     max_descent_speed: float = 1.0
     root_follow_time: float = 0.15
+    drift_correction: float = 0.03
     ease_time: float = 0.1
     pivot_cost: float = 40.0
     pivot_threshold: float = 0.035
@@ -670,6 +682,12 @@ class FootAnchor:
         return new
 
 
+def _toward_zero(offset: np.ndarray, by: float) -> np.ndarray:
+    """``offset`` shortened by ``by`` metres (to none at most)."""
+    n = float(np.linalg.norm(offset))
+    return offset * max(0.0, 1.0 - by / n) if n > by else np.zeros_like(offset)
+
+
 def _material_points(model: mujoco.MjModel, data: mujoco.MjData, bodies: set[int]) -> np.ndarray:
     """``(K, 4)`` world lowest-point candidates ``(x, y, z, radius)`` of the collision geoms
     of ``bodies`` in the pose of ``data`` (:func:`~physmocap.models.geometry.geom_candidates`)."""
@@ -1136,7 +1154,7 @@ class Planting:
                 positions[it, :2],
                 now_a,
                 now_t,
-                base=self.root_offset,
+                base=_toward_zero(self.root_offset, self.options.drift_correction),
             )
         # The body follows its planted feet: the root offset relaxes towards the mean
         # offset of the held feet (held in flight), so a source whose feet slide does

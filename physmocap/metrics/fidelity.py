@@ -33,7 +33,7 @@ character in the actor's world orientation, so directions compare directly.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Mapping, Sequence
 
 import mujoco
@@ -104,6 +104,11 @@ class Fidelity:
         frames_facing_over_30: Frames with facing more than 30 degrees off.
         path_mean_cm, path_max_cm: Pelvis path deviation after the similarity fit.
         path_scale: Scale of the fitted similarity (about the root scale).
+        drift_mean_cm, drift_max_cm: Horizontal distance between the character's pelvis and
+            its target, the actor's pelvis as the retarget scaled and placed it, with no fit
+            (None without the targets): a body that comes to walk beside or behind the actor
+            and stays there (a stream following its feet) shows here, where the similarity
+            fit of the path takes most of it in.
         pelvis_vz_p99, actor_vz_p99_scaled: 99th percentile vertical speeds (m/s).
         saturated_frames: Frame transitions ``t -> t+1`` with a joint at its velocity cap.
         saturated_share: Their share of the clip's transitions.
@@ -128,6 +133,8 @@ class Fidelity:
     floor: "GeomFloorContact | None" = None
     saturated_joint: str | None = None
     saturated_joint_share: float = 0.0
+    drift_mean_cm: float | None = None
+    drift_max_cm: float | None = None
 
     @property
     def worst_segment_median_deg(self) -> float:
@@ -143,6 +150,7 @@ class Fidelity:
             "share_any_segment_over_45": self.share_any_over_45,
             "facing": {"median_deg": self.facing_median_deg, "p95_deg": self.facing_p95_deg},
             "pelvis_path": {"mean_cm": self.path_mean_cm, "max_cm": self.path_max_cm, "scale": self.path_scale},
+            "pelvis_drift": {"mean_cm": self.drift_mean_cm, "max_cm": self.drift_max_cm},
             "pelvis_vertical_speed": {
                 "character_p99": self.pelvis_vz_p99,
                 "actor_p99_scaled": self.actor_vz_p99_scaled,
@@ -696,11 +704,25 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
     ch = traj.character
     from ..models.geometry import foot_bodies
 
-    return fidelity(
+    fid = fidelity(
         actor, character, traj.fps, scale, model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
         floor_contact=floor_contact, feet=foot_bodies(ch.model, ch.contacts),
         velocity_groups=getattr(ch, "velocity_groups", ()),
     )
+    drift = pelvis_drift(traj, character.get("pelvis"))
+    return fid if drift is None else replace(fid, drift_mean_cm=drift[0], drift_max_cm=drift[1])
+
+
+def pelvis_drift(traj, pelvis: np.ndarray | None) -> tuple[float, float] | None:
+    """``(mean, max)`` cm: horizontal distance between the character's ``pelvis (F, 3)``
+    and its target in ``traj.targets`` (no fit); None without either."""
+    targets = getattr(traj, "targets", None)
+    if pelvis is None or targets is None or "pelvis" not in targets.names:
+        return None
+    goal = np.asarray(targets.positions[:, list(targets.names).index("pelvis"), :2], dtype=float)
+    d = np.linalg.norm(pelvis[: goal.shape[0], :2] - goal, axis=1) * 100.0
+    d = d[np.isfinite(d)]
+    return (float(d.mean()), float(d.max())) if d.size else None
 
 
 #: Share of the clip above which segments more than :data:`SEGMENT_WARN_DEG` off are warned about.

@@ -187,6 +187,8 @@ def test_fidelity_from_blocks_and_the_joints_it_reads_is_exact(traj, monkeypatch
         model=ch.model, qpos=traj.qpos, velocity_limits=ch.velocity_limits,
         feet=foot_bodies(ch.model, ch.contacts),
     )
+    drift = fidelity_mod.pelvis_drift(traj, fidelity_mod.character_joint_positions(traj)["pelvis"])
+    everything = dataclasses.replace(everything, drift_mean_cm=drift[0], drift_max_cm=drift[1])  # the trajectory's own figure
     monkeypatch.setattr(fidelity_mod, "BLOCK_FRAMES", 7)
     assert _fidelity_fields_equal(fidelity_mod.trajectory_fidelity(traj), everything)
     picked = fidelity_mod.actor_joint_positions(motion, traj.joint_indices, {"left_knee"})

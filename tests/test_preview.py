@@ -225,3 +225,16 @@ def test_mp4_complete_tells_a_cut_video(backend, tmp_path):
     for cut in (len(data) - 1, len(data) // 2, 4):
         out.write_bytes(data[:cut])
         assert not mp4_complete(out)
+
+
+def test_an_overlay_sheet_draws_the_source_over_the_character(backend, tmp_path):
+    """Before: ``--layout overlay`` was silently ignored for a PNG sheet (two rows, as beside)."""
+    out = tmp_path / "walk.png"
+    argv = ["preview", "example", "-o", str(out), "--end", "90", "--count", "2", "--size", "200x200", "--quiet"]
+    assert _run([*argv, "--layout", "overlay"]) == 0
+    sheet = imageio.imread(out)
+    assert sheet.shape[:2] == (200, 2 * 200)  # one row: character and source together
+    beside = tmp_path / "beside.png"
+    assert _run([*argv[:3], str(beside), *argv[4:]]) == 0
+    character_only = imageio.imread(beside)[:200]
+    assert np.abs(sheet[..., :3].astype(int) - character_only[..., :3].astype(int)).sum() > 0  # the skeleton drawn on it

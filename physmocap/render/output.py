@@ -185,13 +185,15 @@ def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = 
 
 
 def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, first: int, progress: bool | None) -> None:
-    """A PNG grid: one column per frame, the character row above the source row."""
+    """A PNG grid: one column per frame, the character row above the source row (with the
+    ``overlay`` layout one row, the source skeleton drawn over the character)."""
     iio = require_imageio()
     rows = [[], []]
+    overlay = scene.options.layout == "overlay"
     with Progress(len(frames), "preview", enabled=progress) as bar:
         for t in frames:
-            rows[0].append(label(scene.render(t, character=True, source=False), _caption(t, first, scene.traj.fps)))
-            if scene.skeleton is not None:
+            rows[0].append(label(scene.render(t, character=True, source=overlay), _caption(t, first, scene.traj.fps)))
+            if scene.skeleton is not None and not overlay:
                 rows[1].append(label(scene.render(t, character=False, source=True), "source"))
             bar.update(1)
     grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)

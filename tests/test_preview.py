@@ -238,3 +238,12 @@ def test_an_overlay_sheet_draws_the_source_over_the_character(backend, tmp_path)
     assert _run([*argv[:3], str(beside), *argv[4:]]) == 0
     character_only = imageio.imread(beside)[:200]
     assert np.abs(sheet[..., :3].astype(int) - character_only[..., :3].astype(int)).sum() > 0  # the skeleton drawn on it
+
+
+def test_captions_tell_frames_apart_at_high_rates():
+    """Before: two decimals, so frames 674 and 675 of a 120 Hz clip both read 5.62 s."""
+    from physmocap.render.output import _caption
+
+    assert _caption(674, 0, 120.0) != _caption(675, 0, 120.0)
+    assert _caption(674, 0, 120.0).endswith("t=5.617 s")
+    assert _caption(30, 0, 30.0).endswith("t=1.00 s")

@@ -75,7 +75,9 @@ def label(image: np.ndarray, text: str) -> np.ndarray:
 
 
 def _caption(t: int, first: int, fps: float) -> str:
-    return f"frame {first + t}  t={(first + t) / fps:.2f} s"
+    """``frame N  t=S s``: the time with as many decimals as tell two frames apart."""
+    decimals = max(2, int(np.ceil(np.log10(max(float(fps), 1.0)))))
+    return f"frame {first + t}  t={(first + t) / fps:.{decimals}f} s"
 
 
 def video_frames(num_frames: int, clip_fps: float, fps: float | None = None) -> tuple[list[int], float]:

@@ -39,6 +39,7 @@ rad/s^3 (joint speeds, smoothness).
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import json
 import math
@@ -173,19 +174,26 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
     ch = traj.character
     fid = None
     if source_motion is not None and joint_indices is not None:
-        from .metrics.fidelity import actor_joint_positions, character_joint_positions, fidelity, figure_joints
+        from .metrics.fidelity import (
+            actor_joint_positions, character_joint_positions, fidelity, figure_joints, pelvis_drift,
+        )
 
         scale = root_scale(traj, source_motion, joint_indices, contacts)
-        fid = fidelity(
+        mine = character_joint_positions(traj, figure_joints())
+        figures = fidelity(
             actor_joint_positions(source_motion, joint_indices, figure_joints()),
-            character_joint_positions(traj, figure_joints()),
+            mine,
             traj.fps,
             scale,
             model=ch.model,
             qpos=traj.qpos,
             velocity_limits=getattr(ch, "velocity_limits", None),
             velocity_groups=getattr(ch, "velocity_groups", ()),
-        ).as_dict()
+        )
+        drift = pelvis_drift(traj, mine.get("pelvis"))  # None for a trajectory read back without its targets
+        if drift is not None:
+            figures = dataclasses.replace(figures, drift_mean_cm=drift[0], drift_max_cm=drift[1])
+        fid = figures.as_dict()
     character = {
         "name": str(getattr(ch, "name", "")),
         "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),

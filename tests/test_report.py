@@ -347,3 +347,14 @@ def test_a_trajectory_of_the_bundled_mapping_records_none(tmp_path, capsys):
     capsys.readouterr()
     assert load_trajectory(old).character.name == "humanoid"
     assert capsys.readouterr().err == ""
+
+
+def test_the_report_gives_the_pelvis_drift_of_a_retarget_with_its_targets(tmp_path):
+    """The fidelity section carries the pelvis's drift from its target (no fit, docs/metrics.md):
+    under a centimetre offline; absent (None) for a trajectory read back without its targets."""
+    out = tmp_path / "walk.json"
+    assert main(["retarget", "example", "-o", str(tmp_path / "walk.bvh"), "--report", str(out), "--quiet"]) == 0
+    drift = json.loads(out.read_text())["fidelity"]["pelvis_drift"]
+    assert drift["mean_cm"] is not None and drift["mean_cm"] < 1.0 and drift["max_cm"] >= drift["mean_cm"]
+    report = json.loads(out.read_text())
+    assert "pelvis drift from its target" in format_report(report)

@@ -156,15 +156,16 @@ SNAP_SPEED = 2.0
 
 def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndarray:
     """``(F,)`` bool: the frames of the runs of ``held`` whose ``offsets (F, 3)`` (zero off the
-    runs) change faster than :data:`SNAP_SPEED` between the run's first frame and the one
-    before it, or its last and the one after."""
+    runs) change faster than :data:`SNAP_SPEED` somewhere from the frame before the run to the
+    one after it (a foot that slides past the other leg's geom and snaps off it while still at
+    the margin, the bundled robot's left foot on the CMU walk, frame 77)."""
     F = len(held)
     out = np.zeros(F, dtype=bool)
     speed = np.zeros(F + 1)
     speed[1:F] = np.linalg.norm(np.diff(offsets, axis=0), axis=1) * fps  # speed[t]: frames t-1 -> t
     edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(np.int8), [0]])))
     for a, b in zip(edges[::2], edges[1::2]):  # the run is frames a .. b-1
-        if max(speed[a], speed[b]) > SNAP_SPEED:
+        if float(speed[a : b + 1].max()) > SNAP_SPEED:
             out[a:b] = True
     return out
 

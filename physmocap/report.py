@@ -39,7 +39,6 @@ rad/s^3 (joint speeds, smoothness).
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 import json
 import math
@@ -175,7 +174,7 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
     fid = None
     if source_motion is not None and joint_indices is not None:
         from .metrics.fidelity import (
-            actor_joint_positions, character_joint_positions, fidelity, figure_joints, pelvis_drift,
+            actor_joint_positions, character_joint_positions, fidelity, figure_joints, with_pelvis_drift,
         )
 
         scale = root_scale(traj, source_motion, joint_indices, contacts)
@@ -190,10 +189,8 @@ def build_report(traj, source_motion=None, contacts=None, joint_indices: dict[st
             velocity_limits=getattr(ch, "velocity_limits", None),
             velocity_groups=getattr(ch, "velocity_groups", ()),
         )
-        drift = pelvis_drift(traj, mine.get("pelvis"))  # None for a trajectory read back without its targets
-        if drift is not None:
-            figures = dataclasses.replace(figures, drift_mean_cm=drift[0], drift_max_cm=drift[1])
-        fid = figures.as_dict()
+        # no drift for a trajectory read back without its targets
+        fid = with_pelvis_drift(figures, traj, mine.get("pelvis")).as_dict()
     character = {
         "name": str(getattr(ch, "name", "")),
         "mjcf_path": portable_path(getattr(ch, "mjcf_path", ""), Path.cwd()),

@@ -17,9 +17,8 @@ from __future__ import annotations
 import copy
 import warnings
 from functools import partial
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
-import mujoco
 import numpy as np
 
 from ..errors import InputError, MappingError, OptionError, warn
@@ -264,9 +263,10 @@ def _second_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None
 
 
 def _retrack(last: Trajectory, first: Trajectory, config: RetargetConfig, progress: bool | None,
-             labels: dict[str, np.ndarray] | None, guides: dict, label: str, shift=None) -> Trajectory:
-    """``last``'s targets retargeted again with ``guides``, carrying ``first``'s contacts,
-    source motion and source frames."""
+             labels: dict[str, np.ndarray] | None, guides: dict, label: str,
+             shift: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> Trajectory:
+    """``last``'s targets retargeted again with ``guides`` (and ``shift``, as :func:`_track`),
+    carrying ``first``'s contacts, source motion and source frames."""
     again = _track(last.targets, last.character, config.solver, last.source, progress, labels, config.plant,
                    guides, label=label, shift=shift)
     for name in ("contacts", "source_motion", "joint_indices", "source_start"):
@@ -538,11 +538,14 @@ def _track(
     plant: PlantOptions,
     guides=None,
     label: str = "retarget",
-    shift=None,
+    shift: Sequence[tuple[np.ndarray, np.ndarray]] = (),
 ) -> Trajectory:
     """Run the per-frame pipeline over (planned) targets, holding the contact points of
     ``labels`` (None: track the targets as they are), with ``guides`` (``guides.get(frame)``:
-    a :class:`~.branches.Guide` or None; a dict or :class:`~.transitions.TransitionGuides`); the solver's per-frame figures are
+    a :class:`~.branches.Guide` or None; a dict or :class:`~.transitions.TransitionGuides`)
+    and the target columns ``cols`` of each ``(offsets (F, 3), cols)`` in ``shift`` moved by
+    that frame's offset (metres; :func:`~.transitions.eased_foot_shifts`), the trajectory
+    keeping the unmoved targets; the solver's per-frame figures are
     kept in compact arrays (int32, int8 and float64 seconds per frame).  ``label`` names
     the progress bar (``batch`` follows the ``"retarget"`` one)."""
     guides = {} if guides is None else guides
@@ -559,10 +562,11 @@ def _track(
         for t in range(F):
             frame_labels = {k: bool(v[t]) for k, v in labels.items()} if labels is not None else None
             positions = targets.positions[t]
-            for offsets, cols in shift or ():
-                if offsets[t].any():
-                    positions = np.array(positions, dtype=float)
-                    positions[cols] += offsets[t]
+            moved = [(offsets[t], cols) for offsets, cols in shift if offsets[t].any()]
+            if moved:
+                positions = np.array(positions, dtype=float)
+                for offset, cols in moved:
+                    positions[cols] += offset
             result = pipeline.solve(positions, targets.orientations[t], targets.valid[t], frame_labels,
                                     guides.get(t))
             qpos[t] = result.qpos

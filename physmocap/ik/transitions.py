@@ -34,10 +34,11 @@ Every hard constraint holds as before: the holds still hold, the floor and the l
 still bound.  A swing foot that a hard constraint held off its target in the first pass (the
 other leg, through self-collision avoidance) and that snapped back when it was let go has
 its targets moved by that offset spread out in time (:func:`eased_offsets`), so it goes
-round instead of catching up in one frame (:func:`eased_foot_shifts`).  An arm's own guide from the arm passes keeps its joints.  Every frame's
-iterations start from the first pass's pose on that frame (within the frame's velocity
-band), not from the previous frame's: the answer is nearer, so it takes fewer iterations
-(the PyMO walk: 2.7 a frame against 4.2) and ends better converged (its acceleration
+round instead of catching up in one frame (:func:`eased_foot_shifts`).  An arm's own guide
+from the arm passes keeps its joints.  Every frame's iterations start from the first
+pass's pose on that frame (within the frame's velocity band), not from the previous
+frame's: the answer is nearer, so it takes fewer iterations (the PyMO walk: 2.7 a frame
+against 4.2) and ends better converged (its acceleration
 ratio 1.18 -> 0.99; the Bandai walk's scuffing 2.1 -> 0.6 %, its robot's 4.0 -> 0).
 That pose is moved by this pass's offset from the first on the previous frame,
 :math:`p_t \oplus (q_{t-1} \ominus p_{t-1})` (:attr:`~physmocap.ik.branches.Guide.follow`,
@@ -63,7 +64,7 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, minimum_filter1d
 
-from ..spill import release
+from ..spill import blocks, release
 from .branches import MOVING_TYPES, Guide
 
 __all__ = ["change_windows", "moving_joints", "carried_targets", "TransitionGuides", "eased_offsets", "eased_foot_shifts"]
@@ -101,9 +102,9 @@ def _envelope(x: np.ndarray, step: float, upper: bool) -> np.ndarray:
 
 def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: float,
                   pinned: np.ndarray | None = None) -> np.ndarray:
-    r"""``(F, 3)`` offsets to add to a body's targets so that it eases into and out of the
-    offsets ``(F, 3)`` the first pass left it at (metres; the pelvis off its target where a
-    hold kept it), instead of jumping there in a frame.
+    r"""``(F, 3)`` offsets to add to a limb's targets so that it eases into and out of the
+    offsets ``(F, 3)`` the first pass left it at (metres; a swing foot held off its target by
+    the other leg), instead of jumping there in a frame.
 
     Per axis, the offset is spread outwards in time at ``speed`` (m/s): where it is positive
     its upper envelope of slope ``speed / fps`` per frame, where negative its lower one
@@ -149,8 +150,9 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
 EASE_SPEED = 0.25
 #: Metres an eased offset must differ from the first pass's before a target moves.
 EASE_TOLERANCE = 0.005
-#: m/s: a held-off foot's offset that changes faster than this at the start or end of its hold
-#: snaps (the robot's left foot on the PyMO walk: 7.4 m/s); slower ones are left alone.
+#: m/s: a held-off foot's offset that changes faster than this anywhere from the frame before
+#: its hold to the one after snaps (the robot's left foot on the PyMO walk: 7.4 m/s); a hold
+#: whose offset changes more slowly is left alone.
 SNAP_SPEED = 2.0
 
 
@@ -172,15 +174,17 @@ def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndar
 
 def eased_foot_shifts(traj, labels: Mapping[str, np.ndarray], options) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per swing foot that the other leg held off its target in ``traj`` (one of its collision
-    geoms at the self-collision margin, within a millimetre) and that snapped back (its offset
-    changing faster than :data:`SNAP_SPEED` as the hold began or ended), ``((F, 3) shift,
+    geoms at the self-collision margin, within a millimetre) and that snapped (its offset
+    changing faster than :data:`SNAP_SPEED` somewhere in the hold or at its ends), ``((F, 3) shift,
     columns)``: its ankle's horizontal offsets from its target on those frames, eased in time
     (:func:`eased_offsets`; zero on the frames the foot is labelled in contact), for its
     ankle, toe and toe tip targets.  The foot then goes round the other leg instead of
     sliding along it behind its target and snapping back when it clears it (the robot's left
     foot on the PyMO walk, 6 cm in one frame).  ``traj``: a
     :class:`~physmocap.trajectory.Trajectory` with its targets; ``options``: its
-    :class:`~physmocap.ik.solver.SolverOptions`."""
+    :class:`~physmocap.ik.solver.SolverOptions`.  The trajectory and its targets are read
+    :data:`~physmocap.spill.BLOCK_ROWS` frames at a time (a spilled clip's pages let go after
+    each block)."""
     if not options.self_collision:
         return []
     from ..models.geometry import foot_bodies
@@ -203,19 +207,23 @@ def eased_foot_shifts(traj, labels: Mapping[str, np.ndarray], options) -> list[t
     F = traj.qpos.shape[0]
     where = {side: np.empty((F, 3)) for side in sides}
     blocked = {side: np.zeros(F, dtype=bool) for side in sides}
-    for t in range(F):
-        data.qpos[:] = traj.qpos[t]
-        mujoco.mj_kinematics(model, data)
-        for side, (frame, mine) in sides.items():
-            i = frame.object_id(model)
-            where[side][t] = data.site_xpos[i] if frame.kind == "site" else data.xpos[i]
-            blocked[side][t] = float(pair_distances(model, data, mine).min()) <= options.self_collision_margin + 1e-3
+    for s, rows in blocks(traj.qpos):
+        for t, q in enumerate(rows, start=s):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            for side, (frame, mine) in sides.items():
+                i = frame.object_id(model)
+                where[side][t] = data.site_xpos[i] if frame.kind == "site" else data.xpos[i]
+                blocked[side][t] = float(pair_distances(model, data, mine).min()) <= options.self_collision_margin + 1e-3
     out = []
     for side in sides:
         if not blocked[side].any():
             continue
         ankle = f"{side}_ankle"
-        offsets = where[side] - np.asarray(traj.targets.positions[:, names.index(ankle)], dtype=float)
+        col = names.index(ankle)
+        offsets = where[side]
+        for s, rows in blocks(traj.targets.positions):
+            offsets[s : s + rows.shape[0]] -= rows[:, col]
         offsets[:, 2] = 0.0
         down = np.zeros(F, dtype=bool)
         for part in ("heel", "toe"):

@@ -709,20 +709,28 @@ def trajectory_fidelity(traj, floor_contact: bool = True) -> Fidelity:
         floor_contact=floor_contact, feet=foot_bodies(ch.model, ch.contacts),
         velocity_groups=getattr(ch, "velocity_groups", ()),
     )
-    drift = pelvis_drift(traj, character.get("pelvis"))
-    return fid if drift is None else replace(fid, drift_mean_cm=drift[0], drift_max_cm=drift[1])
+    return with_pelvis_drift(fid, traj, character.get("pelvis"))
 
 
 def pelvis_drift(traj, pelvis: np.ndarray | None) -> tuple[float, float] | None:
     """``(mean, max)`` cm: horizontal distance between the character's ``pelvis (F, 3)``
-    and its target in ``traj.targets`` (no fit); None without either."""
+    and its target in ``traj.targets`` (no fit; the targets read :data:`BLOCK_FRAMES` frames at
+    a time); None without either."""
     targets = getattr(traj, "targets", None)
     if pelvis is None or targets is None or "pelvis" not in targets.names:
         return None
-    goal = np.asarray(targets.positions[:, list(targets.names).index("pelvis"), :2], dtype=float)
-    d = np.linalg.norm(pelvis[: goal.shape[0], :2] - goal, axis=1) * 100.0
+    col = list(targets.names).index("pelvis")
+    d = np.empty(min(len(pelvis), targets.num_frames))
+    for s, rows in blocks(targets.positions[: d.size], BLOCK_FRAMES):
+        d[s : s + rows.shape[0]] = np.linalg.norm(pelvis[s : s + rows.shape[0], :2] - rows[:, col, :2], axis=1) * 100.0
     d = d[np.isfinite(d)]
     return (float(d.mean()), float(d.max())) if d.size else None
+
+
+def with_pelvis_drift(fid: Fidelity, traj, pelvis: np.ndarray | None) -> Fidelity:
+    """``fid`` with the :func:`pelvis_drift` of ``traj`` (``fid`` itself where there is none)."""
+    drift = pelvis_drift(traj, pelvis)
+    return fid if drift is None else replace(fid, drift_mean_cm=drift[0], drift_max_cm=drift[1])
 
 
 #: Share of the clip above which segments more than :data:`SEGMENT_WARN_DEG` off are warned about.

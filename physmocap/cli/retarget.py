@@ -68,6 +68,11 @@ def add_retarget_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="one pass fewer: do not retarget again with the joints pulled towards their own low-pass around contact changes",
     )
+    p.add_argument(
+        "--no-ease-caps",
+        action="store_true",
+        help="one pass fewer: do not retarget again with the joints that sit at their velocity caps spread out in time",
+    )
     p.add_argument("--contacts", metavar="CONTACTS.csv", help="foot contact labels (frame ranges) instead of detection")
     p.add_argument("--no-plant", action="store_true", help="do not plant the feet (pure tracking)")
     p.add_argument("--quiet", action="store_true",
@@ -175,6 +180,8 @@ def config_from_args(args: argparse.Namespace):
         options["velocity_limits"] = False
     if getattr(args, "no_arm_branches", False):
         options["arm_branches"] = False
+    if getattr(args, "no_ease_caps", False):
+        options["ease_caps"] = False
     if getattr(args, "no_smooth_transitions", False):
         options["smooth_transitions"] = False
     if getattr(args, "no_self_collision", False):

@@ -26,6 +26,7 @@ from ..metrics.fidelity import (
     actor_joint_positions,
     character_joint_positions,
     fidelity_warnings,
+    saturation_matrix,
     segment_direction_errors,
     trajectory_fidelity,
 )
@@ -43,6 +44,7 @@ from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .rigidfoot import level_roll
 from .solver import RELAXATION_LEVELS, SolverOptions
+from .speedcaps import CapGuides
 from .targets import Targets, build_targets, character_rest_frames
 from .toetips import extend_toe_tips
 from .transitions import TransitionGuides, carried_targets, eased_foot_shifts, moving_joints
@@ -221,8 +223,11 @@ def retarget(
     guides: dict = {}
     if config.solver.arm_branches:
         traj, guides = _second_pass(traj, config, progress, labels)
+    shift: Sequence[tuple[np.ndarray, np.ndarray]] = ()
     if labels is not None and config.plant.smooth_transitions:
-        traj = _transition_pass(traj, config, progress, labels, found.body_labels or {}, guides)
+        traj, shift = _transition_pass(traj, config, progress, labels, found.body_labels or {}, guides)
+    if config.solver.ease_caps and config.solver.velocity_limits:
+        traj = _cap_pass(traj, config, progress, labels, shift)
     _warn_relaxations(traj)
     traj.fidelity = trajectory_fidelity(traj, floor_contact=False)  # the warnings need no floor figures
     for message in fidelity_warnings(traj.fidelity, source_start):
@@ -276,11 +281,12 @@ def _retrack(last: Trajectory, first: Trajectory, config: RetargetConfig, progre
 
 def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
                      labels: dict[str, np.ndarray], body_labels: dict[str, np.ndarray],
-                     arm_guides: dict) -> Trajectory:
+                     arm_guides: dict) -> tuple[Trajectory, Sequence[tuple[np.ndarray, np.ndarray]]]:
     """``traj`` retargeted once more with its joints pulled towards their own low-pass
     around every contact change and towards themselves elsewhere (:mod:`.transitions`), the
     arm passes' guides kept; kept if the solver softened or gave up a hard constraint on no
-    more frames."""
+    more frames.  Returns the trajectory kept and the swing-foot shifts it was retargeted
+    with (:func:`~.transitions.eased_foot_shifts`; none if ``traj`` is kept)."""
     opt = config.plant
     model = traj.character.model
     joints = moving_joints(model)
@@ -291,12 +297,29 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
                               carried, opt.transition_window, opt.transition_sigma, opt.transition_cost,
                               opt.transition_tolerance, arm_guides, traj.targets.valid)
     if not guides.near.any():
-        return traj
+        return traj, ()
     shift = eased_foot_shifts(traj, labels, config.solver)
     again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed",
                      shift=shift)
     softened = int(np.count_nonzero(again.solver.relaxation)) > int(np.count_nonzero(traj.solver.relaxation))
-    return traj if softened or _relaxed(again) > _relaxed(traj) else again
+    return (traj, ()) if softened or _relaxed(again) > _relaxed(traj) else (again, shift)
+
+
+def _cap_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
+              labels: dict[str, np.ndarray] | None, shift: Sequence[tuple[np.ndarray, np.ndarray]]) -> Trajectory:
+    """``traj`` retargeted once more with the joints that sit at their velocity caps pulled
+    towards a reference that spreads their fast moves out in time and every other joint
+    towards itself (:mod:`.speedcaps`), the swing feet moved by the ``shift`` ``traj`` was
+    retargeted with; kept if fewer joint-transitions saturate and the solver gave up a hard
+    constraint on no more frames."""
+    ch = traj.character
+    guides = CapGuides(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
+    if not guides.eased:
+        return traj
+    again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, velocity caps eased", shift=shift)
+    after = saturation_matrix(ch.model, again.qpos, again.fps, ch.velocity_limits, ch.velocity_groups)
+    fewer = int(np.count_nonzero(after)) < guides.saturated_count
+    return again if fewer and _relaxed(again) <= _relaxed(traj) else traj
 
 
 def _relaxed(traj: Trajectory) -> int:

@@ -167,6 +167,10 @@ class SolverOptions:
             of its joint ranges that cannot reach it while another can, retarget again
             with that arm guided onto the other (:mod:`physmocap.ik.branches`).  Streaming
             retargeting cannot look ahead and ignores it.
+        ease_caps: Offline only: where joints sit at their velocity caps (a robot shoulder
+            near its gimbal lock), retarget again with their fast moves spread out in
+            time, started earlier and ended later (:mod:`physmocap.ik.speedcaps`).
+            Streaming retargeting cannot look ahead and ignores it.
     """
 
     max_iterations: int = 4
@@ -194,6 +198,7 @@ class SolverOptions:
     extrapolate_start: bool = False
     catch_up: float = 0.05
     arm_branches: bool = True
+    ease_caps: bool = True
 
     def __post_init__(self) -> None:
         check_fields(

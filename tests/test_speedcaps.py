@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, retargeted, shared_file
-from physmocap.ik.speedcaps import EASE_COST, FOLLOW_COST, CapGuides, eased_reference
+from physmocap.ik.speedcaps import EASE_COST, FOLLOW_COST, CapGuides, eased_reference, held_at_cap
 from physmocap.metrics.fidelity import saturation_matrix, trajectory_fidelity
 
 pytestmark = RETARGET_DIAGNOSTICS
@@ -34,11 +34,30 @@ def test_a_move_too_fast_is_spread_out_centred_on_it():
 def test_only_stretches_holding_a_saturated_transition_are_eased():
     q = _ramp(300, 50, 4, 1.0) + _ramp(300, 200, 4, 1.0)
     saturated = np.zeros(299, dtype=bool)
-    saturated[201] = True  # the second move only
+    saturated[201:203] = True  # the second move only
     r = eased_reference(q, 0.05, saturated)
     assert np.array_equal(r[:150], q[:150])
     assert not np.array_equal(r[150:], q[150:])
     assert np.array_equal(eased_reference(q, 0.05, np.zeros(299, dtype=bool)), q)
+
+
+def test_a_clip_whose_joints_only_touch_their_caps_gets_no_pass():
+    from physmocap.models import load_character
+
+    one = np.zeros(199, dtype=bool)
+    one[101] = one[103] = True  # twice, never running
+    assert not held_at_cap(one).any()
+    one[102] = True
+    assert held_at_cap(one)[101:104].all()
+    ch = load_character("robot")
+    model = ch.model
+    fps, F = 120.0, 240
+    qpos = np.tile(ch.rest_qpos, (F, 1))
+    joint = "l_elbow"
+    adr = int(model.jnt_qposadr[model.joint(joint).id])
+    qpos[:, adr] = _ramp(F, 120, 1, -ch.velocity_limits[joint] / fps)  # one transition at its cap
+    touched = CapGuides(model, qpos, fps, ch.velocity_limits, ch.velocity_groups)
+    assert touched.saturated_count == 1 and not touched.eased
 
 
 def test_a_slow_joint_is_its_own_reference():
@@ -82,7 +101,7 @@ def test_no_joint_sits_at_its_velocity_cap_through_the_dance(character):
     _, traj = retargeted("cmu_05_10_dance_spins.bvh", character)
     fid = trajectory_fidelity(traj, floor_contact=False)
     assert fid.saturated_joint_share <= 0.005, (fid.saturated_joint, fid.saturated_joint_share)
-    assert fid.saturated_share <= 0.01, fid.saturated_share
+    assert fid.saturated_share <= 0.02, fid.saturated_share  # single frames touching a cap are left
     assert fid.worst_segment_median_deg < 8.0  # the moves eased still follow the actor
 
 

@@ -44,7 +44,7 @@ from .frame import FrameRetargeter
 from .planting import PlantOptions, Planting
 from .rigidfoot import level_roll
 from .solver import RELAXATION_LEVELS, SolverOptions
-from .speedcaps import CapGuides
+from .speedcaps import CAP_PASSES, CapGuides
 from .targets import Targets, build_targets, character_rest_frames
 from .toetips import extend_toe_tips
 from .transitions import TransitionGuides, carried_targets, eased_foot_shifts, moving_joints
@@ -311,15 +311,20 @@ def _cap_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
     towards a reference that spreads their fast moves out in time and every other joint
     towards itself (:mod:`.speedcaps`), the swing feet moved by the ``shift`` ``traj`` was
     retargeted with; kept if fewer joint-transitions saturate and the solver gave up a hard
-    constraint on no more frames."""
+    constraint on no more frames, and done again on the pass kept (a joint the pass itself
+    brought to its cap) at most :data:`~.speedcaps.CAP_PASSES` times in all."""
     ch = traj.character
-    guides = CapGuides(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
-    if not guides.eased:
-        return traj
-    again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, velocity caps eased", shift=shift)
-    after = saturation_matrix(ch.model, again.qpos, again.fps, ch.velocity_limits, ch.velocity_groups)
-    fewer = int(np.count_nonzero(after)) < guides.saturated_count
-    return again if fewer and _relaxed(again) <= _relaxed(traj) else traj
+    for _ in range(CAP_PASSES):
+        guides = CapGuides(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
+        if not guides.eased:
+            break
+        again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, velocity caps eased",
+                         shift=shift)
+        after = saturation_matrix(ch.model, again.qpos, again.fps, ch.velocity_limits, ch.velocity_groups)
+        if int(np.count_nonzero(after)) >= guides.saturated_count or _relaxed(again) > _relaxed(traj):
+            break
+        traj = again
+    return traj
 
 
 def _relaxed(traj: Trajectory) -> int:

@@ -75,7 +75,30 @@ class SitePositionTask(mink.Task):
         return self._jacp[list(self.axes)].copy()
 
 
-class SitesPositionTask(mink.Task):
+class _VectorsTask(mink.Task):
+    """``n`` world vectors (metres) with a target and a cost per metre each: the bookkeeping
+    :class:`SitesPositionTask` and :class:`SegmentsTask` share (``k = 3 n`` rows)."""
+
+    def __init__(self, model: mujoco.MjModel, n: int, costs, gain: float) -> None:
+        self.n = int(n)
+        self.k = 3 * self.n
+        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
+        self.model = model
+        self.targets = np.zeros((self.n, 3))
+        self._jac = np.zeros((self.k, model.nv))
+        self.set_costs(costs)
+
+    def set_costs(self, costs) -> None:
+        c = np.broadcast_to(np.asarray(costs, dtype=float), (self.n,))
+        if np.any(c < 0):
+            raise ValueError("costs must be >= 0")
+        self.cost[:] = np.repeat(c, 3)
+
+    def set_targets(self, targets: np.ndarray) -> None:
+        self.targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+
+
+class SitesPositionTask(_VectorsTask):
     r"""World positions of several sites in one task (position-only tracking).
 
     Equivalent to one mink ``FrameTask`` per site with a zero orientation cost,
@@ -87,21 +110,7 @@ class SitesPositionTask(mink.Task):
 
     def __init__(self, model: mujoco.MjModel, sites: list[str], costs, gain: float = 1.0) -> None:
         self.site_ids = np.array([model.site(s).id for s in sites], dtype=int)
-        self.k = 3 * len(self.site_ids)
-        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
-        self.model = model
-        self.targets = np.zeros((len(self.site_ids), 3))
-        self._jac = np.zeros((self.k, model.nv))
-        self.set_costs(costs)
-
-    def set_costs(self, costs) -> None:
-        c = np.broadcast_to(np.asarray(costs, dtype=float), (len(self.site_ids),))
-        if np.any(c < 0):
-            raise ValueError("costs must be >= 0")
-        self.cost[:] = np.repeat(c, 3)
-
-    def set_targets(self, targets: np.ndarray) -> None:
-        self.targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+        super().__init__(model, len(self.site_ids), costs, gain)
 
     def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
         return (configuration.data.site_xpos[self.site_ids] - self.targets).reshape(-1)
@@ -160,7 +169,7 @@ class BodyPointTask(mink.Task):
         return self._jacp[list(self.axes)].copy()
 
 
-class SegmentsTask(mink.Task):
+class SegmentsTask(_VectorsTask):
     r"""World vectors between pairs of tracked points: limb segments pointing the actor's way.
 
     For pair :math:`i` of a parent point :math:`p_i(q)` and a child point :math:`c_i(q)` (a site,
@@ -174,23 +183,9 @@ class SegmentsTask(mink.Task):
     def __init__(self, model: mujoco.MjModel, pairs: list[tuple[tuple[str, int], tuple[str, int]]], costs,
                  gain: float = 1.0) -> None:
         self.pairs = [((str(a), int(i)), (str(b), int(j))) for (a, i), (b, j) in pairs]
-        self.k = 3 * len(self.pairs)
-        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
-        self.model = model
-        self.targets = np.zeros((len(self.pairs), 3))
-        self._jac = np.zeros((self.k, model.nv))
+        super().__init__(model, len(self.pairs), costs, gain)
         self._a = np.zeros((3, model.nv))
         self._b = np.zeros((3, model.nv))
-        self.set_costs(costs)
-
-    def set_costs(self, costs) -> None:
-        c = np.broadcast_to(np.asarray(costs, dtype=float), (len(self.pairs),))
-        if np.any(c < 0):
-            raise ValueError("costs must be >= 0")
-        self.cost[:] = np.repeat(c, 3)
-
-    def set_targets(self, targets: np.ndarray) -> None:
-        self.targets = np.asarray(targets, dtype=float).reshape(-1, 3)
 
     @staticmethod
     def _pos(data: mujoco.MjData, kind: str, i: int) -> np.ndarray:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import RETARGET_DIAGNOSTICS, retargeted, shared_file
-from physmocap.ik.speedcaps import EASE_COST, FOLLOW_COST, CapGuides, eased_reference, held_at_cap
+from physmocap.ik.speedcaps import EASE_COST, FOLLOW_COST, TOUCH_SHARE, CapGuides, eased_reference, held_at_cap
 from physmocap.metrics.fidelity import saturation_matrix, trajectory_fidelity
 
 pytestmark = RETARGET_DIAGNOSTICS
@@ -58,6 +58,11 @@ def test_a_clip_whose_joints_only_touch_their_caps_gets_no_pass():
     qpos[:, adr] = _ramp(F, 120, 1, -ch.velocity_limits[joint] / fps)  # one transition at its cap
     touched = CapGuides(model, qpos, fps, ch.velocity_limits, ch.velocity_groups)
     assert touched.saturated_count == 1 and not touched.eased
+    # touching it on more than TOUCH_SHARE of the transitions, one at a time, is a pass
+    for start in (20, 60, 100, 140, 180):
+        qpos[:, adr] += _ramp(F, start, 1, -ch.velocity_limits[joint] / fps)
+    often = CapGuides(model, qpos, fps, ch.velocity_limits, ch.velocity_groups)
+    assert often.saturated_count == 6 and 6 / (F - 1) > TOUCH_SHARE and often.eased
 
 
 def test_a_slow_joint_is_its_own_reference():

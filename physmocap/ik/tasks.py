@@ -75,7 +75,30 @@ class SitePositionTask(mink.Task):
         return self._jacp[list(self.axes)].copy()
 
 
-class SitesPositionTask(mink.Task):
+class _VectorsTask(mink.Task):
+    """``n`` world vectors (metres) with a target and a cost per metre each: the bookkeeping
+    :class:`SitesPositionTask` and :class:`SegmentsTask` share (``k = 3 n`` rows)."""
+
+    def __init__(self, model: mujoco.MjModel, n: int, costs, gain: float) -> None:
+        self.n = int(n)
+        self.k = 3 * self.n
+        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
+        self.model = model
+        self.targets = np.zeros((self.n, 3))
+        self._jac = np.zeros((self.k, model.nv))
+        self.set_costs(costs)
+
+    def set_costs(self, costs) -> None:
+        c = np.broadcast_to(np.asarray(costs, dtype=float), (self.n,))
+        if np.any(c < 0):
+            raise ValueError("costs must be >= 0")
+        self.cost[:] = np.repeat(c, 3)
+
+    def set_targets(self, targets: np.ndarray) -> None:
+        self.targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+
+
+class SitesPositionTask(_VectorsTask):
     r"""World positions of several sites in one task (position-only tracking).
 
     Equivalent to one mink ``FrameTask`` per site with a zero orientation cost,
@@ -87,21 +110,7 @@ class SitesPositionTask(mink.Task):
 
     def __init__(self, model: mujoco.MjModel, sites: list[str], costs, gain: float = 1.0) -> None:
         self.site_ids = np.array([model.site(s).id for s in sites], dtype=int)
-        self.k = 3 * len(self.site_ids)
-        super().__init__(cost=np.zeros(self.k), gain=gain, lm_damping=0.0)
-        self.model = model
-        self.targets = np.zeros((len(self.site_ids), 3))
-        self._jac = np.zeros((self.k, model.nv))
-        self.set_costs(costs)
-
-    def set_costs(self, costs) -> None:
-        c = np.broadcast_to(np.asarray(costs, dtype=float), (len(self.site_ids),))
-        if np.any(c < 0):
-            raise ValueError("costs must be >= 0")
-        self.cost[:] = np.repeat(c, 3)
-
-    def set_targets(self, targets: np.ndarray) -> None:
-        self.targets = np.asarray(targets, dtype=float).reshape(-1, 3)
+        super().__init__(model, len(self.site_ids), costs, gain)
 
     def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
         return (configuration.data.site_xpos[self.site_ids] - self.targets).reshape(-1)
@@ -158,3 +167,45 @@ class BodyPointTask(mink.Task):
         data = configuration.data
         mujoco.mj_jac(self.model, data, self._jacp, None, self.point(data), self.body)
         return self._jacp[list(self.axes)].copy()
+
+
+class SegmentsTask(_VectorsTask):
+    r"""World vectors between pairs of tracked points: limb segments pointing the actor's way.
+
+    For pair :math:`i` of a parent point :math:`p_i(q)` and a child point :math:`c_i(q)` (a site,
+    or a body's origin), error :math:`e_i = (c_i(q) - p_i(q)) - v^*_i` (metres, world axes) and
+    Jacobian :math:`J_{c_i} - J_{p_i}`, cost :math:`w_i` per metre (0 switches a pair off).
+    With :math:`v^*_i` the targets' own vector (child target minus parent target), a segment
+    whose parent cannot reach its target (a shoulder at its limit) still points the actor's way
+    instead of reaching for its child's absolute position (a forearm folded over the head).
+    """
+
+    def __init__(self, model: mujoco.MjModel, pairs: list[tuple[tuple[str, int], tuple[str, int]]], costs,
+                 gain: float = 1.0) -> None:
+        self.pairs = [((str(a), int(i)), (str(b), int(j))) for (a, i), (b, j) in pairs]
+        super().__init__(model, len(self.pairs), costs, gain)
+        self._a = np.zeros((3, model.nv))
+        self._b = np.zeros((3, model.nv))
+
+    @staticmethod
+    def _pos(data: mujoco.MjData, kind: str, i: int) -> np.ndarray:
+        return data.site_xpos[i] if kind == "site" else data.xpos[i]
+
+    def _jacobian(self, data: mujoco.MjData, out: np.ndarray, kind: str, i: int) -> None:
+        if kind == "site":
+            mujoco.mj_jacSite(self.model, data, out, None, i)
+        else:
+            mujoco.mj_jacBody(self.model, data, out, None, i)
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        data = configuration.data
+        v = np.array([self._pos(data, *c) - self._pos(data, *p) for p, c in self.pairs]).reshape(-1, 3)
+        return (v - self.targets).reshape(-1)
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        data = configuration.data
+        for n, (p, c) in enumerate(self.pairs):
+            self._jacobian(data, self._a, *p)
+            self._jacobian(data, self._b, *c)
+            np.subtract(self._b, self._a, out=self._jac[3 * n : 3 * n + 3])
+        return self._jac

@@ -472,7 +472,7 @@ def pose_on_centres(actor, centres: dict[str, np.ndarray], names: list[str], C: 
 
     seen = np.all(np.isfinite(C), 2)
     sopt = SolverOptions(max_iterations=12, first_frame_iterations=120, self_collision=False,
-                         velocity_limits=False, floor=False, smoothness_cost=0.0,
+                         velocity_limits=False, floor=False, smoothness_cost=0.0, segment_cost=0.0,
                          weights={n: ((0.3 if n.endswith("hand_end") or n.endswith("toe") else 1.0), 0.0) for n in names})
     cs = FrameSolver(_solver_character(actor, {n: actor.tracked[n].name for n in names}), names,
                      np.zeros(len(names), bool), fps, sopt)
@@ -606,6 +606,7 @@ def _marker_solver(char, fps: float, attached, site_names, weights, opt: MarkerS
         max_iterations=max_iterations, first_frame_iterations=150, self_collision=False,
         velocity_limits=opt.velocity_limits, floor=use_floor, floor_iterations=2 if use_floor else 0,
         weights=w, smoothness_cost=0.0,  # a fit to measured markers: their own motion, unsmoothed
+        segment_cost=0.0,  # the joint centres are estimates for the markers to agree with, not a pose to copy
     )
     sites = {k: site_names[i] for k, i in zip(keys, attached)}
     sites.update({n: char.tracked[n].name for n in centres})

@@ -52,7 +52,7 @@ Streaming retargeting cannot look ahead and does not do this.  Radians, metres, 
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -139,15 +139,14 @@ class CapGuides:
     """
 
     def __init__(self, model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: Mapping[str, float],
-                 groups=()) -> None:
+                 groups: Sequence[Sequence[str]] = ()) -> None:
         self.qpos = qpos
         joints = moving_joints(model)
         self.adr = model.jnt_qposadr[joints].astype(int)
         self.dofs = model.jnt_dofadr[joints].astype(int)
         self.cost = np.full(len(joints), FOLLOW_COST)
         sat = saturation_matrix(model, qpos, fps, dict(limits), groups)
-        #: ``(F-1,)`` transitions on which some joint is at its cap, and joint-transitions at caps.
-        self.saturated_transitions = int(np.count_nonzero(sat.any(axis=1))) if sat.size else 0
+        #: joint-transitions at the caps in ``qpos`` (the pass is kept if it has fewer)
         self.saturated_count = int(np.count_nonzero(sat))
         #: frame -> (columns of ``adr``, their reference values) where a reference differs
         self._eased: dict[int, tuple[list[int], list[float]]] = {}

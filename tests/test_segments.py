@@ -36,16 +36,20 @@ def _pose(model: mujoco.MjModel, seed: int) -> mink.Configuration:
 def test_error_and_jacobian_are_the_difference_of_the_points(seed):
     """Error (child - parent) - target, Jacobian J_child - J_parent (finite differences), for
     a site pair and a body pair."""
+    from physmocap.models.mapping import TrackedFrame
+
     model = load_character("humanoid").model
-    pairs = [(("site", model.site("left_elbow").id), ("site", model.site("left_wrist").id)),
-             (("body", model.body("left_upper_arm").id), ("body", model.body("left_forearm").id))]
+    pairs = [(TrackedFrame("site", "left_elbow"), TrackedFrame("site", "left_wrist")),
+             (TrackedFrame("body", "left_upper_arm"), TrackedFrame("body", "left_forearm"))]
     task = SegmentsTask(model, pairs, [3.0, 2.0])
     task.set_targets([[0.0, 0.0, -0.25], [0.1, 0.0, -0.2]])
     configuration = _pose(model, seed)
     data = configuration.data
     e = task.compute_error(configuration).reshape(-1, 3)
-    assert np.allclose(e[0], data.site_xpos[pairs[0][1][1]] - data.site_xpos[pairs[0][0][1]] - [0.0, 0.0, -0.25])
-    assert np.allclose(e[1], data.xpos[pairs[1][1][1]] - data.xpos[pairs[1][0][1]] - [0.1, 0.0, -0.2])
+    assert np.allclose(e[0], data.site_xpos[model.site("left_wrist").id] - data.site_xpos[model.site("left_elbow").id]
+                       - [0.0, 0.0, -0.25])
+    assert np.allclose(e[1], data.xpos[model.body("left_forearm").id] - data.xpos[model.body("left_upper_arm").id]
+                       - [0.1, 0.0, -0.2])
     assert np.array_equal(task.cost, [3.0] * 3 + [2.0] * 3)
     J = task.compute_jacobian(configuration).copy()
     h = 1e-6

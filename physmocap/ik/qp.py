@@ -57,7 +57,7 @@ import mujoco
 import numpy as np
 
 from .limits import FrameStepLimit, RootStepLimit
-from .tasks import SitePositionTask, SitesPositionTask
+from .tasks import FRAME_JAC as _JAC, FRAME_XMAT as _XMAT, FRAME_XPOS as _XPOS, SitePositionTask, SitesPositionTask
 
 try:  # mink's compiled SE(3) operations (what FrameTask uses when present)
     from mink.lie import _lie_ops_c as _native
@@ -72,9 +72,6 @@ INFINITY = 1e30
 #: daqp's constraint sense array type (a C ``int``).
 _SENSE = np.dtype(c_int)
 
-_JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
-_XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
-_XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
 
 
 

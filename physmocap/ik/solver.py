@@ -387,8 +387,7 @@ class FrameSolver:
                 a, b = f"{side}_{parent}", f"{side}_{child}"
                 if cost <= 0.0 or a not in self.names or b not in self.names:
                     continue
-                ta, tb = character.tracked[a], character.tracked[b]
-                pairs.append(((ta.kind, ta.object_id(self.model)), (tb.kind, tb.object_id(self.model))))
+                pairs.append((character.tracked[a], character.tracked[b]))
                 idx.append((self.names.index(a), self.names.index(b)))
         if not pairs:
             return None, np.zeros((0, 2), dtype=int)

@@ -8,12 +8,24 @@ the frame's local axes and always carries orientation rows).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Sequence
+
 import mink
 import mujoco
 import numpy as np
 
+if TYPE_CHECKING:
+    from ..models.mapping import TrackedFrame
+
 __all__ = ["SitePositionTask", "SitesPositionTask", "BodyPointTask"]
 
+
+
+#: Per kind of MuJoCo frame (a tracked joint's site or body, a geom): its translational (and
+#: rotational) Jacobian function, and the ``MjData`` arrays of its world rotation and position.
+FRAME_JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
+FRAME_XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
+FRAME_XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
 
 class SitePositionTask(mink.Task):
     r"""World-frame position of a site.
@@ -180,32 +192,31 @@ class SegmentsTask(_VectorsTask):
     instead of reaching for its child's absolute position (a forearm folded over the head).
     """
 
-    def __init__(self, model: mujoco.MjModel, pairs: list[tuple[tuple[str, int], tuple[str, int]]], costs,
+    def __init__(self, model: mujoco.MjModel, pairs: Sequence[tuple["TrackedFrame", "TrackedFrame"]], costs,
                  gain: float = 1.0) -> None:
-        self.pairs = [((str(a), int(i)), (str(b), int(j))) for (a, i), (b, j) in pairs]
+        """
+        Args:
+            model: The MuJoCo model.
+            pairs: ``(parent, child)`` tracked frames (:class:`~physmocap.models.mapping.TrackedFrame`).
+            costs: Cost per metre, one for all or one per pair.
+            gain: Task gain (1 = dead-beat).
+        """
+        #: ``(parent, child)`` of ``(MjData position array name, Jacobian function, id)``
+        self.pairs = [tuple((FRAME_XPOS[f.kind], FRAME_JAC[f.kind], f.object_id(model)) for f in pair)
+                      for pair in pairs]
         super().__init__(model, len(self.pairs), costs, gain)
         self._a = np.zeros((3, model.nv))
         self._b = np.zeros((3, model.nv))
 
-    @staticmethod
-    def _pos(data: mujoco.MjData, kind: str, i: int) -> np.ndarray:
-        return data.site_xpos[i] if kind == "site" else data.xpos[i]
-
-    def _jacobian(self, data: mujoco.MjData, out: np.ndarray, kind: str, i: int) -> None:
-        if kind == "site":
-            mujoco.mj_jacSite(self.model, data, out, None, i)
-        else:
-            mujoco.mj_jacBody(self.model, data, out, None, i)
-
     def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
         data = configuration.data
-        v = np.array([self._pos(data, *c) - self._pos(data, *p) for p, c in self.pairs]).reshape(-1, 3)
+        v = np.array([getattr(data, c[0])[c[2]] - getattr(data, p[0])[p[2]] for p, c in self.pairs]).reshape(-1, 3)
         return (v - self.targets).reshape(-1)
 
     def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
-        data = configuration.data
+        data, model = configuration.data, self.model
         for n, (p, c) in enumerate(self.pairs):
-            self._jacobian(data, self._a, *p)
-            self._jacobian(data, self._b, *c)
+            p[1](model, data, self._a, None, p[2])
+            c[1](model, data, self._b, None, c[2])
             np.subtract(self._b, self._a, out=self._jac[3 * n : 3 * n + 3])
         return self._jac

@@ -301,8 +301,7 @@ def _transition_pass(traj: Trajectory, config: RetargetConfig, progress: bool | 
     shift = eased_foot_shifts(traj, labels, config.solver)
     again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, contact changes smoothed",
                      shift=shift)
-    softened = int(np.count_nonzero(again.solver.relaxation)) > int(np.count_nonzero(traj.solver.relaxation))
-    return (traj, ()) if softened or _relaxed(again) > _relaxed(traj) else (again, shift)
+    return (traj, ()) if _gave_up_more(again, traj) else (again, shift)
 
 
 def _cap_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
@@ -311,20 +310,29 @@ def _cap_pass(traj: Trajectory, config: RetargetConfig, progress: bool | None,
     towards a reference that spreads their fast moves out in time and every other joint
     towards itself (:mod:`.speedcaps`), the swing feet moved by the ``shift`` ``traj`` was
     retargeted with; kept if fewer joint-transitions saturate and the solver gave up a hard
-    constraint on no more frames, and done again on the pass kept (a joint the pass itself
-    brought to its cap) at most :data:`~.speedcaps.CAP_PASSES` times in all."""
+    constraint (softened a contact equality included) on no more frames, and done again on
+    the pass kept (a joint the pass itself brought to its cap) at most
+    :data:`~.speedcaps.CAP_PASSES` times in all."""
     ch = traj.character
+    sat = saturation_matrix(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
     for _ in range(CAP_PASSES):
-        guides = CapGuides(ch.model, traj.qpos, traj.fps, ch.velocity_limits, ch.velocity_groups)
+        guides = CapGuides(ch.model, traj.qpos, traj.fps, ch.velocity_limits, sat)
         if not guides.eased:
             break
         again = _retrack(traj, traj, config, progress, labels, guides, "retarget again, velocity caps eased",
                          shift=shift)
         after = saturation_matrix(ch.model, again.qpos, again.fps, ch.velocity_limits, ch.velocity_groups)
-        if int(np.count_nonzero(after)) >= guides.saturated_count or _relaxed(again) > _relaxed(traj):
+        if int(np.count_nonzero(after)) >= int(np.count_nonzero(sat)) or _gave_up_more(again, traj):
             break
-        traj = again
+        traj, sat = again, after
     return traj
+
+
+def _gave_up_more(again: Trajectory, traj: Trajectory) -> bool:
+    """Whether a later pass ``again`` needed a relaxation (a contact equality softened
+    included) on more frames than ``traj``, or gave up a hard constraint on more."""
+    softened = int(np.count_nonzero(again.solver.relaxation)) > int(np.count_nonzero(traj.solver.relaxation))
+    return softened or _relaxed(again) > _relaxed(traj)
 
 
 def _relaxed(traj: Trajectory) -> int:

@@ -52,12 +52,11 @@ Streaming retargeting cannot look ahead and does not do this.  Radians, metres, 
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import mujoco
 import numpy as np
 
-from ..metrics.fidelity import saturation_matrix
 from ..sources.gaps import find_runs
 from ..spill import release
 from .branches import Guide
@@ -134,20 +133,19 @@ class CapGuides:
         fps: Frame rate.
         limits: Hinge/slide joint name -> velocity limit (rad/s or m/s;
             ``Character.velocity_limits``).
-        groups: The character's ``velocity_groups`` (their hinges' speeds are their body's,
-            as the solver bounds them).
+        saturated: ``(F-1, len(limits))`` bool, which joints move at their caps on which
+            transitions of ``qpos`` (:func:`~physmocap.metrics.fidelity.saturation_matrix`
+            with the character's ``velocity_groups``, the report's figure).
     """
 
     def __init__(self, model: mujoco.MjModel, qpos: np.ndarray, fps: float, limits: Mapping[str, float],
-                 groups: Sequence[Sequence[str]] = ()) -> None:
+                 saturated: np.ndarray) -> None:
         self.qpos = qpos
         joints = moving_joints(model)
         self.adr = model.jnt_qposadr[joints].astype(int)
         self.dofs = model.jnt_dofadr[joints].astype(int)
         self.cost = np.full(len(joints), FOLLOW_COST)
-        sat = saturation_matrix(model, qpos, fps, dict(limits), groups)
-        #: joint-transitions at the caps in ``qpos`` (the pass is kept if it has fewer)
-        self.saturated_count = int(np.count_nonzero(sat))
+        sat = np.asarray(saturated, dtype=bool)
         #: frame -> (columns of ``adr``, their reference values) where a reference differs
         self._eased: dict[int, tuple[list[int], list[float]]] = {}
         column = {int(a): k for k, a in enumerate(self.adr)}

@@ -45,7 +45,7 @@ The pass is kept only if fewer joint-transitions saturate than before and the so
 a hard constraint on no more frames; a joint the pass brought to its cap gets one more
 (:data:`CAP_PASSES` in all).  On the CMU dance: robot, any joint at its cap on 23.7 %
 of frames before, 0.1 % after (the arms' segment medians 0.1-0.5 degrees further from the actor:
-the moves that start early move the arm early); humanoid 4.7 -> 0.1 %; the G1 6.5 -> 0.25 %.
+the moves that start early move the arm early); humanoid 4.7 -> 0.1 %; the G1 6.5 -> 0.1 %.
 Streaming retargeting cannot look ahead and does not do this.  Radians, metres, seconds.
 """
 

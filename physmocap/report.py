@@ -287,6 +287,12 @@ def _fidelity_table(fid: dict | None) -> list[str]:
             f"{_fmt(100 * sat.get('worst_joint_share', 0.0))} ({sat.get('worst_joint') or '-'})",
         ],
     ]
+    jumps = fid.get("pops")
+    if jumps:
+        where = f", {jumps['worst_joint']} at frame {jumps['worst_frame']}" if jumps.get("worst_joint") else ""
+        rows.append(["pops: joints jumping where the actor's do not", "frames",
+                     f"{jumps['frames']} ({_fmt(100 * jumps['share'])} %)"])
+        rows.append(["largest pop", "cm", f"{_fmt(jumps['worst_cm'])}{where}"])
     out += [""] + _table(["figure", "unit", "value"], rows, {2})
     return out
 

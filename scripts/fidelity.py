@@ -7,8 +7,9 @@ the default options and prints the figures of physmocap.metrics.fidelity
 frames, of the worst segment), share of frames with any segment over 45 degrees,
 facing error (median, p95), pelvis path deviation after a similarity fit (mean,
 max cm) and its drift from its target with no fit (mean cm), the pelvis's vertical speed against the actor's (p99 m/s), velocity-cap
-saturation (any joint, and the worst single joint), and mean absolute joint acceleration with planting against the same
-clip retargeted with planting off.
+saturation (any joint, and the worst single joint), mean absolute joint acceleration with planting against the same
+clip retargeted with planting off, slip and scuffing, and pops (frames on which a joint jumps more than 2 cm
+beyond the actor's, and the largest, cm).
 
 ``--stream`` retargets causally, frame by frame, as ``physmocap replay`` does.
 
@@ -49,7 +50,7 @@ def main() -> int:
 
     print(
         f"{'clip':26s} {'char':8s} {'seg med':>7s} {'worst':>14s} {'>45%':>5s} {'face med':>8s} {'p95':>5s}"
-        f" {'path cm':>7s} {'max':>5s} {'drift':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'1jt%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'gslip':>5s} {'scuf%':>5s}"
+        f" {'path cm':>7s} {'max':>5s} {'drift':>5s} {'vz':>5s} {'vz act':>6s} {'sat%':>5s} {'1jt%':>5s} {'acc':>6s} {'ratio':>5s} {'slip':>5s} {'gslip':>5s} {'scuf%':>5s} {'pops':>4s} {'popcm':>5s}"
     )
     for path in clips:
         clip = path.name
@@ -72,7 +73,8 @@ def main() -> int:
                 f"{clip:26s} {name:8s} {worst[1].median_deg:7.1f} {worst[0]:>14s} {100 * fid.share_any_over_45:5.1f}"
                 f" {fid.facing_median_deg:8.1f} {fid.facing_p95_deg:5.1f} {fid.path_mean_cm:7.1f} {fid.path_max_cm:5.1f} {fid.drift_mean_cm if fid.drift_mean_cm is not None else float('nan'):5.1f}"
                 f" {fid.pelvis_vz_p99:5.2f} {fid.actor_vz_p99_scaled:6.2f} {100 * fid.saturated_share:5.1f}"
-                f" {100 * fid.saturated_joint_share:5.1f} {acc:6.1f} {ratio:5.2f} {fid.floor.slip_mean_cm_s:5.2f} {fid.floor.geom_slip_mean_cm_s:5.2f} {100 * fid.floor.scuff_share:5.1f}",
+                f" {100 * fid.saturated_joint_share:5.1f} {acc:6.1f} {ratio:5.2f} {fid.floor.slip_mean_cm_s:5.2f} {fid.floor.geom_slip_mean_cm_s:5.2f} {100 * fid.floor.scuff_share:5.1f}"
+                f" {fid.pops.frames.size if fid.pops else 0:4d} {fid.pops.worst_cm if fid.pops else float('nan'):5.1f}",
                 flush=True,
             )
     return 0

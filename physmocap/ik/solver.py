@@ -169,11 +169,19 @@ class SolverOptions:
             well or better, but the answers change and resting feet slip more (docs/history.md,
             "Speed stop 23": CMU walk humanoid 0.17 -> 0.37 cm/s).
         catch_up: Metres.  A frame that has not converged after ``max_iterations`` with a
-            position-only target still farther than this from its joint gets up to
-            ``max_iterations`` more (0: never): a fast limb at a low frame rate (a jab at 30
-            fps moves the wrist 15-20 cm a frame) otherwise lags its target by a
-            hand's breadth for several frames.  Frames that converge, or track within it,
-            are unchanged.
+            position target (a joint's, with or without an orientation) still farther than
+            this from its joint gets up to ``max_iterations`` more (0: never): a fast limb at
+            a low frame rate (a jab at 30 fps moves the wrist 15-20 cm a frame) otherwise lags
+            its target by a hand's breadth for several frames.  Frames that converge, or track
+            within it, are unchanged.
+        catch_up_overshoot: Metres.  In those catch-up iterations a line-search trial that
+            leaves the planted contacts within this of their anchors is accepted (as
+            ``contact_overshoot`` does on every iteration; the iterations go on until the
+            contacts are back within ``constraint_tolerance``).  Without it a 30 fps swing
+            foot's step (0.1-0.2 rad) leaves the stance leg's contacts 1-2 mm off by second
+            order, is halved three times, and the foot moves an eighth of the way per
+            iteration: it lagged its target by 10 cm and then jumped 18 cm in one frame (the
+            G1 on the Bandai walk, frames 117-118; 2.8 cm now).
         arm_branches: Offline only: where an arm is left far from the actor's on a branch
             of its joint ranges that cannot reach it while another can, retarget again
             with that arm guided onto the other (:mod:`physmocap.ik.branches`).  Streaming
@@ -209,6 +217,7 @@ class SolverOptions:
     smoothness_cost: float = 0.5
     extrapolate_start: bool = False
     catch_up: float = 0.05
+    catch_up_overshoot: float = 1e-3
     arm_branches: bool = True
     ease_caps: bool = True
 
@@ -261,6 +270,7 @@ class FrameSolver:
         options: SolverOptions | None = None,
     ) -> None:
         self.options = opt = options or SolverOptions()
+        self._overshoot = opt.contact_overshoot
         self.character = character
         self.model = model = character.model
         self.names = tuple(names)
@@ -269,6 +279,7 @@ class FrameSolver:
         # position-only sites share one SitesPositionTask (same maths, one pass).
         self.tasks: list[mink.Task] = []
         self.frame_tasks: list[tuple[int, mink.FrameTask, float, float]] = []
+        self._frame_ids: list[tuple[str, int]] = []  # per frame task: its frame's kind and id (_lagging)
         point_idx, point_sites, point_costs = [], [], []
         for k, (name, oriented) in enumerate(zip(self.names, has_orientation)):
             pc, oc = opt.weights.get(name, weight_of(name))
@@ -283,6 +294,7 @@ class FrameSolver:
                     lm_damping=opt.task_lm_damping,
                 )
                 self.frame_tasks.append((k, task, pc, oc))
+                self._frame_ids.append((tf.kind, tf.object_id(model)))
                 self.tasks.append(task)
             else:
                 point_idx.append(k)
@@ -735,7 +747,7 @@ class FrameSolver:
         is larger (their second-order error, which the next QP removes): the contacts' residual
         first, so that when it alone is too large the trial is refused without the floor's."""
         rc = self._contact_residual()
-        if rc > max(bound, self.options.contact_overshoot):
+        if rc > max(bound, self._overshoot):
             return False
         rf = self._residuals(rc)[1]
         if rf > bound:
@@ -770,15 +782,26 @@ class FrameSolver:
         return not self.options.floor or self._residuals()[1] <= 1e-4
 
     def _lagging(self) -> bool:
-        """True if some position-only target with a cost is farther than ``catch_up`` (metres)
-        from its site in the current configuration (:attr:`SolverOptions.catch_up`)."""
+        """True if some position target with a cost (a point's or a frame task's) is farther
+        than ``catch_up`` (metres) from its site or body in the current configuration
+        (:attr:`SolverOptions.catch_up`)."""
         c = self.options.catch_up
-        if c <= 0 or self.points is None:
+        if c <= 0:
             return False
-        p = self.points
-        d = self.configuration.data.site_xpos[p.site_ids] - p.targets
-        on = p.cost[::3] > 0
-        return bool(np.any(np.einsum("ij,ij->i", d, d)[on] > c * c))
+        data = self.configuration.data
+        if self.points is not None:
+            p = self.points
+            d = data.site_xpos[p.site_ids] - p.targets
+            on = p.cost[::3] > 0
+            if np.any(np.einsum("ij,ij->i", d, d)[on] > c * c):
+                return True
+        for j, (_, task, pc, _) in enumerate(self.frame_tasks):
+            if pc > 0 and self._task_on[j]:
+                kind, i = self._frame_ids[j]
+                d = (data.site_xpos[i] if kind == "site" else data.xpos[i]) - task.transform_target_to_world.translation()
+                if float(d @ d) > c * c:
+                    return True
+        return False
 
     def _iterate(self, total: int, iters: int, base: int) -> tuple[int, int, bool]:
         """The frame's QP iterations from the current configuration: ``iters``, then up to
@@ -867,7 +890,12 @@ class FrameSolver:
             self._set_q(start)
             it, worst, converged = self._iterate(iters + extra, iters, base)
         if not converged and worst < 5 and not first and self._lagging():
+            # the contacts' second-order error is accepted on the way (the iterations go on
+            # until they are back within constraint_tolerance): a step halved for it three
+            # times moves a limb an eighth of the way per iteration
+            self._overshoot = max(opt.contact_overshoot, opt.catch_up_overshoot)
             more, worst2, converged = self._iterate(iters + extra, iters, base)
+            self._overshoot = opt.contact_overshoot
             it, worst = it + more, max(worst, worst2)
         self._converged = (self._converged[1], converged)
         if opt.floor and worst < 3 and not self._floor_ok():

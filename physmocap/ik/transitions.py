@@ -154,11 +154,17 @@ EASE_TOLERANCE = 0.005
 #: its hold to the one after snaps (the robot's left foot on the PyMO walk: 7.4 m/s); a hold
 #: whose offset changes more slowly is left alone.
 SNAP_SPEED = 2.0
+#: Metres: an offset that changes by more than this in one frame snaps too, whatever the
+#: frame rate (a visible jump, the fidelity figures' pop: at 30 Hz :data:`SNAP_SPEED` alone
+#: lets a foot jump 6.7 cm in a frame; the robot's left foot on the Bandai walk was held
+#: 3-4 cm behind and above its target by the other foot for one frame, twice).  At 120 Hz
+#: :data:`SNAP_SPEED` is the tighter test (1.7 cm a frame).
+SNAP_STEP = 0.02
 
 
 def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndarray:
     """``(F,)`` bool: the frames of the runs of ``held`` whose ``offsets (F, 3)`` (zero off the
-    runs) change faster than :data:`SNAP_SPEED` somewhere from the frame before the run to the
+    runs) change faster than :data:`SNAP_SPEED` (or by more than :data:`SNAP_STEP` in a frame) somewhere from the frame before the run to the
     one after it (a foot that slides past the other leg's geom and snaps off it while still at
     the margin, the bundled robot's left foot on the CMU walk, frame 77)."""
     F = len(held)
@@ -167,7 +173,7 @@ def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndar
     speed[1:F] = np.linalg.norm(np.diff(offsets, axis=0), axis=1) * fps  # speed[t]: frames t-1 -> t
     edges = np.flatnonzero(np.diff(np.concatenate([[0], held.astype(np.int8), [0]])))
     for a, b in zip(edges[::2], edges[1::2]):  # the run is frames a .. b-1
-        if float(speed[a : b + 1].max()) > SNAP_SPEED:
+        if float(speed[a : b + 1].max()) > min(SNAP_SPEED, SNAP_STEP * fps):
             out[a:b] = True
     return out
 
@@ -175,8 +181,9 @@ def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndar
 def eased_foot_shifts(traj, labels: Mapping[str, np.ndarray], options) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per swing foot that the other leg held off its target in ``traj`` (one of its collision
     geoms at the self-collision margin, within a millimetre) and that snapped (its offset
-    changing faster than :data:`SNAP_SPEED` somewhere in the hold or at its ends), ``((F, 3) shift,
-    columns)``: its ankle's horizontal offsets from its target on those frames, eased in time
+    changing faster than :data:`SNAP_SPEED`, or by more than :data:`SNAP_STEP` in a frame,
+    somewhere in the hold or at its ends), ``((F, 3) shift, columns)``: its ankle's offsets from
+    its target on those frames (horizontal, and upwards), eased in time
     (:func:`eased_offsets`; zero on the frames the foot is labelled in contact), for its
     ankle, toe and toe tip targets.  The foot then goes round the other leg instead of
     sliding along it behind its target and snapping back when it clears it (the robot's left
@@ -224,7 +231,9 @@ def eased_foot_shifts(traj, labels: Mapping[str, np.ndarray], options) -> list[t
         offsets = where[side]
         for s, rows in blocks(traj.targets.positions):
             offsets[s : s + rows.shape[0]] -= rows[:, col]
-        offsets[:, 2] = 0.0
+        # upwards too (a foot held up over the other foot eases up to it: the robot's on the
+        # Bandai walk), never down (the floor and the swing clearance already hold it up)
+        offsets[:, 2] = np.maximum(offsets[:, 2], 0.0)
         down = np.zeros(F, dtype=bool)
         for part in ("heel", "toe"):
             if f"{side}_{part}" in labels:

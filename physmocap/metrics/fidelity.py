@@ -29,6 +29,13 @@ character in the actor's world orientation, so directions compare directly.
 * **Velocity-cap saturation**: frames on which some joint moves at 99 % or
   more of its velocity limit (the solver's frame-to-frame bound), and the
   share of frames of the joint that sits at its cap most often.
+* **Pops** (cm): a joint that jumps where the actor's does not.  Per joint and
+  frame, the character's second difference :math:`|c_{t+1} - 2 c_t + c_{t-1}|`
+  (metres; a jump of :math:`d` in one frame gives about :math:`d`, whatever the
+  frame rate) beyond the actor's, scaled by the root scale, taken as the largest of
+  the joint's and its parent's on frames :math:`t-1 .. t+1` (a source whose knee
+  jumps moves the ankle too: the actor's own pop is not the character's).  A frame
+  pops where some joint exceeds it by more than :data:`POP_M`.
 """
 
 from __future__ import annotations
@@ -60,6 +67,10 @@ __all__ = [
     "fidelity",
     "SEGMENT_WARN_DEG",
     "FACING_WARN_DEG",
+    "Pops",
+    "pops",
+    "POP_M",
+    "POP_WARN_M",
 ]
 
 #: Segment name -> (proximal canonical joint, distal canonical joint).  ``mid_hip``
@@ -81,6 +92,11 @@ SEGMENT_WARN_DEG = 45.0
 FACING_WARN_DEG = 30.0
 #: A joint at this fraction of its velocity limit counts as saturated.
 SATURATION_RATIO = 0.99
+#: Metres: a joint whose second difference over frames exceeds the actor's by more than this
+#: pops on that frame (:func:`pops`): 2 cm, a jump the eye catches at any frame rate.
+POP_M = 0.02
+#: Metres: pops larger than this are warned about (:func:`fidelity_warnings`).
+POP_WARN_M = 0.05
 
 
 @dataclass(frozen=True)
@@ -90,6 +106,35 @@ class SegmentError:
     median_deg: float
     p95_deg: float
     share_over_45: float
+
+
+@dataclass(frozen=True)
+class Pops:
+    """Where the character's joints jump and the actor's do not (:func:`pops`).
+
+    Attributes:
+        frames: Frames (indices into the retargeted clip) on which some joint pops.
+        share: Their share of the clip's frames.
+        worst_cm: The largest excess of a joint's second difference over the actor's (cm).
+        worst_joint, worst_frame: Where it is (None without any excess).
+        warn_frames: Frames with a pop over :data:`POP_WARN_M`.
+    """
+
+    frames: np.ndarray
+    share: float
+    worst_cm: float
+    worst_joint: str | None
+    worst_frame: int | None
+    warn_frames: np.ndarray
+
+    def as_dict(self) -> dict:
+        return {
+            "frames": int(self.frames.size),
+            "share": self.share,
+            "worst_cm": self.worst_cm,
+            "worst_joint": self.worst_joint,
+            "worst_frame": self.worst_frame,
+        }
 
 
 @dataclass(frozen=True)
@@ -115,6 +160,8 @@ class Fidelity:
         saturated_joint, saturated_joint_share: The joint that sits at its cap on
             the most transitions, and their share (the issue's "no joint at its
             cap on more than 0.5 % of frames" is this figure).
+        pops: Joints that jump where the actor's do not (:class:`Pops`; None without
+            a joint on both sides).
     """
 
     segments: dict[str, SegmentError]
@@ -135,6 +182,7 @@ class Fidelity:
     saturated_joint_share: float = 0.0
     drift_mean_cm: float | None = None
     drift_max_cm: float | None = None
+    pops: Pops | None = None
 
     @property
     def worst_segment_median_deg(self) -> float:
@@ -162,6 +210,7 @@ class Fidelity:
                 "worst_joint_share": self.saturated_joint_share,
             },
             "geoms_on_floor": None if self.floor is None else self.floor.as_dict(),
+            "pops": None if self.pops is None else self.pops.as_dict(),
         }
 
 
@@ -290,6 +339,55 @@ def facing_errors(actor: dict[str, np.ndarray], character: dict[str, np.ndarray]
     hc = _heading(character["left_hip"], character["right_hip"])
     d = np.angle(np.exp(1j * (hc - ha)))
     return np.degrees(np.abs(d))
+
+
+def _second_difference(x: np.ndarray) -> np.ndarray:
+    """``(F,)`` metres: :math:`|x_{t+1} - 2 x_t + x_{t-1}|` of ``x (F, 3)`` on frame :math:`t`
+    (0 on the first and last frames; NaN where a neighbour is unknown)."""
+    out = np.zeros(x.shape[0])
+    if x.shape[0] > 2:
+        out[1:-1] = np.linalg.norm(x[2:] - 2.0 * x[1:-1] + x[:-2], axis=1)
+    return out
+
+
+def pops(actor: dict[str, np.ndarray], character: dict[str, np.ndarray], scale: float = 1.0) -> Pops | None:
+    """Frames on which a character joint jumps where the actor's does not (see the module
+    docstring): per joint both have, the character's second difference minus the largest of
+    the actor's (times ``scale``) at the joint and at its nearest ancestor among the joints
+    given (:func:`~physmocap.canonical.canonical_parent`) over the frame and its neighbours; a
+    lost actor joint (NaN) excuses its frames.  None without a joint on both sides."""
+    from ..canonical import canonical_parent
+
+    both = [j for j in character if j in actor]
+    if not both:
+        return None
+    present = set(both)
+    own = {j: np.nan_to_num(_second_difference(actor[j]) * scale, nan=np.inf) for j in both}
+    F = len(next(iter(character.values())))
+    worst = np.zeros(F)
+    worst_at = np.full(F, -1)
+    for k, j in enumerate(both):
+        allowed = own[j]
+        parent = canonical_parent(j, present)
+        if parent is not None:
+            allowed = np.maximum(allowed, own[parent])
+        window = allowed.copy()
+        window[1:] = np.maximum(window[1:], allowed[:-1])
+        window[:-1] = np.maximum(window[:-1], allowed[1:])
+        excess = np.nan_to_num(_second_difference(character[j]), nan=0.0) - window
+        better = excess > worst
+        worst[better], worst_at[better] = excess[better], k
+    frames = np.flatnonzero(worst > POP_M)
+    t = int(np.argmax(worst))
+    top = float(worst[t])
+    return Pops(
+        frames=frames,
+        share=float(frames.size / max(F, 1)),
+        worst_cm=100.0 * max(top, 0.0),
+        worst_joint=both[int(worst_at[t])] if top > 0 else None,
+        worst_frame=t if top > 0 else None,
+        warn_frames=np.flatnonzero(worst > POP_WARN_M),
+    )
 
 
 def similarity_fit_2d(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -641,6 +739,8 @@ def fidelity(
         over = big if over is None else over | big
     frames_over = np.flatnonzero(over) if over is not None else np.zeros(0, dtype=int)
     n = len(over) if over is not None else 1
+    jumps = pops(actor, character, scale)
+    _let_go(actor, character)
     face = facing_errors(actor, character)
     _let_go(actor, character)
     f_med, f_p95 = _nan_stats(face) if face is not None else (None, None)
@@ -685,6 +785,7 @@ def fidelity(
         floor=floor_figures,
         saturated_joint=worst_joint,
         saturated_joint_share=worst_share,
+        pops=jumps,
     )
 
 
@@ -756,7 +857,8 @@ def fidelity_warnings(fid: Fidelity, offset: int = 0) -> list[str]:
     * a segment more than :data:`SEGMENT_WARN_DEG` off on more than
       :data:`SEGMENT_WARN_SHARE` of the clip;
     * facing more than :data:`FACING_WARN_DEG` off;
-    * joints at their velocity caps on more than 0.5 % of the clip.
+    * joints at their velocity caps on more than 0.5 % of the clip;
+    * a joint that jumps more than :data:`POP_WARN_M` further than the actor's in one frame.
     """
     out = []
     if fid.share_any_over_45 > SEGMENT_WARN_SHARE:
@@ -775,5 +877,12 @@ def fidelity_warnings(fid: Fidelity, offset: int = 0) -> list[str]:
             f"joints move at their velocity caps on {fid.saturated_frames.size} frame(s) "
             f"({100 * fid.saturated_share:.1f} %: {_frames_text(fid.saturated_frames, offset)}); the character lags "
             "the actor there"
+        )
+    jumps = fid.pops
+    if jumps is not None and jumps.warn_frames.size:
+        out.append(
+            f"the character jumps where the actor does not on {jumps.warn_frames.size} frame(s) "
+            f"({_frames_text(jumps.warn_frames, offset)}; worst {jumps.worst_cm:.1f} cm, {jumps.worst_joint} "
+            f"at frame {int(jumps.worst_frame) + int(offset)})"
         )
     return out

@@ -341,3 +341,16 @@ def test_a_swing_foot_that_slides_off_the_other_leg_mid_hold_is_eased_too():
     off = np.array(where) - np.asarray(traj.targets.positions[:, list(traj.targets.names).index("left_ankle"), :2])
     jump = np.linalg.norm(np.diff(off, axis=0), axis=1)[60:100]  # the pass by the stance foot, frames 61-100
     assert jump.max() < 0.012, (jump.max(), 60 + int(jump.argmax()))
+
+
+def test_eased_offsets_keep_a_short_clips_length():
+    """Before: a clip shorter than the easing's reach (20 frames of the bundled walk, a foot held
+    9 cm off) got an array of the reach's length back, and the retarget failed with a
+    broadcasting error."""
+    from physmocap.ik.transitions import eased_offsets
+
+    x = np.zeros((12, 3))
+    x[5:8, 1] = 0.09
+    e = eased_offsets(x, 120.0, 0.25, 0.005)
+    assert e.shape == x.shape and np.isfinite(e).all()
+    assert np.abs(e).max() <= 0.09 + 1e-12

@@ -62,7 +62,7 @@ from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
 
 from ..spill import blocks, release
 from .branches import MOVING_TYPES, Guide
@@ -139,7 +139,9 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
     if not differs.any():
         return np.zeros_like(x)
     reach = int(np.ceil(float(np.abs(e - x).max()) / step)) + 1
-    near = np.convolve(differs.astype(float), np.ones(2 * reach + 1), mode="same") > 0
+    # every frame within ``reach`` of one that differs (np.convolve's "same" would return the
+    # kernel's length, not the clip's, on a clip shorter than 2 * reach + 1 frames)
+    near = maximum_filter1d(differs.astype(np.int8), size=2 * reach + 1, mode="constant") > 0
     weight = gaussian_filter1d(near.astype(float), max(reach / 2.0, 1.0), mode="nearest")
     weight = np.clip(2.0 * weight, 0.0, 1.0)
     return e * weight[:, None]

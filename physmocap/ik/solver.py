@@ -270,7 +270,7 @@ class FrameSolver:
         options: SolverOptions | None = None,
     ) -> None:
         self.options = opt = options or SolverOptions()
-        self._overshoot = opt.contact_overshoot
+        self._catching_up = False  # in the catch-up iterations (catch_up_overshoot applies)
         self.character = character
         self.model = model = character.model
         self.names = tuple(names)
@@ -747,7 +747,10 @@ class FrameSolver:
         is larger (their second-order error, which the next QP removes): the contacts' residual
         first, so that when it alone is too large the trial is refused without the floor's."""
         rc = self._contact_residual()
-        if rc > max(bound, self._overshoot):
+        overshoot = self.options.contact_overshoot
+        if self._catching_up:
+            overshoot = max(overshoot, self.options.catch_up_overshoot)
+        if rc > max(bound, overshoot):
             return False
         rf = self._residuals(rc)[1]
         if rf > bound:
@@ -893,9 +896,11 @@ class FrameSolver:
             # the contacts' second-order error is accepted on the way (the iterations go on
             # until they are back within constraint_tolerance): a step halved for it three
             # times moves a limb an eighth of the way per iteration
-            self._overshoot = max(opt.contact_overshoot, opt.catch_up_overshoot)
-            more, worst2, converged = self._iterate(iters + extra, iters, base)
-            self._overshoot = opt.contact_overshoot
+            self._catching_up = True
+            try:
+                more, worst2, converged = self._iterate(iters + extra, iters, base)
+            finally:
+                self._catching_up = False
             it, worst = it + more, max(worst, worst2)
         self._converged = (self._converged[1], converged)
         if opt.floor and worst < 3 and not self._floor_ok():

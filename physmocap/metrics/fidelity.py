@@ -739,7 +739,8 @@ def fidelity(
         over = big if over is None else over | big
     frames_over = np.flatnonzero(over) if over is not None else np.zeros(0, dtype=int)
     n = len(over) if over is not None else 1
-    jumps = pops(actor, character, scale)
+    used = figure_joints()  # whatever else the caller gave (the same figure from every caller)
+    jumps = pops({k: v for k, v in actor.items() if k in used}, {k: v for k, v in character.items() if k in used}, scale)
     _let_go(actor, character)
     face = facing_errors(actor, character)
     _let_go(actor, character)

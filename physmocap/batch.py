@@ -54,6 +54,7 @@ PATH_OPTIONS = ("map", "source_map", "marker_set", "contacts", "character")
 SUMMARY_FIELDS = (
     "input", "output", "status", "error", "frame", "frames", "fps", "limit_violations", "penetration_max_mm",
     "skating_mean_cm_s", "worst_segment_median_deg", "facing_p95_deg", "path_mean_cm", "saturated_share",
+    "pop_frames", "largest_pop_cm",
 )
 STATE_FILE = ".physmocap-batch.json"
 #: Seconds a worker process is given to exit once told to (or once its pipe closed).
@@ -102,6 +103,8 @@ class FileResult:
     facing_p95_deg: float | None = None
     path_mean_cm: float | None = None
     saturated_share: float | None = None
+    pop_frames: int | None = None  # frames on which a joint jumps where the actor's does not
+    largest_pop_cm: float | None = None
     seconds: float = field(default=0.0, compare=False)
 
 
@@ -513,6 +516,9 @@ def _measure(traj: Any, res: FileResult) -> None:
         res.facing_p95_deg = _figure(fid.facing_p95_deg, 2)
         res.path_mean_cm = _figure(fid.path_mean_cm, 2)
         res.saturated_share = _figure(fid.saturated_share, 4)
+        if fid.pops is not None:
+            res.pop_frames = int(fid.pops.frames.size)
+            res.largest_pop_cm = _figure(fid.pops.worst_cm, 2)
 
 
 def _figure(value: Any, digits: int) -> float | None:

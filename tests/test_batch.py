@@ -39,6 +39,8 @@ def test_batch_records_failures_and_mirrors_outputs(folder):
     # the summaries name files relatively, in their errors too (the machine's paths stay out)
     assert str(folder) not in (out / "summary.json").read_text() + (out / "summary.csv").read_text()
     assert rows[os.path.join("..", "in", "a.bvh")]["frames"] == 39
+    done = rows[os.path.join("..", "in", "a.bvh")]
+    assert isinstance(done["pop_frames"], int) and done["largest_pop_cm"] >= 0.0  # the fidelity's pops
     assert summary["totals"] == {"files": 3, "done": 2, "failed": 1, "frames": 78}
 
 

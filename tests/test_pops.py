@@ -119,3 +119,13 @@ def test_a_snap_is_centimetres_a_frame_too():
         offsets[10:30, 1] = (0.9 / fps) * np.minimum(t - 9, 30 - t)  # out at 0.9 m/s, and back
         run = _snapping_runs(offsets, held, fps)
         assert bool(run[10:30].all()) == snaps and not run[:10].any() and not run[30:].any(), (fps, run)
+
+
+def test_catch_up_overshoot_is_on_by_default_and_validated():
+    from physmocap.errors import OptionError
+    from physmocap.ik.solver import SolverOptions
+
+    assert SolverOptions().catch_up_overshoot == pytest.approx(1e-3) and SolverOptions().contact_overshoot == 0.0
+    for bad in (-1e-3, float("nan")):
+        with pytest.raises(OptionError):
+            SolverOptions(catch_up_overshoot=bad)

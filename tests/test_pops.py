@@ -62,6 +62,14 @@ def test_the_actors_own_jump_is_not_a_pop():
     assert pops(_walking_leg(120, 60.0), jumped).frames.size == 2
 
 
+def test_no_frames_or_no_common_joint():
+    assert pops({}, {"left_knee": np.zeros((5, 3))}) is None
+    empty = pops({"left_knee": np.zeros((0, 3))}, {"left_knee": np.zeros((0, 3))})
+    assert empty.frames.size == 0 and empty.worst_cm == 0.0 and empty.worst_joint is None
+    short = pops({"left_knee": np.zeros((2, 3))}, {"left_knee": np.ones((2, 3))})
+    assert short.frames.size == 0  # no second difference on two frames
+
+
 def test_pops_are_scaled_like_the_actor_and_warned_about():
     coarse = _walking_leg(40, 10.0)  # 10 fps: the swing's second difference is 10 cm
     big = {k: 2.0 * v for k, v in coarse.items()}  # a character twice the actor's size

@@ -378,8 +378,8 @@ def pops(actor: dict[str, np.ndarray], character: dict[str, np.ndarray], scale: 
         better = excess > worst
         worst[better], worst_at[better] = excess[better], k
     frames = np.flatnonzero(worst > POP_M)
-    t = int(np.argmax(worst))
-    top = float(worst[t])
+    t = int(np.argmax(worst)) if F else 0
+    top = float(worst[t]) if F else 0.0
     return Pops(
         frames=frames,
         share=float(frames.size / max(F, 1)),

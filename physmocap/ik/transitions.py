@@ -166,9 +166,10 @@ SNAP_STEP = 0.02
 
 def _snapping_runs(offsets: np.ndarray, held: np.ndarray, fps: float) -> np.ndarray:
     """``(F,)`` bool: the frames of the runs of ``held`` whose ``offsets (F, 3)`` (zero off the
-    runs) change faster than :data:`SNAP_SPEED` (or by more than :data:`SNAP_STEP` in a frame) somewhere from the frame before the run to the
-    one after it (a foot that slides past the other leg's geom and snaps off it while still at
-    the margin, the bundled robot's left foot on the CMU walk, frame 77)."""
+    runs) change faster than :data:`SNAP_SPEED`, or by more than :data:`SNAP_STEP` in a frame,
+    somewhere from the frame before the run to the one after it (a foot that slides past the
+    other leg's geom and snaps off it while still at the margin, the bundled robot's left foot
+    on the CMU walk, frame 77)."""
     F = len(held)
     out = np.zeros(F, dtype=bool)
     speed = np.zeros(F + 1)

@@ -73,8 +73,6 @@ INFINITY = 1e30
 _SENSE = np.dtype(c_int)
 
 
-
-
 def _weighted_residual(task: mink.Task, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray]:
     r"""``(W_k, e_k)`` of a mink task: :math:`W_k = \mathrm{diag}(w) J`, :math:`e_k = -\mathrm{diag}(w)\,g\,e`
     (weights :math:`w`, gain :math:`g`, error :math:`e`, Jacobian :math:`J`), as mink's

@@ -51,7 +51,7 @@ from ..options import check_fields
 from ..rotations import xyzw_to_wxyz
 from .limits import FloorLimit, FrameStepLimit, GroupStepLimit, RootStepLimit, SelfCollisionLimit, group_box_speeds
 from .qp import QP, QPBuilder, WarmSolver
-from .tasks import SegmentsTask, SitePositionTask, SitesPositionTask
+from .tasks import FRAME_XPOS, SegmentsTask, SitePositionTask, SitesPositionTask
 from .targets import weight_of
 
 __all__ = ["SolverOptions", "ContactHolds", "FrameSolver", "RELAXATION_LEVELS"]
@@ -279,7 +279,8 @@ class FrameSolver:
         # position-only sites share one SitesPositionTask (same maths, one pass).
         self.tasks: list[mink.Task] = []
         self.frame_tasks: list[tuple[int, mink.FrameTask, float, float]] = []
-        self._frame_ids: list[tuple[str, int]] = []  # per frame task: its frame's kind and id (_lagging)
+        #: per frame task: its frame's world-position array in ``MjData`` and its id (:meth:`_lagging`)
+        self._frame_xpos: list[tuple[str, int]] = []
         point_idx, point_sites, point_costs = [], [], []
         for k, (name, oriented) in enumerate(zip(self.names, has_orientation)):
             pc, oc = opt.weights.get(name, weight_of(name))
@@ -294,7 +295,7 @@ class FrameSolver:
                     lm_damping=opt.task_lm_damping,
                 )
                 self.frame_tasks.append((k, task, pc, oc))
-                self._frame_ids.append((tf.kind, tf.object_id(model)))
+                self._frame_xpos.append((FRAME_XPOS[tf.kind], tf.object_id(model)))
                 self.tasks.append(task)
             else:
                 point_idx.append(k)
@@ -800,8 +801,8 @@ class FrameSolver:
                 return True
         for j, (_, task, pc, _) in enumerate(self.frame_tasks):
             if pc > 0 and self._task_on[j]:
-                kind, i = self._frame_ids[j]
-                d = (data.site_xpos[i] if kind == "site" else data.xpos[i]) - task.transform_target_to_world.translation()
+                array, i = self._frame_xpos[j]
+                d = getattr(data, array)[i] - task.transform_target_to_world.translation()
                 if float(d @ d) > c * c:
                     return True
         return False

@@ -17,15 +17,14 @@ import numpy as np
 if TYPE_CHECKING:
     from ..models.mapping import TrackedFrame
 
-__all__ = ["SitePositionTask", "SitesPositionTask", "BodyPointTask"]
-
-
+__all__ = ["SitePositionTask", "SitesPositionTask", "SegmentsTask", "BodyPointTask", "FRAME_JAC", "FRAME_XMAT", "FRAME_XPOS"]
 
 #: Per kind of MuJoCo frame (a tracked joint's site or body, a geom): its translational (and
 #: rotational) Jacobian function, and the ``MjData`` arrays of its world rotation and position.
 FRAME_JAC = {"site": mujoco.mj_jacSite, "body": mujoco.mj_jacBody, "geom": mujoco.mj_jacGeom}
 FRAME_XMAT = {"site": "site_xmat", "body": "xmat", "geom": "geom_xmat"}
 FRAME_XPOS = {"site": "site_xpos", "body": "xpos", "geom": "geom_xpos"}
+
 
 class SitePositionTask(mink.Task):
     r"""World-frame position of a site.

@@ -45,6 +45,7 @@ from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
+from scipy.ndimage import maximum_filter1d
 
 from ..spill import blocks, release, spilled_empty
 
@@ -371,9 +372,7 @@ def pops(actor: dict[str, np.ndarray], character: dict[str, np.ndarray], scale: 
         parent = canonical_parent(j, present)
         if parent is not None:
             allowed = np.maximum(allowed, own[parent])
-        window = allowed.copy()
-        window[1:] = np.maximum(window[1:], allowed[:-1])
-        window[:-1] = np.maximum(window[:-1], allowed[1:])
+        window = maximum_filter1d(allowed, size=3, mode="nearest") if F else allowed  # frames t-1 .. t+1
         excess = np.nan_to_num(_second_difference(character[j]), nan=0.0) - window
         better = excess > worst
         worst[better], worst_at[better] = excess[better], k

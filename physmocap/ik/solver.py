@@ -169,19 +169,23 @@ class SolverOptions:
             well or better, but the answers change and resting feet slip more (docs/history.md,
             "Speed stop 23": CMU walk humanoid 0.17 -> 0.37 cm/s).
         catch_up: Metres.  A frame that has not converged after ``max_iterations`` with a
-            position target (a joint's, with or without an orientation) still farther than
-            this from its joint gets up to ``max_iterations`` more (0: never): a fast limb at
-            a low frame rate (a jab at 30 fps moves the wrist 15-20 cm a frame) otherwise lags
-            its target by a hand's breadth for several frames.  Frames that converge, or track
-            within it, are unchanged.
-        catch_up_overshoot: Metres.  In those catch-up iterations a line-search trial that
-            leaves the planted contacts within this of their anchors is accepted (as
-            ``contact_overshoot`` does on every iteration; the iterations go on until the
-            contacts are back within ``constraint_tolerance``).  Without it a 30 fps swing
-            foot's step (0.1-0.2 rad) leaves the stance leg's contacts 1-2 mm off by second
-            order, is halved three times, and the foot moves an eighth of the way per
-            iteration: it lagged its target by 10 cm and then jumped 18 cm in one frame (the
-            G1 on the Bandai walk, frames 117-118; 2.8 cm now).
+            position-only target still farther than this from its joint, or any position
+            target (an oriented one too) that far behind a target that moved farther than
+            this since the previous frame, gets up to ``max_iterations`` more (0: never): a
+            fast limb at a low frame rate (a jab at 30 fps moves the wrist 15-20 cm a frame)
+            otherwise lags its target by a hand's breadth for several frames.  Frames that
+            converge, or track within it, are unchanged.
+        catch_up_overshoot: Metres.  In the catch-up iterations behind such a fast target, a
+            line-search trial that leaves the planted contacts within this of their anchors
+            is accepted (as ``contact_overshoot`` does on every iteration; the iterations go
+            on until the contacts are back within ``constraint_tolerance``).  Without it a
+            30 fps swing foot's step (0.1-0.2 rad) leaves the stance leg's contacts 1-2 mm off
+            by second order, is halved three times, and the foot moves an eighth of the way
+            per iteration: it lagged its target by 10 cm and then jumped 18 cm in one frame
+            (the G1 on the Bandai walk, frames 117-118; 2.8 cm now).  Only behind a fast
+            target: on every catch-up (the 120 Hz clips' too) it set the PyMO walk humanoid's
+            toes flapping after toe-off, and taking oriented targets' lags everywhere turned
+            the G1's left wrist 90 degrees from the actor's on the dance.
         arm_branches: Offline only: where an arm is left far from the actor's on a branch
             of its joint ranges that cannot reach it while another can, retarget again
             with that arm guided onto the other (:mod:`physmocap.ik.branches`).  Streaming
@@ -270,7 +274,9 @@ class FrameSolver:
         options: SolverOptions | None = None,
     ) -> None:
         self.options = opt = options or SolverOptions()
-        self._catching_up = False  # in the catch-up iterations (catch_up_overshoot applies)
+        self._catching_up = False  # in the catch-up iterations of a fast target (catch_up_overshoot applies)
+        self._last_targets: np.ndarray | None = None  # the previous frame's target positions
+        self._target_steps = np.zeros(len(names))
         self.character = character
         self.model = model = character.model
         self.names = tuple(names)
@@ -365,6 +371,11 @@ class FrameSolver:
     # -- targets ----------------------------------------------------------------
     def _set_targets(self, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray) -> None:
         """Targets for the next frame: ``(N, 3)`` metres, ``(N, 4)`` xyzw, ``(N,)`` bool."""
+        here = np.asarray(positions, dtype=float)
+        last, self._last_targets = self._last_targets, here.copy()
+        moved = np.zeros(len(here)) if last is None or last.shape != here.shape else np.linalg.norm(here - last, axis=1)
+        #: metres each target moved since the previous frame (0 where unknown; :meth:`_lagging`)
+        self._target_steps = np.where(np.isfinite(moved) & np.asarray(valid, dtype=bool), moved, 0.0)
         # every target's (w, x, y, z, x, y, z) in one new array: each task gets its own row
         # (what FrameTask.set_target's copy would make; the rows are never written again)
         poses = np.concatenate([xyzw_to_wxyz(orientations), positions], axis=1)
@@ -479,6 +490,7 @@ class FrameSolver:
         self._daqp.reset()
         self.q_prev = None
         self._q_prev2 = None
+        self._last_targets = None
         self._converged = (False, False)
 
     # -- solving ----------------------------------------------------------------
@@ -785,27 +797,32 @@ class FrameSolver:
         """
         return not self.options.floor or self._residuals()[1] <= 1e-4
 
-    def _lagging(self) -> bool:
-        """True if some position target with a cost (a point's or a frame task's) is farther
-        than ``catch_up`` (metres) from its site or body in the current configuration
-        (:attr:`SolverOptions.catch_up`)."""
+    def _lagging(self) -> tuple[bool, bool]:
+        """``(lagging, fast)``: whether some position-only target with a cost is farther than
+        ``catch_up`` (metres) from its site in the current configuration, and whether some
+        position target (a point's or a frame task's) is that far behind a target that itself
+        moved farther than ``catch_up`` since the previous frame: a fast limb
+        (:attr:`SolverOptions.catch_up`, :attr:`SolverOptions.catch_up_overshoot`)."""
         c = self.options.catch_up
         if c <= 0:
-            return False
+            return False, False
         data = self.configuration.data
+        quick = self._target_steps > c
+        lagging = fast = False
         if self.points is not None:
             p = self.points
             d = data.site_xpos[p.site_ids] - p.targets
-            on = p.cost[::3] > 0
-            if np.any(np.einsum("ij,ij->i", d, d)[on] > c * c):
-                return True
-        for j, (_, task, pc, _) in enumerate(self.frame_tasks):
-            if pc > 0 and self._task_on[j]:
+            far = (np.einsum("ij,ij->i", d, d) > c * c) & (p.cost[::3] > 0)
+            lagging = bool(far.any())
+            fast = bool((far & quick[self._point_idx]).any())
+        for j, (k, task, pc, _) in enumerate(self.frame_tasks):
+            if fast:
+                break
+            if pc > 0 and self._task_on[j] and quick[k]:
                 array, i = self._frame_xpos[j]
                 d = getattr(data, array)[i] - task.transform_target_to_world.translation()
-                if float(d @ d) > c * c:
-                    return True
-        return False
+                fast = float(d @ d) > c * c
+        return lagging or fast, fast
 
     def _iterate(self, total: int, iters: int, base: int) -> tuple[int, int, bool]:
         """The frame's QP iterations from the current configuration: ``iters``, then up to
@@ -893,11 +910,12 @@ class FrameSolver:
             # from the previous frame's pose (as without extrapolate_start)
             self._set_q(start)
             it, worst, converged = self._iterate(iters + extra, iters, base)
-        if not converged and worst < 5 and not first and self._lagging():
-            # the contacts' second-order error is accepted on the way (the iterations go on
-            # until they are back within constraint_tolerance): a step halved for it three
-            # times moves a limb an eighth of the way per iteration
-            self._catching_up = True
+        lagging, fast = self._lagging() if not converged and worst < 5 and not first else (False, False)
+        if lagging:
+            # behind a fast target, the contacts' second-order error is accepted on the way
+            # (the iterations go on until they are back within constraint_tolerance): a step
+            # halved for it three times moves a limb an eighth of the way per iteration
+            self._catching_up = fast
             try:
                 more, worst2, converged = self._iterate(iters + extra, iters, base)
             finally:

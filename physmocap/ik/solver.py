@@ -182,7 +182,7 @@ class SolverOptions:
             30 fps swing foot's step (0.1-0.2 rad) leaves the stance leg's contacts 1-2 mm off
             by second order, is halved three times, and the foot moves an eighth of the way
             per iteration: it lagged its target by 10 cm and then jumped 18 cm in one frame
-            (the G1 on the Bandai walk, frames 117-118; 2.8 cm now).  Only behind a fast
+            (the G1 on the Bandai walk, frames 117-118; 2.9 cm now).  Only behind a fast
             target: on every catch-up (the 120 Hz clips' too) it set the PyMO walk humanoid's
             toes flapping after toe-off, and taking oriented targets' lags everywhere turned
             the G1's left wrist 90 degrees from the actor's on the dance.

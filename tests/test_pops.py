@@ -137,3 +137,29 @@ def test_catch_up_overshoot_is_on_by_default_and_validated():
     for bad in (-1e-3, float("nan")):
         with pytest.raises(OptionError):
             SolverOptions(catch_up_overshoot=bad)
+
+
+@pytest.mark.parametrize("name", ["humanoid", "robot"])
+def test_the_catch_up_allowance_is_only_behind_a_fast_target(name):
+    """The 1 mm contact allowance of the catch-up iterations, and the oriented targets' lags,
+    count only behind a target that moved more than ``catch_up`` since the previous frame.
+    On every catch-up (the first version) the PyMO walk humanoid's toes flapped after
+    toe-off and the G1's left wrist turned 90 degrees from the actor's on the dance."""
+    from test_qp import _setup
+
+    solver = _setup(name, 0)
+    c = solver.options.catch_up
+    data = solver.configuration.data
+    names = solver.names
+    here = np.array([solver.character.tracked[n].position(solver.model, data) for n in names])
+    ori = np.tile([0.0, 0.0, 0.0, 1.0], (len(names), 1))
+    valid = np.ones(len(names), dtype=bool)
+    far = here + np.array([0.0, 0.0, 2.0 * c])  # every target 10 cm above its joint
+    solver._set_targets(far, ori, valid)
+    solver._set_targets(far, ori, valid)  # ... and still there: a slow lag
+    assert solver._lagging() == (True, False)
+    solver._set_targets(far + np.array([2.0 * c, 0.0, 0.0]), ori, valid)  # the targets jump 10 cm
+    assert solver._lagging() == (True, True)
+    solver.reset()
+    solver._set_targets(here, ori, valid)  # after a reset no step is known: nothing is fast
+    assert not solver._lagging()[1]

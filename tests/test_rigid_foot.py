@@ -210,3 +210,42 @@ def test_a_rigid_foot_does_not_whip_after_toe_off():
         assert offs.size
         worst = max(step[t : t + 6].max() for t in offs)
         assert worst < 0.5 * ch.velocity_limits[joint] / traj.fps, (side, np.degrees(worst))
+
+
+def test_a_rigid_foot_on_its_front_edge_rises_heel_first_for_its_leg_to_reach():
+    """Where only its toes are planned, a rigid foot whose ankle target lies beyond its leg's
+    reach is turned heel up about its front contact point by the least angle that brings the
+    ankle within reach (the pivot stays put, the roll is kept), by at most the larger of the
+    actor's toe bend and :data:`TIPTOE_LEAST`; a leg that reaches, a frame with weight 0 and
+    a part weight are handled as the swing turn's (issue 9: the bundled robot's whole body
+    came down 2-3 cm at every toe-off of the CMU walk, its pelvis moving vertically at twice
+    the actor's speed)."""
+    from physmocap.ik.footplan import TIPTOE_LEAST, stance_tiptoe
+
+    foot = _foot_box()
+    F = 5
+    Q = np.tile(_pitch(0.0), (F, 1))  # flat
+    ankle = np.tile([0.0, 0.0, 0.06], (F, 1))
+    reach = 0.50
+    # the hip 51 cm from the ankle, up and forward: 1 cm out of reach (frames 0, 2, 3, 4);
+    # frame 1 within reach
+    hip = np.tile(ankle[0] + 0.51 * np.array([np.sin(0.3), 0.0, np.cos(0.3)]), (F, 1))
+    hip[1] = ankle[1] + 0.49 * np.array([np.sin(0.3), 0.0, np.cos(0.3)])
+    weight = np.array([1.0, 1.0, 0.0, 0.5, 1.0])
+    bend = np.array([0.0, 0.0, 0.0, 0.0, np.radians(2.0)])
+    turns, pivots = stance_tiptoe(foot, ankle, Q, hip, reach, weight, bend)
+    assert np.allclose(turns[[1, 2]], [0.0, 0.0, 0.0, 1.0])  # reaches; weight 0
+    front = foot.toe_point(ankle[:1], Q[:1])[0]
+    moved = pivots[0] + Rotation.from_quat(turns[0]).apply(ankle[0] - pivots[0])
+    assert np.allclose(pivots[0], front)  # about the front contact point
+    assert np.linalg.norm(hip[0] - moved) == pytest.approx(reach, abs=1e-5)  # the least turn that reaches
+    assert moved[2] > ankle[0, 2]  # heel up
+    axis = Rotation.from_quat(turns[0]).as_rotvec()
+    assert abs(axis[0]) < 1e-12 and abs(axis[2]) < 1e-12  # about the foot's lateral axis: no roll
+    angle = Rotation.from_quat(turns).magnitude()
+    assert 0.0 < angle[0] < TIPTOE_LEAST
+    assert angle[3] == pytest.approx(0.5 * angle[0], rel=1e-6)  # a part weight: part of the turn
+    # bounded: a hip far out of reach gets the bound (the larger of the bend and TIPTOE_LEAST)
+    far = np.tile(ankle[0] + 0.60 * np.array([np.sin(0.3), 0.0, np.cos(0.3)]), (2, 1))
+    t2, _ = stance_tiptoe(foot, ankle[:2], Q[:2], far, reach, np.ones(2), np.array([0.0, np.radians(40.0)]))
+    assert Rotation.from_quat(t2).magnitude() == pytest.approx([TIPTOE_LEAST, np.radians(40.0)], rel=1e-6)

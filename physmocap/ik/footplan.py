@@ -31,7 +31,10 @@ front edge.  Its toe contact is planned by that edge (:class:`RigidFoot`: horizo
 its front contact site, vertically its lowest material point, both carried by the
 ankle's targets), and where its heel is not planned the whole foot moves by the
 edge's vertical offset, so the held edge and the targets agree through the roll
-instead of the plan holding its ball at its flat-stance height.  Leaving the floor, where
+instead of the plan holding its ball at its flat-stance height.  Where only that edge is
+planned and the leg would not reach the ankle, the foot rises heel first about the edge,
+as the actor's hind foot does over its bending toes (:func:`stance_tiptoe`), rather than the
+body coming down for it (:func:`pelvis_drop`).  Leaving the floor, where
 the actor's toes are still bent, such a foot is pitched towards level just enough to clear
 the floor (:func:`swing_flatten`).
 
@@ -56,7 +59,7 @@ import numpy as np
 from ..spill import release
 from .easing import smoothstep
 
-__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "toe_bend", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
+__all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "stance_tiptoe", "toe_bend", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
 
 def contact_intervals(label: np.ndarray) -> list[tuple[int, int]]:
@@ -314,6 +317,7 @@ def planted_positions(
     toe_sites: Mapping[str, "ToeContact"] | None = None,
     *,
     rigid_feet: Mapping[str, tuple["RigidFoot", np.ndarray]] | None = None,
+    toe_bends: Mapping[str, np.ndarray] | None = None,
     in_place: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Targets with both feet planted: ``(new positions (F, N, 3), foot offsets (F, 2, 2))``.
@@ -343,7 +347,13 @@ def planted_positions(
             None or a missing side: that foot's toes lie flat in contact.
         rigid_feet: Side -> ``(RigidFoot, (F, 4) ankle orientation targets)`` of a foot
             without toe joints: its toe contact is planned by its own front edge
-            (:meth:`RigidFoot.toe_point`) and the whole foot moves as one.
+            (:meth:`RigidFoot.toe_point`) and the whole foot moves as one; where only its
+            toes are planned it pitches heel up about that edge for its leg to reach it, by
+            at most the actor's toe bend (:func:`stance_tiptoe`; the orientation targets are
+            turned in place).
+        toe_bends: Side -> ``(F,)`` the actor's toe bend (radians, :func:`toe_bend`; a side
+            without one: 0, the turn bounded by :data:`TIPTOE_LEAST`); None: rigid feet are
+            not pitched.
         in_place: Plan ``positions`` themselves (a writeable float64 array the caller gives
             up; each column is read before it is changed) and return them: one
             ``(F, N, 3)`` copy less, the same numbers.  Positions in a temporary file
@@ -414,6 +424,9 @@ def planted_positions(
         if side in leg_lengths and hip in col and knee in col:
             feet[col[knee]] = True
             legs.append((side, col[hip], col[knee], col[ankle], leg_lengths[side], plan.weight))
+            if rigid is not None and toe_bends is not None:
+                _tiptoe(out, col, side, rigid, REACH * sum(leg_lengths[side]),
+                        plan.z_weight["front"] * (1.0 - plan.z_weight[ankle]), toe_bends.get(side, np.zeros(F)))
         release(out)  # positions in a temporary file (physmocap.spill): the pages read leave the memory
     if legs:
         hips = np.stack([out[:, h] for _, h, _, _, _, _ in legs], axis=1)
@@ -429,6 +442,26 @@ def planted_positions(
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
             release(out)
     return out, offsets
+
+
+def _tiptoe(out: np.ndarray, col: Mapping[str, int], side: str, rigid: tuple["RigidFoot", np.ndarray], reach: float,
+            weight: np.ndarray, bend: np.ndarray) -> None:
+    """``side``'s rigid foot targets in ``out`` (and its orientation targets ``rigid[1]``, in
+    place) pitched heel up about the front edge where its leg would not reach
+    (:func:`stance_tiptoe`)."""
+    from ..rotations import quat_apply, quat_mul
+
+    foot, orientation = rigid
+    cols = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
+    turns, pivots = stance_tiptoe(foot, out[:, col[f"{side}_ankle"]], orientation, out[:, col[f"{side}_hip"]], reach,
+                                  weight, bend)
+    rows = np.flatnonzero(turns[:, 3] < 1.0)
+    if not rows.size:
+        return
+    for c in cols:
+        p = np.asarray(out[rows, c], dtype=float)
+        out[rows, c] = pivots[rows] + quat_apply(turns[rows], p - pivots[rows])
+    orientation[rows] = quat_mul(turns[rows], np.asarray(orientation[rows], dtype=float))
 
 
 #: Bisection steps of :func:`swing_flatten` (the turn found to :math:`2^{-20}` of the foot's pitch).
@@ -499,6 +532,77 @@ def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
         lo = np.where(ok, lo, mid)
     out[rows] = turn(w * hi)
     return out
+
+
+#: Radians a rigid foot may always rise on its front edge in stance (:func:`stance_tiptoe`),
+#: where the actor's toes bend less: the character's leg, scaled, is not the actor's, and a
+#: straight trailing leg may need a few degrees more heel than the actor's own (the bundled
+#: robot on the CMU walk, up to 10 beyond the toe bend).
+TIPTOE_LEAST = float(np.radians(15.0))
+
+
+def stance_tiptoe(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray, hip: np.ndarray, reach: float,
+                  weight: np.ndarray, most: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    r"""``((F, 4) turns x-y-z-w, (F, 3) pivots)``: a rigid foot on its front edge pitched heel
+    up about that edge, just enough for its leg to reach it (the identity elsewhere; applied to
+    the foot's targets as :math:`P + r\,(p - P)` and to its orientation as :math:`r\,Q`).
+
+    The actor rolls over its toes in late stance: its heel rises, the toes bend, and its leg
+    stays straight.  A rigid foot follows the actor's ankle-to-toe-tip line
+    (:mod:`physmocap.ik.rigidfoot`), flatter than the actor's hind foot by the toes' bend, and
+    its plan puts the front edge on the floor: its ankle comes out lower than the leg reaches,
+    and the whole body came down for it (:func:`pelvis_drop`: the bundled robot on the CMU
+    walk, 2-3 cm at every toe-off, its pelvis moving vertically at twice the actor's speed).
+    So on the frames where only its toes are planned (``weight (F,)``, 0..1 eased) the foot is
+    turned about its front contact point (:meth:`RigidFoot.toe_point`), heel up about its own
+    lateral axis, by the least angle :math:`\delta \in [0, b]` at which the ankle target
+    ``ankle (F, 3)`` lies within ``reach`` of the hip target ``hip (F, 3)`` (bisection,
+    :data:`FLATTEN_STEPS`), then scaled by ``weight``.  The bound :math:`b` is the actor's toe
+    bend ``most (F,)`` (radians, :func:`toe_bend`: the turn stands in for the toes the foot
+    lacks, as the hind foot's pitch is the toe-tip line's plus the bend), at least
+    :data:`TIPTOE_LEAST`; where even :math:`b` does not reach, the foot turns by :math:`b` and
+    the body comes down the rest.  A leg that reaches as it is, or that a turn does not bring
+    nearer, is left alone.  Metres, radians."""
+    from ..rotations import quat_apply, quat_conj, quat_mul
+
+    F = len(orientation)
+    turns = np.zeros((F, 4))
+    turns[:, 3] = 1.0
+    pivots = np.asarray(ankle, dtype=float).copy()
+    w = np.asarray(weight, dtype=float)
+    b = np.maximum(np.asarray(most, dtype=float), TIPTOE_LEAST)
+    a_all, h_all = np.asarray(ankle, dtype=float), np.asarray(hip, dtype=float)
+    rows = np.flatnonzero((w > 0.0) & (b > 0.0) & (np.linalg.norm(h_all - a_all, axis=1) > reach))
+    if not rows.size:
+        return turns, pivots
+    a, h, q = a_all[rows], h_all[rows], np.asarray(orientation, dtype=float)[rows]
+    p = foot.toe_point(a, q)
+    R = quat_mul(q, quat_conj(foot.rest_quat))
+    f0 = _level_unit(foot.front)
+    side = quat_apply(R, np.broadcast_to(np.cross(f0, [0.0, 0.0, 1.0]), a.shape))
+
+    def turn(angle: np.ndarray) -> np.ndarray:
+        """Heel up by ``angle``: toes down about f x up (a positive turn raises the toes)."""
+        half = -0.5 * angle
+        return np.concatenate([side * np.sin(half)[:, None], np.cos(half)[:, None]], axis=1)
+
+    def distance(angle: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(h - (p + quat_apply(turn(angle), a - p)), axis=1)
+
+    hi = b[rows].copy()
+    useful = distance(hi) < distance(np.zeros(len(rows)))
+    hi[~useful] = 0.0
+    lo = np.zeros(len(rows))
+    far = distance(hi) > reach  # not reached even at the bound: the bound (the body comes down the rest)
+    lo[far] = hi[far]
+    for _ in range(FLATTEN_STEPS):
+        mid = 0.5 * (lo + hi)
+        ok = distance(mid) <= reach
+        hi = np.where(ok, mid, hi)
+        lo = np.where(ok, lo, mid)
+    turns[rows] = turn(hi * w[rows])
+    pivots[rows] = p
+    return turns, pivots
 
 
 def toe_bend(ankle: np.ndarray, toe: np.ndarray, toe_end: np.ndarray) -> np.ndarray:

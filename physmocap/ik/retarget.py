@@ -394,11 +394,13 @@ def plan_targets(
             orientation = level_roll(orientation, foot.rest_quat, _toes_only_weights(labels, side, targets.fps, plant.ease_time))
             _set_columns(levelled.orientations, [i], orientation[:, None])
             rigid[side] = (foot, orientation)
+    bends = toe_bends() if rigid and toe_bends is not None else {}  # read only for rigid feet
     _, offsets = planted_positions(
         levelled.positions, targets.names, labels, targets.fps, plant.ease_time, planting.leg_lengths(), planting.stance_heights(),
-        planting.toe_contacts(), rigid_feet=rigid, in_place=True,
+        planting.toe_contacts(), rigid_feet=rigid, toe_bends=bends, in_place=True,
     )
-    bends = toe_bends() if rigid and toe_bends is not None else {}  # read only for rigid feet
+    for side, (_, orientation) in rigid.items():  # pitched heel up where only the toes are down
+        _set_columns(levelled.orientations, [targets.names.index(f"{side}_ankle")], orientation[:, None])
     for side, (foot, orientation) in rigid.items():  # swing feet pitched clear of the floor
         _flatten_swing(levelled, side, foot, orientation, 1.0 - _contact_weights(labels, side, targets.fps, plant.ease_time),
                        plant.clearance, bends.get(side))

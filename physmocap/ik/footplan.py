@@ -449,8 +449,6 @@ def _tiptoe(out: np.ndarray, col: Mapping[str, int], side: str, rigid: tuple["Ri
     """``side``'s rigid foot targets in ``out`` (and its orientation targets ``rigid[1]``, in
     place) pitched heel up about the front edge where its leg would not reach
     (:func:`stance_tiptoe`)."""
-    from ..rotations import quat_apply, quat_mul
-
     foot, orientation = rigid
     cols = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
     turns, pivots = stance_tiptoe(foot, out[:, col[f"{side}_ankle"]], orientation, out[:, col[f"{side}_hip"]], reach,
@@ -458,10 +456,10 @@ def _tiptoe(out: np.ndarray, col: Mapping[str, int], side: str, rigid: tuple["Ri
     rows = np.flatnonzero(turns[:, 3] < 1.0)
     if not rows.size:
         return
-    for c in cols:
-        p = np.asarray(out[rows, c], dtype=float)
-        out[rows, c] = pivots[rows] + quat_apply(turns[rows], p - pivots[rows])
-    orientation[rows] = quat_mul(turns[rows], np.asarray(orientation[rows], dtype=float))
+    # turned about the pivot as turn_foot turns about the ankle
+    moved, orientation[rows] = turn_foot(turns[rows], pivots[rows], out[rows][:, cols], orientation[rows])
+    for k, c in enumerate(cols):
+        out[rows, c] = moved[:, k]
 
 
 #: Bisection steps of :func:`swing_flatten` (the turn found to :math:`2^{-20}` of the foot's pitch).

@@ -987,15 +987,24 @@ class Planting:
 
     def clearance_sites(self) -> dict[int, float]:
         """Site id -> clearance height for this frame's swing sites (after :meth:`step`): free
-        sites that have not been down since their foot last swung.  A heel lifting off while
-        its toes are still down is not swinging: held up to the clearance at once, it rose
-        12 mm in one frame at every heel-off (and the pelvis with it); a toe still coming
-        down after its heel keeps the clearance until it lands."""
+        sites that have not been down since their foot last swung, of a foot none of whose
+        sites is held.  A heel lifting off while its toes are still down is not swinging:
+        held up to the clearance at once, it rose 12 mm in one frame at every heel-off (and
+        the pelvis with it).  Offline, nor is a rigid foot's front edge coming down after its
+        heel (its geoms' clearance already eases out as it lands, :meth:`clearance_bodies`):
+        held 12 mm up until its own label began, the foot slapped flat in one frame (the
+        bundled robot on the CMU walk: its toe site 10-12 mm down in that frame at every heel
+        strike, and the pelvis 4-5 mm with it); the floor still bounds it.  A foot with toes
+        keeps the clearance there (without it, a hand of an all-fours fixture hovered
+        13-18 mm), and so does a stream (mixed on the streamed walks; docs/history.md, stop 35)."""
         c = self.options.clearance
         if not self.options.plant or c <= 0:
             return {}
         locks = self.locks
-        return {t.site_id: c for t, f, down in zip(locks.tasks, locks.free, locks.landed) if f and not down}
+        held = {side: not self.anchored and self._rigid[side] and any(not locks.free[k] for k in ks)
+                for side, ks in self._side_sites.items()}
+        return {t.site_id: c for t, f, down, side in zip(locks.tasks, locks.free, locks.landed, self._site_side)
+                if f and not down and not held[side]}
 
     def _heading_follower(self, character) -> HeadingFollower:
         """The :class:`~.footturn.HeadingFollower` of this character's feet (offline planting)."""

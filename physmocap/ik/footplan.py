@@ -34,7 +34,9 @@ edge's vertical offset, so the held edge and the targets agree through the roll
 instead of the plan holding its ball at its flat-stance height.  Where only that edge is
 planned and the leg would not reach the ankle, the foot rises heel first about the edge,
 as the actor's hind foot does over its bending toes (:func:`stance_tiptoe`), rather than the
-body coming down for it (:func:`pelvis_drop`).  Leaving the floor, where
+body coming down for it (:func:`pelvis_drop`); what the turn cannot reach the body comes down
+for, and the foot is then turned again for the hip where it ends up (the drop is smoothed over
+its neighbours' frames, and a foot turned for the hip before it left the leg bent).  Leaving the floor, where
 the actor's toes are still bent, such a foot is pitched towards level just enough to clear
 the floor (:func:`swing_flatten`).
 
@@ -350,7 +352,7 @@ def planted_positions(
             (:meth:`RigidFoot.toe_point`) and the whole foot moves as one; where only its
             toes are planned it pitches heel up about that edge for its leg to reach it, by
             at most the actor's toe bend (:func:`stance_tiptoe`; the orientation targets are
-            turned in place).
+            turned in place), turned again for the hip as the body's drop leaves it.
         toe_bends: Side -> ``(F,)`` the actor's toe bend (radians, :func:`toe_bend`; a side
             without one: 0, the turn bounded by :data:`TIPTOE_LEAST`); None: rigid feet are
             not pitched.
@@ -366,6 +368,7 @@ def planted_positions(
     col = {n: i for i, n in enumerate(names)}
     feet = np.zeros(len(names), dtype=bool)
     legs = []
+    tiptoes = []  # the rigid feet turned heel up: (arguments of _tiptoe, what it changed)
     for s, side in enumerate(("left", "right")):
         ankle = f"{side}_ankle"
         if ankle not in col:
@@ -425,8 +428,9 @@ def planted_positions(
             feet[col[knee]] = True
             legs.append((side, col[hip], col[knee], col[ankle], leg_lengths[side], plan.weight))
             if rigid is not None and toe_bends is not None:
-                _tiptoe(out, col, side, rigid, REACH * sum(leg_lengths[side]),
+                args = (out, col, side, rigid, REACH * sum(leg_lengths[side]),
                         plan.z_weight["front"] * (1.0 - plan.z_weight[ankle]), toe_bends.get(side, np.zeros(F)))
+                tiptoes.append((args, _tiptoe(*args)))
         release(out)  # positions in a temporary file (physmocap.spill): the pages read leave the memory
     if legs:
         hips = np.stack([out[:, h] for _, h, _, _, _, _ in legs], axis=1)
@@ -437,6 +441,13 @@ def planted_positions(
         for i in np.flatnonzero(~feet):  # column by column: spilled positions map one in at a time
             out[:, i, 2] -= drop
             release(out)
+        for args, undo in tiptoes:
+            # turned again from where they were, for the hips as they came down: the drop is
+            # smoothed over its neighbours' frames, and a foot turned for the hip before it
+            # left its leg bent (the G1's trailing knee on the CMU walk, 29 degrees where the
+            # actor's is 5-14)
+            _untiptoe(out, args[3][1], undo)
+            _tiptoe(*args)
         for side, h, k, a, (l1, l2), _ in legs:
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
             out[:, k] = knee_between(out[:, h], out[:, a], knee0, l1, l2, _foot_forward(out, col, side))
@@ -445,21 +456,32 @@ def planted_positions(
 
 
 def _tiptoe(out: np.ndarray, col: Mapping[str, int], side: str, rigid: tuple["RigidFoot", np.ndarray], reach: float,
-            weight: np.ndarray, bend: np.ndarray) -> None:
+            weight: np.ndarray, bend: np.ndarray) -> tuple[np.ndarray, list[int], np.ndarray, np.ndarray]:
     """``side``'s rigid foot targets in ``out`` (and its orientation targets ``rigid[1]``, in
-    place) pitched heel up about the front edge where its leg would not reach
-    (:func:`stance_tiptoe`)."""
+    place) pitched heel up about the front edge where its leg would not reach the hip target
+    in ``out`` (:func:`stance_tiptoe`).  Returns what it changed, for :func:`_untiptoe`: the
+    rows, the columns, and their points ``(R, K, 3)`` and orientations ``(R, 4)`` before."""
     foot, orientation = rigid
     cols = [col[f"{side}_{j}"] for j in FOOT_JOINTS if f"{side}_{j}" in col]
     turns, pivots = stance_tiptoe(foot, out[:, col[f"{side}_ankle"]], orientation, out[:, col[f"{side}_hip"]], reach,
                                   weight, bend)
     rows = np.flatnonzero(turns[:, 3] < 1.0)
-    if not rows.size:
-        return
-    # turned about the pivot as turn_foot turns about the ankle
-    moved, orientation[rows] = turn_foot(turns[rows], pivots[rows], out[rows][:, cols], orientation[rows])
+    points = np.asarray(out[rows][:, cols], dtype=float)
+    before = (rows, cols, points, np.array(orientation[rows], dtype=float))
+    if rows.size:
+        # turned about the pivot as turn_foot turns about the ankle
+        moved, orientation[rows] = turn_foot(turns[rows], pivots[rows], points, orientation[rows])
+        for k, c in enumerate(cols):
+            out[rows, c] = moved[:, k]
+    return before
+
+
+def _untiptoe(out: np.ndarray, orientation: np.ndarray, before: tuple[np.ndarray, list[int], np.ndarray, np.ndarray]) -> None:
+    """Put back what :func:`_tiptoe` changed in ``out`` and ``orientation``."""
+    rows, cols, points, turned_from = before
     for k, c in enumerate(cols):
-        out[rows, c] = moved[:, k]
+        out[rows, c] = points[:, k]
+    orientation[rows] = turned_from
 
 
 #: Bisection steps of :func:`swing_flatten` (the turn found to :math:`2^{-20}` of the foot's pitch).

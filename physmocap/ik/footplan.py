@@ -368,7 +368,7 @@ def planted_positions(
     col = {n: i for i, n in enumerate(names)}
     feet = np.zeros(len(names), dtype=bool)
     legs = []
-    tiptoes = []  # the rigid feet turned heel up: (arguments of _tiptoe, what it changed)
+    tiptoes = []  # the rigid feet turned heel up: (orientation targets, arguments of _tiptoe, what it changed)
     for s, side in enumerate(("left", "right")):
         ankle = f"{side}_ankle"
         if ankle not in col:
@@ -430,7 +430,7 @@ def planted_positions(
             if rigid is not None and toe_bends is not None:
                 args = (out, col, side, rigid, REACH * sum(leg_lengths[side]),
                         plan.z_weight["front"] * (1.0 - plan.z_weight[ankle]), toe_bends.get(side, np.zeros(F)))
-                tiptoes.append((args, _tiptoe(*args)))
+                tiptoes.append((rigid[1], args, _tiptoe(*args)))
         release(out)  # positions in a temporary file (physmocap.spill): the pages read leave the memory
     if legs:
         hips = np.stack([out[:, h] for _, h, _, _, _, _ in legs], axis=1)
@@ -441,12 +441,12 @@ def planted_positions(
         for i in np.flatnonzero(~feet):  # column by column: spilled positions map one in at a time
             out[:, i, 2] -= drop
             release(out)
-        for args, undo in tiptoes:
+        for orientation, args, undo in tiptoes:
             # turned again from where they were, for the hips as they came down: the drop is
             # smoothed over its neighbours' frames, and a foot turned for the hip before it
             # left its leg bent (the G1's trailing knee on the CMU walk, 29 degrees where the
             # actor's is 5-14)
-            _untiptoe(out, args[3][1], undo)
+            _untiptoe(out, orientation, undo)
             _tiptoe(*args)
         for side, h, k, a, (l1, l2), _ in legs:
             knee0 = positions[:, k] - np.array([0.0, 0.0, 1.0]) * drop[:, None]
@@ -555,9 +555,11 @@ def swing_flatten(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
 
 
 #: Radians a rigid foot may always rise on its front edge in stance (:func:`stance_tiptoe`),
-#: where the actor's toes bend less: the character's leg, scaled, is not the actor's, and a
-#: straight trailing leg may need a few degrees more heel than the actor's own (the bundled
-#: robot on the CMU walk, up to 10 beyond the toe bend).
+#: where the actor's toes bend less (or the actor has no toe tips to tell): the character's
+#: leg, scaled, is not the actor's, and a straight trailing leg may need a few degrees more
+#: heel than the actor's own.  A generous bound, not a fit: on the shared walks the robots
+#: needed up to 10 degrees beyond the toe bend (the bundled robot on the CMU walk), and any
+#: bound from 10 up gave the same figures there; what it does not reach the body comes down for.
 TIPTOE_LEAST = float(np.radians(15.0))
 
 
@@ -592,7 +594,7 @@ def stance_tiptoe(foot: "RigidFoot", ankle: np.ndarray, orientation: np.ndarray,
     w = np.asarray(weight, dtype=float)
     b = np.maximum(np.asarray(most, dtype=float), TIPTOE_LEAST)
     a_all, h_all = np.asarray(ankle, dtype=float), np.asarray(hip, dtype=float)
-    rows = np.flatnonzero((w > 0.0) & (b > 0.0) & (np.linalg.norm(h_all - a_all, axis=1) > reach))
+    rows = np.flatnonzero((w > 0.0) & (np.linalg.norm(h_all - a_all, axis=1) > reach))
     if not rows.size:
         return turns, pivots
     a, h, q = a_all[rows], h_all[rows], np.asarray(orientation, dtype=float)[rows]

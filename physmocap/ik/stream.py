@@ -58,7 +58,7 @@ from .frame import FrameRetargeter
 from .retarget import map_motion
 from .targets import Targets, build_targets, character_rest_frames
 
-__all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS"]
+__all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS", "streaming_config", "streaming_iterations"]
 
 #: A live frame has a deadline: fewer floor clean-up iterations and a looser constraint
 #: tolerance than offline by default (applied when no ``config`` is given).  Eight IK
@@ -80,6 +80,34 @@ __all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS"]
 STREAMING_DEFAULTS = {"max_iterations": 8, "floor_iterations": 2, "constraint_tolerance": 1e-4, "smoothness_cost": 0.5,
                       "catch_up": 0.0, "pivot_threshold": math.radians(10.0)}
 
+#: Hz.  ``STREAMING_DEFAULTS["max_iterations"]`` is the budget of a frame at this rate; at a
+#: lower rate a frame gets as many more as keep the same iterations per second of motion
+#: (:func:`streaming_config`), up to :data:`STREAMING_MAX_ITERATIONS`.  Between two 30 fps
+#: frames the targets move four times as far as at 120 Hz, and eight iterations did not
+#: reach them: the streamed pelvis fell 5-7 cm behind its target through every stance and
+#: caught up in one frame (docs/history.md, stop 36).
+STREAMING_REFERENCE_RATE = 120.0
+#: The most IK iterations a streamed frame gets by default, whatever its rate (a bound on
+#: a slow source's worst-case latency; 30 fps gets 32).
+STREAMING_MAX_ITERATIONS = 48
+
+
+def streaming_iterations(fps: float) -> int:
+    r"""Default IK iterations a frame for a stream at ``fps`` (frames/s):
+    :math:`\min(M, \max(n, \lceil n\,f_0 / f \rceil))` with :math:`n` the budget at the
+    reference rate :math:`f_0` (:data:`STREAMING_REFERENCE_RATE`) and :math:`M` =
+    :data:`STREAMING_MAX_ITERATIONS`: the same iterations per second of motion as at
+    :math:`f_0`, never fewer than :math:`n` a frame."""
+    n = int(STREAMING_DEFAULTS["max_iterations"])
+    need = math.ceil(n * STREAMING_REFERENCE_RATE / float(fps) - 1e-9)
+    return int(min(STREAMING_MAX_ITERATIONS, max(n, need)))
+
+
+def streaming_config(fps: float) -> RetargetConfig:
+    """The default configuration of a stream at ``fps``: :data:`STREAMING_DEFAULTS` with
+    :func:`streaming_iterations` a frame."""
+    return RetargetConfig().with_options(**{**STREAMING_DEFAULTS, "max_iterations": streaming_iterations(fps)})
+
 
 class StreamingRetargeter:
     """Causal frame-by-frame retargeter for one actor and one character.
@@ -88,7 +116,8 @@ class StreamingRetargeter:
         character: A :class:`~physmocap.models.Character` (or a path / bundled
             name; None = the default humanoid).
         config: The :class:`~physmocap.ik.config.RetargetConfig`; None takes the
-            defaults with :data:`STREAMING_DEFAULTS`.  ``config.targets.source_floor``
+            defaults with :data:`STREAMING_DEFAULTS` (:func:`streaming_config`: more
+            iterations a frame below 120 frames/s).  ``config.targets.source_floor``
             is the actor's floor in the source world (metres); None takes it from
             the first frame.
         skeleton: The source skeleton (names, parents, rest offsets).
@@ -126,7 +155,7 @@ class StreamingRetargeter:
         self.fps = float(fps)
         self.translated = np.zeros(0, dtype=np.int64) if translated is None else np.asarray(translated, dtype=np.int64)
         if config is None:
-            config = RetargetConfig().with_options(**STREAMING_DEFAULTS)
+            config = streaming_config(self.fps)
         self.config = config.with_options(**options) if options else config
         self.source = str(source)
         self._profile, self._mapping = profile, mapping
@@ -310,7 +339,7 @@ def stream_motion(motion: Motion, character=None, config: RetargetConfig | None 
     seconds, the whole frame: targets, contacts and IK)."""
     mapping = options.pop("mapping", None) or motion.meta.get("source_mapping")
     if config is None:
-        config = RetargetConfig().with_options(**STREAMING_DEFAULTS)
+        config = streaming_config(motion.fps)
     if options:
         config = config.with_options(**options)
     if config.targets.source_floor is None and motion.meta.get("floor_z") is not None:

@@ -211,11 +211,14 @@ def test_a_held_foot_does_not_swing_round_as_it_lifts():
     off its target heading, through a 1.2 s stance; when its heel lifted (frames 355-361) the
     foot swung round its held toe tip and the heel swivelled 10 cm on the floor (535 cm/s
     on one frame; foot slip 2.41 cm/s over the clip).  Held feet now turn towards their
-    target heading (physmocap.ik.footturn).  The clip's foot slip is now about 1 cm/s: most
-    of it is the actor's own feet gliding along the floor, unlabelled (frames 140-160 on the
-    left toes, 350-360 on the left heel: 15-40 cm/s), which the character follows; since the
-    velocity caps are eased (physmocap.ik.speedcaps) one more of those frames rests within
-    2 mm (0.97 -> 1.01 cm/s)."""
+    target heading (physmocap.ik.footturn).  The clip's foot slip was then about 1 cm/s
+    (1.01 at stop 35, over the issue's bound).  Half of it was not the actor's: standing on
+    its toes with the foot rolled (frames 140-160, 720-775), the humanoid's toe segment rested
+    on one end of its capsule while the hold sat at the site in its middle, and the foot,
+    turning about the site, swept that end round over the floor.  Held on the end it rests
+    on (FootPlanter._follow_contact), 0.42 cm/s; most of what is left is the actor's left heel
+    gliding 15-40 cm/s along the floor, unlabelled (frames 350-360), which the character
+    follows."""
     from physmocap.metrics.fidelity import geom_floor_contact
     from physmocap.models.geometry import foot_bodies
 
@@ -229,7 +232,7 @@ def test_a_held_foot_does_not_swing_round_as_it_lifts():
         if pair.resting_samples:
             worst = max(worst, pair.slip_mean_cm_s)
     assert worst < 100.0, worst
-    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 1.05
+    assert trajectory_fidelity(traj).floor.slip_mean_cm_s < 0.8
 
 
 def test_crouched_legs_point_their_knees_where_the_actor_does():

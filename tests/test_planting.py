@@ -259,7 +259,11 @@ def test_the_ball_stays_where_it_rests_while_the_foot_rolls_over_its_toes(clip):
     (CMU walk) and 5.4 cm/s (PyMO walk) mean while within 5 mm of the floor.  Now it is held
     where it rests, not pulled down, until it lifts (PlanHints.lifting): 0.4 and 2.5 cm/s; 3.1
     on the PyMO walk since a frame far from its targets gets more iterations (catch_up), which
-    let its foot roll a little further on the frames the ball is held."""
+    let its foot roll a little further on the frames the ball is held; 3.7 since a toe tip
+    tipped onto the end of its capsule is held on that end (FootPlanter._follow_contact): a
+    foot turned with the actor's turns its held ball about that end, 3 cm further off than the
+    tip's site (the PyMO walk's frames 904-906, 8-11 cm/s; the foot's slip, pivots excepted,
+    0.77 -> 0.30 cm/s)."""
     _, traj = retargeted(clip, "humanoid")
     labels, speeds = traj.contacts.labels, []
     for side in ("left", "right"):
@@ -269,7 +273,7 @@ def test_the_ball_stays_where_it_rests_while_the_foot_rolls_over_its_toes(clip):
         both = rolling[1:] & rolling[:-1] & low[1:] & low[:-1]
         speeds.append(np.linalg.norm(np.diff(pos[:, :2], axis=0), axis=1)[both] * traj.fps * 100.0)
     speeds = np.concatenate(speeds)
-    assert speeds.size > 10 and speeds.mean() < 3.5, (speeds.size, speeds.mean())
+    assert speeds.size > 10 and speeds.mean() < 4.2, (speeds.size, speeds.mean())
 
 
 def test_a_lost_toe_target_does_not_let_a_streamed_toe_go():
@@ -385,3 +389,95 @@ def test_toes_bend_through_toe_off_without_snapping_at_their_cap():
     toes = [j for j, n in enumerate(names) if "toe" in n]
     running = sat[1:, toes] & sat[:-1, toes]
     assert not running.any(), [names[toes[j]] for j in np.flatnonzero(running.any(axis=0))]
+
+
+def test_a_toe_tip_tipped_onto_the_end_of_its_capsule_is_held_there():
+    """A foot with toes standing on them alone (offline, ``rolling``): its toe-tip site is held
+    while the toes rest level; rolled (an inverted foot on its toes, a dancer's turn), the
+    toe segment's capsule rests on one end, the site is off the floor, and the hold moves to
+    the end it rests on (FootPlanter._follow_contact, as a rigid foot's corner).  Held at the
+    site, the foot turned about it and swept the resting end round over the floor: the CMU
+    dance's humanoid slipped 1.01 cm/s (its spins on the toes, frames 140-160 and 720-775;
+    0.42 now)."""
+    import mujoco
+
+    from physmocap.ik.planting import PlanHints, Planting
+    from physmocap.ik.tasks import BodyPointTask, SitePositionTask
+    from physmocap.models import load_character
+    from physmocap.models.geometry import character_geoms, geom_z_extent
+
+    ch = load_character("humanoid")
+    model = ch.model
+    planting = Planting(ch, list(ch.rest_positions()), 120.0, anchored=False)
+    locks = planting.locks
+    tip = locks.sites.index(ch.contacts["right"][-1])
+    toes = int(model.site(locks.sites[tip]).bodyid[0])
+    foot = {toes, int(model.body_parentid[toes])}
+    geoms = [g for g in character_geoms(model, collision_only=True) if model.geom_bodyid[g] in foot]
+    data = ch.rest_data()
+
+    def pose(roll: float, lift: float = 0.0) -> None:
+        """Heel up 29 degrees, toes bent as much (they lie level), the foot inverted by ``roll``,
+        lowered onto the floor (+ ``lift``)."""
+        mujoco.mju_copy(data.qpos, ch.rest_data().qpos)
+        data.qpos[model.joint("right_ankle_dorsiflexion").qposadr[0]] = -0.5
+        data.qpos[model.joint("right_toe_extension").qposadr[0]] = 0.5
+        data.qpos[model.joint("right_ankle_inversion").qposadr[0]] = roll
+        mujoco.mj_kinematics(model, data)
+        data.qpos[2] += lift - min(geom_z_extent(model, data, g)[0] for g in geoms)
+        mujoco.mj_kinematics(model, data)
+
+    flags = np.zeros(len(locks.sites), dtype=bool)
+    flags[tip] = True
+    hints = PlanHints(rolling=flags.copy(), holdable=np.ones_like(flags))
+
+    def hold():
+        _, hard, _ = locks.update(flags, data, hints)
+        (task,) = [t for t in hard if getattr(t, "site_id", None) == model.site(locks.sites[tip]).id
+                   or getattr(t, "body", None) == toes]
+        return task
+
+    pose(0.0)  # on the toes, level: held at the site
+    assert isinstance(hold(), SitePositionTask)
+    pose(0.25)  # rolled 14 degrees: on one end of the capsule
+    task = hold()
+    assert isinstance(task, BodyPointTask)
+    end = task.point(data)
+    assert abs(end[2]) < 1e-6 and np.allclose(task.target[:2], end[:2])
+    site = data.site_xpos[model.site(locks.sites[tip]).id]
+    assert site[2] > 0.005 and np.linalg.norm(site[:2] - end[:2]) > 0.02  # the site is off the floor, to the side
+    pose(0.0)  # level again: back on the site, where it is
+    task = hold()
+    assert isinstance(task, SitePositionTask)
+    assert np.allclose(task.target[:2], data.site_xpos[task.site_id, :2])
+    pose(0.25, lift=0.004)  # rolled, but still coming down: the site
+    assert isinstance(hold(), SitePositionTask)
+
+
+def test_a_held_toe_tip_keeps_a_soft_hold_until_the_landing_heel_is_held():
+    """Offline, the toes of a flat foot are not held (its heel and ball fix it), so a toe tip
+    lets go once the heel is labelled.  But the heel is held only once it is down, and at
+    30 fps it is often labelled a frame before: for that frame nothing held the foot, and it
+    slid over the floor towards its plan (the Bandai punch: 1-5 cm in one frame).  A toe tip
+    held when the heel is labelled keeps its hold, softly, until the heel is held
+    (``PlanHints.soft``); then it lets go."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("humanoid")
+    names = tuple(ch.rest_positions())
+    planting = Planting(ch, names, 30.0, anchored=False)
+    data = ch.rest_data()  # standing on the floor: every contact site down
+    rest = np.array([ch.rest_positions()[n] for n in names])
+    tip_id, heel_id = (int(ch.model.site(s).id) for s in (ch.contacts["right"][-1], ch.contacts["right"][0]))
+
+    def holds(right_heel: bool) -> tuple[bool, bool, bool]:
+        """(tip held hard, tip held softly, heel held hard) on the next frame."""
+        labels = {"left_heel": True, "left_toe": True, "right_heel": right_heel, "right_toe": True}
+        _, soft, hard, _ = planting.step(rest, labels, data)
+        on = lambda tasks, i: any(getattr(t, "site_id", None) == i and t.axes == (0, 1) for t in tasks)  # its horizontal hold
+        return on(hard, tip_id), on(soft, tip_id), on(hard, heel_id)
+
+    assert holds(False) == (True, False, False)  # on the toes: the tip held, the heel free
+    assert holds(True) == (False, True, True)  # the heel labelled and caught: the tip held softly
+    assert holds(True) == (False, False, True)  # the heel held: the tip lets go

@@ -75,6 +75,11 @@ TIP_HEIGHT = 0.002
 PATCH_TIE = 0.001
 #: Metres a tipped foot's resting patch may move on the foot before its hold moves with it.
 PATCH_MOVE = 0.005
+#: Seconds from the start of a heel's label over which a toe tip held as it starts keeps a soft
+#: hold while the heel is not held yet (:meth:`Planting.step`): a heel is labelled up to a
+#: frame of a 30 fps clip before it is down.  Longer, a heel labelled while the actor's foot
+#: rose 3 cm (the Bandai punch, frames 172-176) kept the foot on the floor.
+LANDING_HOLD_TIME = 0.04
 
 
 @dataclass
@@ -230,7 +235,8 @@ class PlanHints:
     Attributes:
         rolling: The site's height is planned by the targets (a toe segment rolling
             with the actor's, :mod:`.footplan`): held horizontally while labelled,
-            whatever its height, and not pulled down.
+            whatever its height, and not pulled down; tipped onto the end of its geom,
+            held on that end (:meth:`FootPlanter._follow_contact`).
         holdable: The site may be held (the others are only pulled down).
         lifting: The site is held horizontally while it stays down but not pulled
             down: the ball of a foot rolling over its toes, which rests where it is
@@ -248,6 +254,8 @@ class PlanHints:
             with a flat foot drags the pelvis down) and every site of a foot whose toe has let
             go (:meth:`Planting._toes_moving`: the foot lifts as a whole instead of its ball
             staying held while the toes sweep forward over the floor).  None: no such site.
+        soft: The site's hold is soft this frame: a toe tip held when its heel is labelled,
+            until the heel is held (:meth:`Planting.step`).  None: no such site.
     """
 
     rolling: np.ndarray
@@ -256,6 +264,7 @@ class PlanHints:
     pivoting: np.ndarray | None = None
     bending: np.ndarray | None = None
     released: np.ndarray | None = None
+    soft: np.ndarray | None = None
 
 
 class FootPlanter:
@@ -349,9 +358,10 @@ class FootPlanter:
         return xy if n < 1e-9 else self.anchor[j, :2] + d[j] * u / n
 
     def _follow_contact(self, k: int, data: mujoco.MjData) -> None:
-        r"""Hold a rigid foot pivoting on site ``k`` where it actually rests.
+        r"""Hold a foot pivoting on site ``k`` where it actually rests.
 
-        A rigid foot rolling over its front edge is held at its pivot site, on that edge.
+        A rigid foot rolling over its front edge is held at its pivot site, on that edge;
+        a foot on its toes alone, at its toe tip's site (``PlanHints.rolling``).
         Where it cannot keep the edge level (an ankle roll at its limit, with the foot
         turned from the leg's plane) it tips onto one corner: the site rises off the floor
         and the foot, turning about the held site, drags the corner it stands on (the
@@ -363,7 +373,11 @@ class FootPlanter:
         steeply pitched foot): fixed on the foot, held where it is when taken, taken again
         where the patch moves more than :data:`PATCH_MOVE` on the foot.  Back on the site,
         held where it is, once the site is down at its height again or the foot is off the
-        floor (its lowest point more than :data:`TIP_HEIGHT` up: still landing).
+        floor (its lowest point more than :data:`TIP_HEIGHT` up: still landing).  A toe
+        segment tips the same way: a foot rolled on its toes (an inverted foot in a turn)
+        rests on one end of the toe tip's capsule, 3 cm to the side of the site, and held at
+        the site the foot turned about it and swept that end over the floor (the CMU dance's
+        humanoid: foot slip 1.01 -> 0.42 cm/s).
         ``data``: the previous frame's solution.
 
         Measured on the bundled robot, holding the patch wherever it lies off the site
@@ -488,8 +502,9 @@ class FootPlanter:
         ``release_margin``), so a foot rises before it moves, as a planted foot
         does.  Labelled sites are pulled down onto the floor by a soft height
         task.  A swing foot that skims the floor without a label is not held.
-        Offline (``hints`` given), a rigid foot tipped onto a corner is held on that
-        corner (:meth:`_follow_contact`).
+        Offline (``hints`` given), a rigid foot or a toe segment tipped onto a corner is
+        held on that corner (:meth:`_follow_contact`), and a site ``hints.soft`` marks is
+        held softly.
 
         Args:
             in_contact: Per site, whether it is labelled in contact on this frame
@@ -543,7 +558,7 @@ class FootPlanter:
                     self.anchor[k, 2] = self.floor
                     self.locked[k] = True
                     self.on_corner[k] = False
-                if pivoting:
+                if pivoting or rolling:
                     self._follow_contact(k, data)
                 hold = self.corner[k] if self.on_corner[k] else self.xy[k]
                 hold.set_target(self.anchor[k])
@@ -551,7 +566,8 @@ class FootPlanter:
                 if hold is self.xy[k]:  # a corner hold (a rigid foot's pivot) never fades
                     hold.set_cost(opt.cost_xy * fade)
                 # a foot turning about another held point: this one held softly (FootPlanter.turn)
-                (soft if self.turning[k] or fade < 1.0 else hard).append(hold)
+                gentle = hints is not None and hints.soft is not None and bool(hints.soft[k])
+                (soft if self.turning[k] or fade < 1.0 or gentle else hard).append(hold)
             else:
                 self.locked[k] = False
                 self.on_corner[k] = False
@@ -761,6 +777,10 @@ class Planting:
         #: (a foot down on its toes alone after that rolls over them; one landing toes first
         #: does not)
         self._heel_down = {"left": False, "right": False}
+        #: offline: per side, frames since its heel's label started (0: not labelled), and the
+        #: frames of LANDING_HOLD_TIME (at least one)
+        self._heel_age = {"left": 0, "right": 0}
+        self._landing_frames = max(1, int(round(LANDING_HOLD_TIME * fps)))
         self._pivot = np.array([roles.get(site) == "pivot" for site in self.sites], dtype=bool)
         #: the side (left, right) of each site
         self._site_side = ["left" if s in character.contacts.get("left", ()) else "right" for s in self.sites]
@@ -1126,10 +1146,21 @@ class Planting:
             # toes in their landing bend, and a third held point over a straight leg made the
             # QP throw the body 18 cm sideways for a frame (Bandai walk).  Toes rolling with
             # the actor's (their height planned by the toe segment, .footplan) are held, not pulled.
+            for side in self._heel_age:
+                self._heel_age[side] = self._heel_age[side] + 1 if labels.get(f"{side}_heel", False) else 0
+            heel_held = np.array([bool(np.any(self.locks.locked[self._side_sites[side]] & self._heel_sites[self._side_sites[side]]))
+                                  or self._heel_age[side] > self._landing_frames for side in self._site_side], dtype=bool)
             waiting = toe & heel & self._toe_segment
+            # The heel labelled but not held yet (at 30 fps it is often labelled a frame before it
+            # is down): a held toe tip keeps its hold, softly, until it is, for LANDING_HOLD_TIME
+            # at most.  Let go at once, the foot was held nowhere for that frame and slid 1-5 cm
+            # towards its plan (the Bandai punch); held hard, a third hold threw the body 36 cm
+            # (the same clip).
+            landing = waiting & ~heel_held & self.locks.locked
+            waiting = waiting & ~landing
             bending = self._toes_bending(positions, first)
             hints = PlanHints(rolling=toes_only & self._rolling, holdable=~waiting, lifting=toes_only & self._release,
-                              pivoting=toes_only & self._pivot,
+                              pivoting=toes_only & self._pivot, soft=landing,
                               bending=np.array([bending.get(side, False) for side in self._site_side], dtype=bool))
         self._turn_holds(positions, orientations, valid, data, flags)  # offline and streaming alike
         tasks, hard, engaged = self.locks.update(flags, data, hints)

@@ -302,6 +302,18 @@ def test_a_lost_toe_target_does_not_let_a_streamed_toe_go():
     assert not planting._toes_moving(faster, labels, valid)["left_toe"]
 
 
+def _right_toe_hold(character: str):
+    """``(character, its offline planter's FootPlanter, the index of the right foot's last contact
+    site there, that site's body)``."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character(character)
+    locks = Planting(ch, list(ch.rest_positions()), 120.0, anchored=False).locks
+    k = locks.sites.index(ch.contacts["right"][-1])
+    return ch, locks, k, int(ch.model.site(locks.sites[k]).bodyid[0])
+
+
 def test_a_rigid_foot_tipped_onto_a_corner_is_held_on_that_corner():
     """FootPlanter._follow_contact: a rigid foot rolling over its front edge is held at its
     pivot site while the edge is level; tipped onto one corner (an ankle roll at its limit),
@@ -310,17 +322,12 @@ def test_a_rigid_foot_tipped_onto_a_corner_is_held_on_that_corner():
     a foot still coming down is not tipped."""
     import mujoco
 
-    from physmocap.ik.planting import PlanHints, Planting
+    from physmocap.ik.planting import PlanHints
     from physmocap.ik.tasks import BodyPointTask, SitePositionTask
-    from physmocap.models import load_character
     from physmocap.models.geometry import character_geoms, geom_z_extent
 
-    ch = load_character("robot")
+    ch, locks, toe, foot = _right_toe_hold("robot")
     model = ch.model
-    planting = Planting(ch, list(ch.rest_positions()), 120.0, anchored=False)
-    locks = planting.locks
-    toe = locks.sites.index(ch.contacts["right"][-1])
-    foot = int(model.site(locks.sites[toe]).bodyid[0])
     geoms = [g for g in character_geoms(model, collision_only=True) if model.geom_bodyid[g] == foot]
     data = ch.rest_data()
 
@@ -401,17 +408,12 @@ def test_a_toe_tip_tipped_onto_the_end_of_its_capsule_is_held_there():
     0.42 now)."""
     import mujoco
 
-    from physmocap.ik.planting import PlanHints, Planting
+    from physmocap.ik.planting import PlanHints
     from physmocap.ik.tasks import BodyPointTask, SitePositionTask
-    from physmocap.models import load_character
     from physmocap.models.geometry import character_geoms, geom_z_extent
 
-    ch = load_character("humanoid")
+    ch, locks, tip, toes = _right_toe_hold("humanoid")
     model = ch.model
-    planting = Planting(ch, list(ch.rest_positions()), 120.0, anchored=False)
-    locks = planting.locks
-    tip = locks.sites.index(ch.contacts["right"][-1])
-    toes = int(model.site(locks.sites[tip]).bodyid[0])
     foot = {toes, int(model.body_parentid[toes])}
     geoms = [g for g in character_geoms(model, collision_only=True) if model.geom_bodyid[g] in foot]
     data = ch.rest_data()

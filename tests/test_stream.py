@@ -321,3 +321,24 @@ def test_a_30_fps_stream_keeps_up_with_the_actor(walk):
     # a budget given is kept
     given = StreamingRetargeter(ch, skeleton=slow.skeleton, fps=slow.fps, max_iterations=3)
     assert given.config.solver.max_iterations == 3
+
+
+def test_a_streamed_toe_lets_go_of_the_floor_when_its_target_runs_off_after_its_label():
+    """A toe whose label has ended stays held until it has lifted (``lock_low``).  On the 30 fps
+    Bandai walk the humanoid's left toe tip never lifted after toe-off (frames 29-32): the foot
+    rolled about the held tip while its target ran on 8-10 cm a frame, fell 34 cm behind and
+    then jumped 11-17 cm a frame (the ankle at most 38 cm behind its target over the clip).  Now
+    it lets go once its target moves off faster than ``toe_release_speed``, as it does while
+    its label is still on (Planting._toes_moving, stop 36)."""
+    from physmocap.ik.stream import stream_motion
+    from physmocap.metrics.fidelity import character_joint_positions, figure_joints
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    traj = stream_motion(load_motion(shared_file("bandai_walk.bvh")), load_character())
+    joints = character_joint_positions(traj, figure_joints())
+    targets = traj.targets
+    for side in ("left", "right"):
+        target = targets.positions[:, targets.names.index(f"{side}_ankle")]
+        lag = np.linalg.norm((joints[f"{side}_ankle"] - target)[:, :2], axis=1)
+        assert lag.max() < 0.15, (side, lag.max(), int(np.argmax(lag)))

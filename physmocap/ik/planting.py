@@ -971,7 +971,9 @@ class Planting:
             self._toe_prev[side] = toe.copy()
             key = f"{side}_toe"
             if not labels.get(key, False):
-                self._toe_gone[side] = False
+                # the label over: a toe still held because it has not lifted (lock_low) lets go
+                # once its target moves off as fast
+                self._toe_gone[side] = prev is not None and float(np.linalg.norm(toe - prev)) > limit
                 continue
             if not self._toe_gone[side] and prev is not None and not labels.get(f"{side}_heel", False):
                 self._toe_gone[side] = float(np.linalg.norm(toe - prev)) > limit

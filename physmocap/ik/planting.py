@@ -957,7 +957,10 @@ class Planting:
         some 50-70 ms after the foot has left the floor
         (:class:`~physmocap.ik.contacts.ContactStream`), and a toe held that long behind a
         foot already swinging stores up a 20-35 cm offset that the body follows.  Let go
-        until the toe's label ends.  A foot without a toe target is left alone."""
+        until the toe's label ends; after it, a toe still held because it has not lifted
+        (``lock_low``) lets go the same way (its target racing on, the foot rolled about the
+        held tip and fell 34 cm behind: the 30 fps Bandai walk).  A foot without a toe target
+        is left alone."""
         out = dict(labels)
         limit = self.options.toe_release_speed / self.locks.fps
         for side, foot in self.feet.items():

@@ -323,6 +323,7 @@ def test_a_30_fps_stream_keeps_up_with_the_actor(walk):
     assert given.config.solver.max_iterations == 3
 
 
+@pytest.mark.filterwarnings("ignore:.*no usable calibration pose")  # a stream calibrates on frame 0, mid-stride here
 def test_a_streamed_toe_lets_go_of_the_floor_when_its_target_runs_off_after_its_label():
     """A toe whose label has ended stays held until it has lifted (``lock_low``).  On the 30 fps
     Bandai walk the humanoid's left toe tip never lifted after toe-off (frames 29-32): the foot

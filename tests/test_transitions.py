@@ -354,3 +354,22 @@ def test_eased_offsets_keep_a_short_clips_length():
     e = eased_offsets(x, 120.0, 0.25, 0.005)
     assert e.shape == x.shape and np.isfinite(e).all()
     assert np.abs(e).max() <= 0.09 + 1e-12
+
+
+@pytest.mark.parametrize("fps", [30.0, 120.0])
+def test_eased_offsets_turn_over_several_frames_not_one(fps):
+    """A foot held up 3.6 cm for one frame (the robot's left foot over its right on the Bandai
+    walk, frame 33): the eased offset rose and fell at the easing speed and turned in one frame
+    at its top, a jump of twice the easing step (the fidelity figure's largest pop there, 5.0 cm).
+    Rounded over ROUND_TIME, it still reaches the hold, never overshoots the rise's speed, and
+    turns by at most half that (stop 36)."""
+    from physmocap.ik.transitions import eased_offsets
+
+    speed = 0.25
+    step = speed / fps
+    x = np.zeros((200, 3))
+    x[100, 2] = 0.036
+    e = eased_offsets(x, fps, speed, tolerance=0.005)
+    assert e[100, 2] >= 0.036 - 1e-12
+    assert np.abs(np.diff(e, axis=0)).max() <= step + 1e-12
+    assert np.abs(np.diff(e, 2, axis=0)).max() <= 0.5 * step, np.abs(np.diff(e, 2, axis=0)).max() / step

@@ -62,7 +62,7 @@ from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d, uniform_filter1d
 
 from ..spill import blocks, release
 from .branches import MOVING_TYPES, Guide
@@ -109,7 +109,11 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
     Per axis, the offset is spread outwards in time at ``speed`` (m/s): where it is positive
     its upper envelope of slope ``speed / fps`` per frame, where negative its lower one
     (:func:`_envelope`), the larger in magnitude; a slowly changing offset is its own
-    envelope.  The result is applied only around the frames where it differs from the
+    envelope.  Its corners are then rounded over :data:`ROUND_TIME` either side, its positive
+    and negative parts each as a moving average of their running maximum (minimum), which
+    is never smaller in magnitude and rises no faster: a rise meeting a fall at a one-frame
+    hold turned in one frame (the robot's foot held over its other foot on the Bandai walk,
+    a 5 cm pop).  The result is applied only around the frames where it differs from the
     offset by more than ``tolerance`` (metres), faded in and out over as many frames as the
     largest difference takes at ``speed``: elsewhere the targets are the actor's.  On the
     ``pinned (F,)`` frames (a foot in contact, held by its plan) the result is 0, and it
@@ -123,6 +127,13 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
     up = np.stack([_envelope(x[:, i], step, True) for i in range(x.shape[1])], axis=1)
     low = np.stack([_envelope(x[:, i], step, False) for i in range(x.shape[1])], axis=1)
     e = np.where(np.abs(up) >= np.abs(low), up, low)
+    # rounded (see above): never below the envelope, no steeper, turning over 2n + 1 frames
+    n = max(1, int(round(ROUND_TIME * fps)))
+    if n > 1:
+        size = 2 * n + 1
+        pos = uniform_filter1d(maximum_filter1d(np.maximum(e, 0.0), size=size, axis=0, mode="nearest"), size=size, axis=0, mode="nearest")
+        neg = uniform_filter1d(minimum_filter1d(np.minimum(e, 0.0), size=size, axis=0, mode="nearest"), size=size, axis=0, mode="nearest")
+        e = pos + neg
     if pinned is not None and np.any(pinned):
         # frames to the nearest pinned frame, both ways
         gap = np.full(F, float(F))
@@ -147,6 +158,8 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
     return e * weight[:, None]
 
 
+#: Seconds over which an eased offset's corners are rounded (:func:`eased_offsets`).
+ROUND_TIME = 0.05
 #: m/s at which a swing foot eases into (and out of) the offset from its target at which the
 #: other leg holds it (self-collision avoidance).
 EASE_SPEED = 0.25

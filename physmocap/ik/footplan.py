@@ -59,7 +59,7 @@ from typing import Mapping
 import numpy as np
 
 from ..spill import release
-from .easing import smoothstep
+from .easing import rounded_above, smoothstep
 
 __all__ = ["FootPlan", "contact_intervals", "ease_weights", "eased_mask", "foot_offsets", "pelvis_drop", "knee_between", "planted_positions", "ToeContact", "RigidFoot", "swing_flatten", "stance_tiptoe", "toe_bend", "turn_foot", "plant_body_contacts", "body_part_target", "BODY_PART_JOINTS"]
 
@@ -252,11 +252,7 @@ def pelvis_drop(
     need = np.where(dxy >= r, dz, need)
     drop = np.max(np.maximum(need, 0.0) * weights, axis=1)
     n = max(1, int(round(smooth_time * fps)))
-    if n > 1 and drop.size:
-        from scipy.ndimage import maximum_filter1d, uniform_filter1d
-
-        drop = uniform_filter1d(maximum_filter1d(drop, size=2 * n + 1, mode="nearest"), size=2 * n + 1, mode="nearest")
-    return drop
+    return rounded_above(drop, n) if n > 1 else drop
 
 
 def knee_between(

@@ -379,7 +379,8 @@ def plan_targets(
     positions, kept as the raw ones, move to a temporary file for a long clip
     (:func:`~physmocap.spill.spill`) before they are copied.  ``toe_bends`` gives the actor's
     toe bends (:func:`actor_toe_bends`), called only for a character with rigid feet: their
-    swing turn is bounded by it (without it, unbounded)."""
+    swing turn and their heel-up turn in stance are bounded by it (without it the swing turn
+    is unbounded and the stance turn at most :data:`~.footplan.TIPTOE_LEAST`)."""
     planting = Planting(character, targets.names, targets.fps, plant, floor=floor_height, anchored=False)
     if own:
         targets.positions = spill(targets.positions)

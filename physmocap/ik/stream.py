@@ -99,6 +99,8 @@ def streaming_iterations(fps: float) -> int:
     :data:`STREAMING_MAX_ITERATIONS`: the same iterations per second of motion as at
     :math:`f_0`, never fewer than :math:`n` a frame."""
     n = int(STREAMING_DEFAULTS["max_iterations"])
+    if not (math.isfinite(fps) and fps > 0):
+        return n  # no rate to scale by (the retargeter refuses it, naming it)
     need = math.ceil(n * STREAMING_REFERENCE_RATE / float(fps) - 1e-9)
     return int(min(STREAMING_MAX_ITERATIONS, max(n, need)))
 

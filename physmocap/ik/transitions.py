@@ -62,10 +62,11 @@ from typing import Mapping, Sequence
 
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d, uniform_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
 
 from ..spill import blocks, release
 from .branches import MOVING_TYPES, Guide
+from .easing import rounded_above
 
 __all__ = ["change_windows", "moving_joints", "carried_targets", "TransitionGuides", "eased_offsets", "eased_foot_shifts"]
 
@@ -130,10 +131,7 @@ def eased_offsets(offsets: np.ndarray, fps: float, speed: float, tolerance: floa
     # rounded (see above): never below the envelope, no steeper, turning over 2n + 1 frames
     n = max(1, int(round(ROUND_TIME * fps)))
     if n > 1:
-        size = 2 * n + 1
-        pos = uniform_filter1d(maximum_filter1d(np.maximum(e, 0.0), size=size, axis=0, mode="nearest"), size=size, axis=0, mode="nearest")
-        neg = uniform_filter1d(minimum_filter1d(np.minimum(e, 0.0), size=size, axis=0, mode="nearest"), size=size, axis=0, mode="nearest")
-        e = pos + neg
+        e = rounded_above(np.maximum(e, 0.0), n) - rounded_above(np.maximum(-e, 0.0), n)
     if pinned is not None and np.any(pinned):
         # frames to the nearest pinned frame, both ways
         gap = np.full(F, float(F))

@@ -32,6 +32,24 @@ def load_script(name: str):
     return module
 
 
+VENDOR_FIXTURES = REPO / "tests" / "fixtures" / "bvh"
+
+
+def first_frames(name: str, count: int) -> bytes:
+    """A vendor fixture's bytes cut to its first ``count`` frame rows (the ``Frames:`` line
+    says so, in the file's own spacing): the parser tests that edit a file line by line
+    work on a few frames; the fixtures themselves hold about 1.5 s of walking."""
+    import re
+
+    data = (VENDOR_FIXTURES / name).read_bytes()
+    nl = b"\r\n" if b"\r\n" in data else b"\n"
+    lines = data.split(nl)
+    motion = next(i for i, line in enumerate(lines) if line.strip() == b"MOTION")
+    head = lines[: motion + 3]
+    head[motion + 1] = re.sub(rb"(Frames:\s*)\d+", rb"\g<1>%d" % count, head[motion + 1])
+    return nl.join(head + lines[motion + 3: motion + 3 + count]) + nl
+
+
 def shared_file(name: str) -> Path:
     """Path of a shared recording, or skip the test with a clear reason."""
     path = SHARED_DATA / name

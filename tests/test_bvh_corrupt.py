@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from conftest import shared_file
+from conftest import first_frames, shared_file
 from physmocap.errors import InputError, PhysmocapWarning
 from physmocap.sources import load_motion
 from physmocap.sources.bvh import read_bvh
 
 FIXTURES = Path(__file__).parent / "fixtures" / "bvh"
-SRC = (FIXTURES / "optitrack_motive.bvh").read_bytes()
+SRC = first_frames("optitrack_motive.bvh", 5)
 LINES = SRC.split(b"\n")
 MOTION = LINES.index(b"MOTION")  # 0-based index; MOTION is on line MOTION + 1
 FIRST_ROW = MOTION + 3  # 0-based index of the first frame row

@@ -938,16 +938,25 @@ def build_targets(
             length = float(np.linalg.norm(char_pts[c] - anchor_c0))
             d, n = _unit(S[:, i] - anchor_a)
             ok_n = (n > 1e-6) & valid[:, i] & ok
-            walked = T[:, j] + float(np.linalg.norm(char_pts[c] - char_pts[p])) * _unit(S[:, i] - S[:, j])[0]
             T[:, i] = np.where(ok_n[:, None], anchor + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
-            # the upper torso turns with its corrected neck, so the chest's orientation
-            # target and the shoulders it carries agree with the trunk line
-            fix = quat_between(walked - T[:, j], T[:, i] - T[:, j])
+            # The upper torso turns with its corrected neck.  The rigid carrier of the
+            # shoulders turns by the smallest rotation taking the neck it carries (its rest
+            # neck, turned by it) onto the corrected one, so shoulders and neck targets agree
+            # whatever the carrier (on a character without a chest it is the actor's spine,
+            # which need not carry the neck along the actor's chest-to-neck line: the
+            # robot's neck and shoulder targets disagreed by up to 10 cm and its trunk
+            # leaned 7-13 degrees off the actor's).  The parent's orientation target keeps
+            # the actor's own chest-to-neck turn (turned like the carrier instead, the
+            # humanoid's flexible spine leaned 2 degrees past the CMU walk's trunk line and
+            # its pelvis rose and fell faster than the actor's).
+            rest_neck, neck_now = char_pts[c] - char_pts[p], T[:, i] - T[:, j]
             if has_q[j]:
-                Q[j] = held.keep(quat_mul(fix, Q[j]))
+                walked = float(np.linalg.norm(rest_neck)) * _unit(S[:, i] - S[:, j])[0]
+                Q[j] = held.keep(quat_mul(quat_between(walked, neck_now), Q[j]))
             carrier = p if p in delta else ("chest" if "chest" not in pset else None)
             if carrier is not None and carrier in delta:
-                delta[carrier] = turned.keep(quat_mul(fix, delta[carrier]))
+                carried = quat_apply(delta[carrier], rest_neck)
+                delta[carrier] = turned.keep(quat_mul(quat_between(carried, neck_now), delta[carrier]))
             continue
         length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import bvh_reference
 from conftest import SHARED_BVH, shared_file
 from physmocap.errors import OptionError, PhysmocapWarning
 from physmocap.resources import example_clip
@@ -85,53 +86,9 @@ def test_shared_quirks():
 
 
 def _reference_fk(path: Path, frames: list[int]) -> np.ndarray:
-    """World positions (file units and axes) by a deliberately simple, independent
-    FK: regexes for OFFSET/CHANNELS/braces, rotation matrices from scipy."""
-    import re
-
-    text = path.read_text()
-    head, motion = re.split(r"(?m)^\s*MOTION\s*$", text, maxsplit=1)
-    parents, offsets, chans, stack, last = [], [], [], [], -1
-    for line in head.splitlines():
-        tok = line.split()
-        if not tok:
-            continue
-        if tok[0] in ("ROOT", "JOINT", "End"):
-            parents.append(stack[-1] if stack else -1)
-            chans.append([])
-            last = len(parents) - 1
-        elif tok[0] == "{":
-            stack.append(last)
-        elif tok[0] == "}":
-            stack.pop()
-        elif tok[0] == "OFFSET":
-            offsets.append([float(v) for v in tok[1:4]])
-        elif tok[0] == "CHANNELS":
-            chans[-1] = tok[2:]
-    rows = motion.strip().splitlines()[2:]
-    out = []
-    for f in frames:
-        vals = [float(v) for v in rows[f].split()]
-        k = 0
-        R = [None] * len(parents)
-        P = np.zeros((len(parents), 3))
-        for j, p in enumerate(parents):
-            t = np.array(offsets[j])
-            axes, angles = "", []
-            for c in chans[j]:
-                if c.endswith("position"):
-                    t["XYZ".index(c[0])] = vals[k]
-                else:
-                    axes += c[0]
-                    angles.append(vals[k])
-                k += 1
-            local = Rotation.from_euler(axes, angles, degrees=True).as_matrix() if axes else np.eye(3)
-            if p < 0:
-                P[j], R[j] = t, local
-            else:
-                P[j], R[j] = P[p] + R[p] @ t, R[p] @ local
-        out.append(P)
-    return np.array(out)
+    """World positions (file units and axes) by a deliberately simple, independent FK
+    (:mod:`bvh_reference`)."""
+    return bvh_reference.world(bvh_reference.parse(path), frames)[1]
 
 
 @pytest.mark.parametrize("name", SHARED_BVH)

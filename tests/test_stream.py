@@ -343,3 +343,22 @@ def test_a_streamed_toe_lets_go_of_the_floor_when_its_target_runs_off_after_its_
         target = targets.positions[:, targets.names.index(f"{side}_ankle")]
         lag = np.linalg.norm((joints[f"{side}_ankle"] - target)[:, :2], axis=1)
         assert lag.max() < 0.15, (side, lag.max(), int(np.argmax(lag)))
+
+
+def test_a_reference_pose_message_names_the_frame_streamed_after_it():
+    """Before: a replay that dropped late frames said the joints jumped "into frame 1" and
+    calibrated "on frame 1" when the frame streamed after frame 0 was the file's frame 7."""
+    import warnings
+
+    from physmocap.ik.stream import StreamingRetargeter
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    walk = load_motion("example")  # frame 0: CMU's T-pose
+    live = StreamingRetargeter(load_character(), skeleton=walk.skeleton, fps=walk.fps, translated=walk.translated)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for t in (0, 7):
+            live.step(rotations=walk.rotations[t], translations=walk.translations[t], index=t)
+    said = [str(w.message) for w in caught if "reference pose" in str(w.message)]
+    assert len(said) == 1 and "into frame 7, the next one streamed" in said[0], said

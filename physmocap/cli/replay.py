@@ -97,10 +97,10 @@ def run(args: argparse.Namespace) -> int:
                     dropped += newest - t
                     t = newest
         if motion.is_rotational:
-            q = streamer.step(rotations=motion.rotations[t], translations=motion.translations[t])
+            q = streamer.step(rotations=motion.rotations[t], translations=motion.translations[t], index=t)
         else:
             conf = None if motion.confidence is None else motion.confidence[t]
-            q = streamer.step(positions=motion.positions[t], confidence=conf)
+            q = streamer.step(positions=motion.positions[t], confidence=conf, index=t)
         qpos[t] = last = q
         t += 1
     wall = time.perf_counter() - start

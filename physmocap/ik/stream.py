@@ -257,6 +257,7 @@ class StreamingRetargeter:
         translations: np.ndarray | None = None,
         positions: np.ndarray | None = None,
         confidence: np.ndarray | None = None,
+        index: int | None = None,
     ) -> np.ndarray:
         """Retarget one frame; returns the character's ``qpos`` ``(nq,)``.
 
@@ -265,6 +266,8 @@ class StreamingRetargeter:
             translations: ``(K, 3)`` local translations of the translated joints.
             positions: ``(J, 3)`` world positions in metres, Z-up (positional sources).
             confidence: ``(J,)`` per-joint confidence for positions.
+            index: The frame's number in the source, for messages (default: the number of
+                frames stepped before it; a caller that drops late frames gives it).
         """
         t0 = time.perf_counter()
         motion = self._motion(rotations, translations, positions, confidence)
@@ -276,7 +279,8 @@ class StreamingRetargeter:
             if np.isfinite(jump) and jump * self.fps > self.reference_speed:
                 warn(
                     f"{self.source}: frame 0 looks like a reference pose (the joints jump {jump * 100:.0f} cm "
-                    f"into frame 1): calibrated again on frame 1"
+                    f"into frame {self.frame if index is None else index}, the next one streamed): calibrated "
+                    f"again there"
                 )
                 # new calibration; the solver carries on (velocity limits hold across)
                 self._start(motion, keep_solver=True)

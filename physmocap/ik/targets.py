@@ -330,15 +330,18 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
         carrier = next((x for x in HEAD_CARRIERS if x in present), None)
         return ident if carrier is None else _rest_alignment(carrier, present, actor_pts, char_pts, yaw)
     if c == "pelvis":
-        # The pelvis is aligned on the whole trunk line, mid-hip to neck: skeletons place
-        # the hip centres differently relative to the lumbar joint (CMU's sit 6 cm in front
-        # of it, as in real anatomy; the humanoid's straight below), and the line from the
-        # hips to the neck is what the eye (and the fidelity figures) compare.
+        # The pelvis is aligned on the whole trunk line, pelvis to neck (the spine's lean,
+        # as the eye and the fidelity figures read it; the torso segments between have
+        # other proportions on every skeleton).  Not the line from the hip centres:
+        # skeletons place those differently relative to the pelvis joint (CMU's sit 6 cm in
+        # front of it and 9 cm below, as in real anatomy; the humanoid's and the robot's
+        # straight below), and a character aligned on the actor's hip-to-neck line leaned
+        # back 7-9 degrees where the actor stood upright.
         top = next((x for x in ("neck", "head", "chest", "spine") if x in present), None)
-        if top is None or "left_hip" not in present or "right_hip" not in present:
+        if top is None:
             return ident
-        d_a = actor_pts[top] - 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
-        d_c = quat_apply(yaw, char_pts[top] - 0.5 * (char_pts["left_hip"] + char_pts["right_hip"]))
+        d_a = actor_pts[top] - actor_pts["pelvis"]
+        d_c = quat_apply(yaw, char_pts[top] - char_pts["pelvis"])
         if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
             return ident
         return _min_rotation(d_c, d_a)
@@ -932,13 +935,13 @@ def build_targets(
             # c is carried rigidly by a torso segment that the character's parent p belongs to
             T[:, i] = T[:, j] + quat_apply(delta[seg], char_pts[c] - char_pts[p])
             continue
-        if c == "neck" and hips:
-            # the trunk line, mid-hip to neck, follows the actor's (the chain of torso
-            # joints between has other proportions on every skeleton)
-            length = float(np.linalg.norm(char_pts[c] - anchor_c0))
-            d, n = _unit(S[:, i] - anchor_a)
-            ok_n = (n > 1e-6) & valid[:, i] & ok
-            T[:, i] = np.where(ok_n[:, None], anchor + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
+        if c == "neck":
+            # the trunk line, pelvis to neck, follows the actor's (the chain of torso joints
+            # between has other proportions on every skeleton; see _rest_alignment)
+            length = float(np.linalg.norm(char_pts[c] - char_pts["pelvis"]))
+            d, n = _unit(S[:, i] - S[:, ip])
+            ok_n = (n > 1e-6) & valid[:, i] & valid[:, ip]
+            T[:, i] = np.where(ok_n[:, None], T[:, ip] + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
             # The upper torso turns with its corrected neck.  The rigid carrier of the
             # shoulders turns by the smallest rotation taking the neck it carries (its rest
             # neck, turned by it) onto the corrected one, so shoulders and neck targets agree

@@ -211,6 +211,14 @@ def test_a_failed_file_is_named_once(folder, capsys):
     assert line.count(broken) == 1, line
 
 
+def test_a_failed_file_is_named_as_the_user_spelt_the_source(folder, capsys, monkeypatch):
+    """Before: a relative source folder's failures were named by absolute paths."""
+    monkeypatch.chdir(folder)
+    assert main(["batch", "in", "-o", "out", "--end", "40", "--quiet"]) == 1
+    line = next(x for x in capsys.readouterr().err.splitlines() if x.startswith("failed:"))
+    assert line.startswith(f"failed: {os.path.join('in', 'broken.bvh')}:") and str(folder) not in line, line
+
+
 def test_bvh_options_for_a_batch_of_npz_are_said_to_be_ignored(tmp_path):
     """Before: ``batch ... --up Z`` writing NPZ files ran silently (each file's warning is not
     shown); it is said once for the batch."""

@@ -77,6 +77,19 @@ def test_retarget_writes_a_preview_too(backend, tmp_path):
     assert imageio.imread(again).shape[:2] == (128, 128)
 
 
+def test_a_saved_trajectory_previews_from_the_source_frame_it_records(backend, tmp_path):
+    """Before: the source was cut where a fresh retarget would start (frame 1 of the bundled
+    walk, with a warning telling the user to pass --start 0), not where the saved one did."""
+    out = tmp_path / "walk.npz"
+    assert _run(["retarget", "example", "-o", str(out), "--start", "5", "--end", "30", "--quiet"]) == 0
+    sheet = tmp_path / "sheet.png"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no reference-pose warning: the file says where it starts
+        assert main(["preview", str(out), "--source", "example", "-o", str(sheet), "--count", "2",
+                     "--size", "64x64", "--quiet"]) == 0
+    assert imageio.imread(sheet).shape[:2] == (128, 128)
+
+
 @pytest.mark.parametrize(
     "argv,needle",
     [

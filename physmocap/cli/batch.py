@@ -70,10 +70,22 @@ def run(args: argparse.Namespace) -> int:
     print(f"{len(results) - len(failed)} of {len(results)} files done ({frames} frames); summary in "
           f"{os.path.join(args.output, 'summary.csv')}", file=sys.stderr)
     for r in failed:
-        error = _failure(r)
-        named = error.startswith(f"{r.input}:")  # most errors already name their file
-        print(f"failed: {error}" if named else f"failed: {r.input}: {error}", file=sys.stderr)
+        shown = _shown(r.input, args.source)  # spelt as the user spelt the source
+        error = _failure(r).replace(r.input, shown)
+        named = error.startswith(f"{shown}:")  # most errors already name their file
+        print(f"failed: {error}" if named else f"failed: {shown}: {error}", file=sys.stderr)
     return 0 if not failed else 1
+
+
+def _shown(path: str, source: str) -> str:
+    """``path`` (jobs hold absolute paths) relative to the working directory where the user
+    gave a relative ``source`` (folder, glob or manifest), else as it is."""
+    if os.path.isabs(source):
+        return path
+    try:
+        return os.path.relpath(path)
+    except ValueError:  # another drive
+        return path
 
 
 def _check_character(args: argparse.Namespace) -> None:

@@ -83,6 +83,18 @@ def render_preview(
         announce(f"wrote {out}")
 
 
+def _source_start(args: argparse.Namespace, traj) -> int | None:
+    """The source frame a saved trajectory starts at: ``--start`` if given, else the one the
+    file records (``source_start``, written by ``retarget --qpos``), else None (guessed as a
+    retarget would, for a file without it)."""
+    if args.start is not None:
+        return args.start
+    import numpy as np
+
+    with np.load(args.input, allow_pickle=False) as data:
+        return int(traj.source_start) if "source_start" in data.files else None
+
+
 def _load(args: argparse.Namespace):
     """The :class:`~physmocap.render.source.PreviewInput` to show: a saved .npz (with its
     source if given) or a fresh retarget."""
@@ -98,7 +110,7 @@ def _load(args: argparse.Namespace):
         from .retarget import cleaned_source
 
         source = cleaned_source(load_motion(args.source, min_frames=1), args)
-        return preview_input_with_source(traj, source, args.start, args.profile, args.source_map)
+        return preview_input_with_source(traj, source, _source_start(args, traj), args.profile, args.source_map)
     if args.source:
         raise OptionError("--source is for a trajectory .npz input; a motion file is its own source")
     from .retarget import retarget_from_args

@@ -337,11 +337,21 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
         # front of it and 9 cm below, as in real anatomy; the humanoid's and the robot's
         # straight below), and a character aligned on the actor's hip-to-neck line leaned
         # back 7-9 degrees where the actor stood upright.
+        # Without a neck or a head the top is a chest or spine joint a few centimetres above
+        # the pelvis joint (the Unitree G1's waist 4 cm): too short a lever to set a tilt by,
+        # so the line runs from the hip centres there, as it did everywhere before stop 37.
         top = next((x for x in ("neck", "head", "chest", "spine") if x in present), None)
         if top is None:
             return ident
-        d_a = actor_pts[top] - actor_pts["pelvis"]
-        d_c = quat_apply(yaw, char_pts[top] - char_pts["pelvis"])
+        if top in ("neck", "head"):
+            base_a, base_c = actor_pts["pelvis"], char_pts["pelvis"]
+        elif "left_hip" in present and "right_hip" in present:
+            base_a = 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
+            base_c = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
+        else:
+            return ident
+        d_a = actor_pts[top] - base_a
+        d_c = quat_apply(yaw, char_pts[top] - base_c)
         if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
             return ident
         return _min_rotation(d_c, d_a)

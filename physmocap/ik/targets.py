@@ -51,6 +51,7 @@ from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
 from .limbtwist import LIMB_CHAINS, MIN_BEND, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
+from .trunkreach import SMOOTHING_TIME, TrunkReach, trunk_reach
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
@@ -167,6 +168,7 @@ class Calibration:
     foot_tips: dict = field(default_factory=dict)  # side -> toe-tip direction in the foot's frame (rigidfoot)
     limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> its FlexionAxis or None (limbtwist)
     limb_twists: dict = field(default_factory=dict)  # limb's upper segment -> its TwistCalibration (limbtwist)
+    trunk_reach: TrunkReach | None = None  # the trunk directions the torso joints reach (trunkreach)
 
 
 @dataclass(eq=False)
@@ -263,6 +265,13 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
     for canon, tf in character.tracked.items():
         out[canon] = (tf.position(model, data).copy(), Rotation.from_matrix(tf.rotation(model, data)).as_quat())
     return out
+
+
+def _body_rest_quat(character, canon: str) -> np.ndarray:
+    """World rotation (x-y-z-w) of the body carrying the tracked frame ``canon``, at rest."""
+    model, data = character.model, character.rest_data()
+    b = character.tracked[canon].body_id(model)
+    return Rotation.from_matrix(data.xmat[b].reshape(3, 3)).as_quat()
 
 
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
@@ -826,7 +835,7 @@ def build_targets(
     # each finished column is kept in ``held`` (a long clip's in a temporary file: a column
     # mapped in while read), the actor's columns it read let go
     candidates = [c for c in opt.oriented if c in pset and movable.get(c, True)]
-    held = _ColumnStore(F, len(candidates) + 1)  # and the chest's, turned with the neck below
+    held = _ColumnStore(F, len(candidates) + 2)  # and the pelvis given way, and the chest turned with the neck
     for c in candidates:
         actor.release()
         i = col[c]
@@ -875,6 +884,15 @@ def build_targets(
         if i in Q:  # signs kept continuous over frames (nicer for users; SE3 does not care)
             Q[i] = held.keep(_continuous_signs(Q[i]))
     actor.release()
+
+    # --- the pelvis gives way where the actor's trunk leans further over it than the
+    # character's torso joints reach (trunkreach), so that the trunk follows the actor's
+    reach = trunk_reach(character) if cal is None else cal.trunk_reach
+    if reach is not None and "neck" in pset and has_q[col["pelvis"]]:
+        ipv = col["pelvis"]
+        body_in_frame = quat_mul(quat_conj(rest_c["pelvis"][1]), _body_rest_quat(character, "pelvis"))
+        window = max(1, int(round(SMOOTHING_TIME * motion.fps))) if F > 1 else 1
+        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], body_in_frame, window))
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
@@ -1007,6 +1025,7 @@ def build_targets(
             foot_tips=foot_tips,
             limb_axes=limb_axes,
             limb_twists=twists,
+            trunk_reach=reach,
         )
     release(S)
     del delta, turned  # let go before the orientations and positions are laid out frame by frame

@@ -1,4 +1,4 @@
-"""How far a character's torso joints can lean its trunk relative to its pelvis.
+r"""How far a character's torso joints can lean its trunk relative to its pelvis.
 
 The trunk line runs from the pelvis to the neck (the torso segment of the fidelity figures).
 Its direction in the pelvis body's frame depends only on the joints between the two: a robot's

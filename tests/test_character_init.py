@@ -456,7 +456,10 @@ def test_g1_proposal_retargets_like_the_bundled_mapping(g1_proposal, tmp_path):
         for canon in MAJOR:
             b = cb.tracked[canon].name
             worst = max(worst, float(np.linalg.norm(dp.body(b).xpos - db.body(b).xpos)))
-    assert worst < 0.02, f"proposed vs bundled mapping: bodies {worst * 100:.1f} cm apart"
+    # 2.1 cm since stop 37: the bundled mapping's neck follows the actor's trunk line from the
+    # pelvis joint (the G1's 13 cm above its hip centres); the proposal, which has no neck, turns
+    # its torso with the actor's spine (under 1 cm when the line ran from the hip centres)
+    assert worst < 0.025, f"proposed vs bundled mapping: bodies {worst * 100:.1f} cm apart"
 
 
 def test_g1_cli_writes_a_mapping_that_retargets(g1_proposal, tmp_path, capsys):

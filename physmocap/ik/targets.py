@@ -51,6 +51,7 @@ from ..spill import blocks, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
 from .limbtwist import LIMB_CHAINS, MIN_BEND, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
+from .trunkreach import SMOOTHING_TIME, TrunkReach, trunk_reach
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
@@ -167,6 +168,7 @@ class Calibration:
     foot_tips: dict = field(default_factory=dict)  # side -> toe-tip direction in the foot's frame (rigidfoot)
     limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> its FlexionAxis or None (limbtwist)
     limb_twists: dict = field(default_factory=dict)  # limb's upper segment -> its TwistCalibration (limbtwist)
+    trunk_reach: TrunkReach | None = None  # the trunk directions the torso joints reach (trunkreach)
 
 
 @dataclass(eq=False)
@@ -265,6 +267,13 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
     return out
 
 
+def _body_rest_quat(character, canon: str) -> np.ndarray:
+    """World rotation (x-y-z-w) of the body carrying the tracked frame ``canon``, at rest."""
+    model, data = character.model, character.rest_data()
+    b = character.tracked[canon].body_id(model)
+    return Rotation.from_matrix(data.xmat[b].reshape(3, 3)).as_quat()
+
+
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, eps), n[..., 0]
@@ -330,15 +339,28 @@ def _rest_alignment(c: str, present: set, actor_pts: dict, char_pts: dict, yaw: 
         carrier = next((x for x in HEAD_CARRIERS if x in present), None)
         return ident if carrier is None else _rest_alignment(carrier, present, actor_pts, char_pts, yaw)
     if c == "pelvis":
-        # The pelvis is aligned on the whole trunk line, mid-hip to neck: skeletons place
-        # the hip centres differently relative to the lumbar joint (CMU's sit 6 cm in front
-        # of it, as in real anatomy; the humanoid's straight below), and the line from the
-        # hips to the neck is what the eye (and the fidelity figures) compare.
+        # The pelvis is aligned on the whole trunk line, pelvis to neck (the spine's lean,
+        # as the eye and the fidelity figures read it; the torso segments between have
+        # other proportions on every skeleton).  Not the line from the hip centres:
+        # skeletons place those differently relative to the pelvis joint (CMU's sit 6 cm in
+        # front of it and 9 cm below, as in real anatomy; the humanoid's and the robot's
+        # straight below), and a character aligned on the actor's hip-to-neck line leaned
+        # back 7-9 degrees where the actor stood upright.
+        # Without a neck or a head the top is a chest or spine joint a few centimetres above
+        # the pelvis joint (the Unitree G1's waist 4 cm): too short a lever to set a tilt by,
+        # so the line runs from the hip centres there, as it did everywhere before stop 37.
         top = next((x for x in ("neck", "head", "chest", "spine") if x in present), None)
-        if top is None or "left_hip" not in present or "right_hip" not in present:
+        if top is None:
             return ident
-        d_a = actor_pts[top] - 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
-        d_c = quat_apply(yaw, char_pts[top] - 0.5 * (char_pts["left_hip"] + char_pts["right_hip"]))
+        if top in ("neck", "head"):
+            base_a, base_c = actor_pts["pelvis"], char_pts["pelvis"]
+        elif "left_hip" in present and "right_hip" in present:
+            base_a = 0.5 * (actor_pts["left_hip"] + actor_pts["right_hip"])
+            base_c = 0.5 * (char_pts["left_hip"] + char_pts["right_hip"])
+        else:
+            return ident
+        d_a = actor_pts[top] - base_a
+        d_c = quat_apply(yaw, char_pts[top] - base_c)
         if np.linalg.norm(d_a) < 1e-6 or np.linalg.norm(d_c) < 1e-6:
             return ident
         return _min_rotation(d_c, d_a)
@@ -813,7 +835,7 @@ def build_targets(
     # each finished column is kept in ``held`` (a long clip's in a temporary file: a column
     # mapped in while read), the actor's columns it read let go
     candidates = [c for c in opt.oriented if c in pset and movable.get(c, True)]
-    held = _ColumnStore(F, len(candidates) + 1)  # and the chest's, turned with the neck below
+    held = _ColumnStore(F, len(candidates) + 2)  # and the pelvis given way, and the chest turned with the neck
     for c in candidates:
         actor.release()
         i = col[c]
@@ -862,6 +884,15 @@ def build_targets(
         if i in Q:  # signs kept continuous over frames (nicer for users; SE3 does not care)
             Q[i] = held.keep(_continuous_signs(Q[i]))
     actor.release()
+
+    # --- the pelvis gives way where the actor's trunk leans further over it than the
+    # character's torso joints reach (trunkreach), so that the trunk follows the actor's
+    reach = trunk_reach(character) if cal is None else cal.trunk_reach
+    if reach is not None and "neck" in pset and has_q[col["pelvis"]]:
+        ipv = col["pelvis"]
+        body_in_frame = quat_mul(quat_conj(rest_c["pelvis"][1]), _body_rest_quat(character, "pelvis"))
+        window = max(1, int(round(SMOOTHING_TIME * motion.fps))) if F > 1 else 1
+        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], body_in_frame, window))
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or
@@ -932,13 +963,13 @@ def build_targets(
             # c is carried rigidly by a torso segment that the character's parent p belongs to
             T[:, i] = T[:, j] + quat_apply(delta[seg], char_pts[c] - char_pts[p])
             continue
-        if c == "neck" and hips:
-            # the trunk line, mid-hip to neck, follows the actor's (the chain of torso
-            # joints between has other proportions on every skeleton)
-            length = float(np.linalg.norm(char_pts[c] - anchor_c0))
-            d, n = _unit(S[:, i] - anchor_a)
-            ok_n = (n > 1e-6) & valid[:, i] & ok
-            T[:, i] = np.where(ok_n[:, None], anchor + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
+        if c == "neck":
+            # the trunk line, pelvis to neck, follows the actor's (the chain of torso joints
+            # between has other proportions on every skeleton; see _rest_alignment)
+            length = float(np.linalg.norm(char_pts[c] - char_pts["pelvis"]))
+            d, n = _unit(S[:, i] - S[:, ip])
+            ok_n = (n > 1e-6) & valid[:, i] & valid[:, ip]
+            T[:, i] = np.where(ok_n[:, None], T[:, ip] + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
             # The upper torso turns with its corrected neck.  The rigid carrier of the
             # shoulders turns by the smallest rotation taking the neck it carries (its rest
             # neck, turned by it) onto the corrected one, so shoulders and neck targets agree
@@ -994,6 +1025,7 @@ def build_targets(
             foot_tips=foot_tips,
             limb_axes=limb_axes,
             limb_twists=twists,
+            trunk_reach=reach,
         )
     release(S)
     del delta, turned  # let go before the orientations and positions are laid out frame by frame

@@ -11,11 +11,13 @@ character in the actor's world orientation, so directions compare directly.
 
 * **Segment direction error** (degrees): per frame and segment, the angle
   between the character's segment direction and the actor's.  Segments
-  (:data:`SEGMENTS`): torso (mid-hip to neck), upper arms (shoulder to
+  (:data:`SEGMENTS`): torso (pelvis to neck), upper arms (shoulder to
   elbow), forearms (elbow to wrist), thighs (hip to knee), shanks (knee to
-  ankle).  The torso runs from the midpoint of the hip joint centres, not from
-  the vendor's "pelvis" joint, which sits anywhere between the hips and the
-  waist.
+  ankle).  The torso runs from the pelvis joint, the root of the spine, as the
+  eye reads a trunk's lean: a CMU actor's hip centres sit 6 cm in front of and
+  9 cm below its pelvis joint, and a character whose hips are straight below
+  its spine that matched the line from the hip centres stood 7-9 degrees
+  leaned back where the actor's spine is upright.
 * **Facing error** (degrees): the angle about the vertical between the
   character's pelvis heading and the actor's; the heading is the horizontal
   direction perpendicular to the right-to-left hip line,
@@ -74,10 +76,9 @@ __all__ = [
     "POP_WARN_M",
 ]
 
-#: Segment name -> (proximal canonical joint, distal canonical joint).  ``mid_hip``
-#: is the midpoint of the two hip joint centres.
+#: Segment name -> (proximal canonical joint, distal canonical joint).
 SEGMENTS: dict[str, tuple[str, str]] = {
-    "torso": ("mid_hip", "neck"),
+    "torso": ("pelvis", "neck"),
     "left_upper_arm": ("left_shoulder", "left_elbow"),
     "right_upper_arm": ("right_shoulder", "right_elbow"),
     "left_forearm": ("left_elbow", "left_wrist"),

@@ -1,0 +1,168 @@
+r"""How far a character's torso joints can lean its trunk relative to its pelvis.
+
+The trunk line runs from the pelvis to the neck (the torso segment of the fidelity figures).
+Its direction in the pelvis body's frame depends only on the joints between the two: a robot's
+waist (yaw and pitch), the humanoid's spine (three bodies of three hinges).  An actor can ask
+for more than those joints reach: the CMU dance's actor tilts its pelvis some 24 degrees
+forward under an upright spine, and the bundled robot's waist extends by 20 at most.  Followed
+as it is, the pelvis's orientation target then holds the waist at its limit, and the trunk,
+shoulders and arms share what is missing (the dance robot's arm 8 degrees off).
+
+:func:`trunk_reach` samples the torso joints within their ranges once per character and keeps
+the trunk directions reached, unit vectors in the pelvis body's frame.  :meth:`TrunkReach.give_way`
+tips a pelvis orientation target about its hip line by the part of the demanded trunk direction
+that lies beyond them:
+
+.. math::
+
+    R'_p = R_p \, \mathrm{Rot}\big(\hat h\,(\hat h \cdot \hat a)\,\max(0, \angle(\hat n, \hat d) - \tau)\big),
+    \qquad \hat d = R_p^{-1} \hat t, \quad \hat n = \arg\max_{k} \hat r_k \cdot \hat d,
+    \quad \hat a = \frac{\hat n \times \hat d}{\lVert \hat n \times \hat d \rVert}
+
+(``t`` the trunk target's world direction, ``r_k`` the directions reached, ``h`` the hip line in
+the pelvis body's frame, ``tau`` the sampling's tolerance), averaged over
+:data:`SMOOTHING_TIME`, so that the torso can put the trunk where the actor's is and the pelvis
+tips to take the rest, as a pelvis does under a spine (its hip line, heading and legs' roots
+stay).  A demanded direction within reach leaves the target as it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from ..rotations import quat_mul
+
+__all__ = ["TrunkReach", "trunk_reach", "SAMPLES", "TOLERANCE_DEG", "SMOOTHING_TIME"]
+
+#: Torso poses sampled per character (a third of the joint values at each end of the range:
+#: the edges of the reach are what matters).
+SAMPLES = 4096
+#: A demanded direction this close to one reached counts as reached (degrees): about the
+#: spacing of the samples over a robot waist's range.
+TOLERANCE_DEG = 1.5
+#: The turns are averaged over this long (s): the nearest direction reached steps from sample
+#: to sample where the trunk runs along the edge of the reach.
+SMOOTHING_TIME = 0.1
+#: Frames compared against the samples at a time (a (frames, samples) array of dot products).
+BLOCK = 1024
+
+
+@dataclass(frozen=True)
+class TrunkReach:
+    """The trunk directions a character reaches, ``(K, 3)`` unit vectors in its pelvis body's
+    frame, and the axis ``(3,)`` there the pelvis gives way about: its hip line (right to left
+    hip at rest), so that it tips forward or back, as a pelvis does under a spine, and its hip
+    line, its heading and its legs' roots stay where they were (a pelvis given way about a
+    slanted axis turned the dance robot's heading 20 degrees off the actor's in a kick)."""
+
+    directions: np.ndarray
+    axis: np.ndarray
+
+    def give_way(self, pelvis: np.ndarray, trunk: np.ndarray, rest_offset: np.ndarray, window: int = 1) -> np.ndarray:
+        """The pelvis targets ``(F, 4)`` x-y-z-w turned by what lies beyond reach.
+
+        Args:
+            pelvis: ``(F, 4)`` pelvis orientation targets (the tracked frame's world rotation).
+            trunk: ``(F, 3)`` world directions of the trunk target (pelvis to neck); rows
+                not finite are left alone.
+            rest_offset: ``(4,)`` the pelvis body's rotation in the tracked frame (the target
+                is the tracked frame's; the directions reached are in the body's frame).
+            window: frames over which the turns (rotation vectors in the body's frame) are
+                averaged: the nearest direction reached steps from sample to sample, and the
+                pelvis should not (1: none; a stream's single frame).
+        """
+        from scipy.ndimage import uniform_filter1d
+        from scipy.spatial.transform import Rotation
+
+        out = np.array(pelvis, dtype=float, copy=True)
+        body = Rotation.from_quat(out) * Rotation.from_quat(rest_offset)
+        ok = np.all(np.isfinite(trunk), axis=1) & (np.linalg.norm(trunk, axis=1) > 1e-9)
+        tol = np.radians(TOLERANCE_DEG)
+        turns = np.zeros((len(out), 3))
+        for s in range(0, len(out), BLOCK):
+            e = min(s + BLOCK, len(out))
+            rows = np.flatnonzero(ok[s:e]) + s
+            if rows.size == 0:
+                continue
+            d = body[rows].inv().apply(trunk[rows])
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            dots = d @ self.directions.T
+            best = np.argmax(dots, axis=1)
+            n = self.directions[best]
+            angle = np.arccos(np.clip(dots[np.arange(len(rows)), best], -1.0, 1.0))
+            beyond = angle > tol
+            axis = np.cross(n[beyond], d[beyond])
+            axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+            turns[rows[beyond]] = axis * (angle[beyond] - tol)[:, None]
+        turns = np.outer(turns @ self.axis, self.axis)  # about the hip line only
+        if not np.any(turns):
+            return out
+        if window > 1:
+            turns = uniform_filter1d(turns, size=int(window), axis=0, mode="nearest")
+        moved = np.flatnonzero(np.linalg.norm(turns, axis=1) > 1e-12)
+        turn = Rotation.from_rotvec(turns[moved]).as_quat()
+        out[moved] = quat_mul(out[moved], turn_in_tracked_frame(turn, rest_offset))
+        return out
+
+
+def turn_in_tracked_frame(turn: np.ndarray, rest_offset: np.ndarray) -> np.ndarray:
+    """A rotation given in the pelvis body's frame, expressed in the tracked frame's:
+    :math:`O\\,E\\,O^{-1}` with ``O`` the body's rotation in the tracked frame."""
+    from ..rotations import quat_conj
+
+    o = np.broadcast_to(rest_offset, turn.shape)
+    return quat_mul(quat_mul(o, turn), quat_conj(o))
+
+
+def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
+    """The trunk directions the character's torso joints reach (see the module docstring), or
+    None when it tracks no pelvis or no neck, or no joint lies between them (a rigid trunk).
+    Deterministic: the samples come from a generator seeded with 0."""
+    tracked = character.tracked
+    if "pelvis" not in tracked or "neck" not in tracked:
+        return None
+    model = character.model
+    pelvis_f, neck_f = tracked["pelvis"], tracked["neck"]
+    root, b = pelvis_f.body_id(model), neck_f.body_id(model)
+    joints = []
+    while b > 0 and b != root:
+        for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
+            if int(model.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+                joints.append(j)
+        b = model.body_parentid[b]
+    if b != root or not joints:
+        return None
+    data = character.rest_data()
+    rng = np.random.default_rng(0)
+    lo = np.array([model.jnt_range[j][0] if model.jnt_limited[j] else -np.pi for j in joints])
+    hi = np.array([model.jnt_range[j][1] if model.jnt_limited[j] else np.pi for j in joints])
+    pick = rng.integers(0, 3, size=(samples, len(joints)))
+    values = np.where(pick == 0, lo, np.where(pick == 1, hi, rng.uniform(lo, hi, size=pick.shape)))
+    adr = np.array([model.jnt_qposadr[j] for j in joints])
+    rest_q = data.qpos.copy()
+    body_root = root
+
+    def direction() -> np.ndarray:
+        d = neck_f.position(model, data) - pelvis_f.position(model, data)
+        d = data.xmat[body_root].reshape(3, 3).T @ d
+        return d / np.linalg.norm(d)
+
+    mujoco.mj_kinematics(model, data)
+    if "left_hip" in tracked and "right_hip" in tracked:
+        axis = tracked["left_hip"].position(model, data) - tracked["right_hip"].position(model, data)
+        axis = data.xmat[body_root].reshape(3, 3).T @ axis
+    else:  # no hips: across the trunk, the body's own sideways axis
+        axis = np.cross(direction(), [1.0, 0.0, 0.0])
+    if np.linalg.norm(axis) < 1e-9:
+        return None
+    axis /= np.linalg.norm(axis)
+    out = np.empty((samples, 3))
+    for k in range(samples):
+        data.qpos[:] = rest_q
+        data.qpos[adr] = values[k]
+        mujoco.mj_kinematics(model, data)
+        out[k] = direction()
+    return TrunkReach(out, axis)

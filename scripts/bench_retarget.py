@@ -120,10 +120,11 @@ def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
         return _worker()
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--runs", type=int, default=5, help="interleaved runs of every clip and character; medians are printed (default 5)")
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
-    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"])
-    ap.add_argument("--clips", nargs="+", default=CLIPS)
+    ap.add_argument("--characters", nargs="+", default=["humanoid", "robot"],
+                    help="bundled names or MJCF paths (default: humanoid robot)")
+    ap.add_argument("--clips", nargs="+", default=CLIPS, help="file names in ../shared/data (default: the walks, the jumps and the OptiTrack clip)")
     ap.add_argument("--no-plant", action="store_true", help="pure tracking: no contact detection or planting")
     ap.add_argument("--compare", type=Path, default=None, metavar="REF_DIR",
                     help="also run the checkout REF_DIR (PYTHONPATH=REF_DIR), alternating runs, and print the ratio")

@@ -35,6 +35,10 @@ def test_a_trunk_within_reach_leaves_the_pelvis_alone_and_one_beyond_turns_it_by
     # a lost trunk (not finite) leaves its frame alone
     lost = reach.give_way(pelvis[:1], np.full((1, 3), np.nan), IDENTITY)
     np.testing.assert_allclose(lost, pelvis[:1])
+    # and so does a lost pelvis, without failing the frames around it
+    gap = np.vstack([pelvis[:1], np.full((1, 4), np.nan), pelvis[1:2]])
+    kept = reach.give_way(gap, trunk[[0, 0, 1]], IDENTITY)
+    assert np.all(np.isnan(kept[1])) and np.allclose(kept[[0, 2]], out[:2])
 
 
 def test_the_robot_s_reach_is_its_waist_s_and_the_same_every_time():

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..rotations import quat_mul
+from ..rotations import Rotation, quat_conj, quat_mul
 
 __all__ = ["TrunkReach", "trunk_reach", "SAMPLES", "TOLERANCE_DEG", "SMOOTHING_TIME"]
 
@@ -75,11 +75,10 @@ class TrunkReach:
                 pelvis should not (1: none; a stream's single frame).
         """
         from scipy.ndimage import uniform_filter1d
-        from scipy.spatial.transform import Rotation
 
         out = np.array(pelvis, dtype=float, copy=True)
-        body = Rotation.from_quat(out) * Rotation.from_quat(rest_offset)
-        ok = np.all(np.isfinite(trunk), axis=1) & (np.linalg.norm(trunk, axis=1) > 1e-9)
+        ok = (np.all(np.isfinite(trunk), axis=1) & (np.linalg.norm(trunk, axis=1) > 1e-9)
+              & np.all(np.isfinite(out), axis=1) & (np.linalg.norm(out, axis=1) > 1e-9))
         tol = np.radians(TOLERANCE_DEG)
         turns = np.zeros((len(out), 3))
         for s in range(0, len(out), BLOCK):
@@ -87,7 +86,8 @@ class TrunkReach:
             rows = np.flatnonzero(ok[s:e]) + s
             if rows.size == 0:
                 continue
-            d = body[rows].inv().apply(trunk[rows])
+            body = Rotation.from_quat(out[rows]) * Rotation.from_quat(rest_offset)
+            d = body.inv().apply(trunk[rows])
             d /= np.linalg.norm(d, axis=1, keepdims=True)
             dots = d @ self.directions.T
             best = np.argmax(dots, axis=1)
@@ -111,16 +111,16 @@ class TrunkReach:
 def turn_in_tracked_frame(turn: np.ndarray, rest_offset: np.ndarray) -> np.ndarray:
     """A rotation given in the pelvis body's frame, expressed in the tracked frame's:
     :math:`O\\,E\\,O^{-1}` with ``O`` the body's rotation in the tracked frame."""
-    from ..rotations import quat_conj
-
     o = np.broadcast_to(rest_offset, turn.shape)
     return quat_mul(quat_mul(o, turn), quat_conj(o))
 
 
 def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
     """The trunk directions the character's torso joints reach (see the module docstring), or
-    None when it tracks no pelvis or no neck, or no joint lies between them (a rigid trunk).
-    Deterministic: the samples come from a generator seeded with 0."""
+    None when it tracks no pelvis or no neck, when no hinge lies between them (a rigid trunk),
+    or when a ball joint does (its cone of ranges is not sampled here: no give-way rather than
+    one measured on part of the trunk's joints).  Slide joints stay at rest.  Deterministic:
+    the samples come from a generator seeded with 0."""
     tracked = character.tracked
     if "pelvis" not in tracked or "neck" not in tracked:
         return None
@@ -130,7 +130,10 @@ def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
     joints = []
     while b > 0 and b != root:
         for j in range(model.body_jntadr[b], model.body_jntadr[b] + model.body_jntnum[b]):
-            if int(model.jnt_type[j]) in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)):
+            kind = int(model.jnt_type[j])
+            if kind == int(mujoco.mjtJoint.mjJNT_BALL):
+                return None
+            if kind == int(mujoco.mjtJoint.mjJNT_HINGE):
                 joints.append(j)
         b = model.body_parentid[b]
     if b != root or not joints:
@@ -148,9 +151,11 @@ def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
     def direction() -> np.ndarray:
         d = neck_f.position(model, data) - pelvis_f.position(model, data)
         d = data.xmat[body_root].reshape(3, 3).T @ d
-        return d / np.linalg.norm(d)
+        return d / max(float(np.linalg.norm(d)), 1e-12)
 
     mujoco.mj_kinematics(model, data)
+    if np.linalg.norm(neck_f.position(model, data) - pelvis_f.position(model, data)) < 1e-6:
+        return None  # the neck on the pelvis: no trunk to lean
     if "left_hip" in tracked and "right_hip" in tracked:
         axis = tracked["left_hip"].position(model, data) - tracked["right_hip"].position(model, data)
         axis = data.xmat[body_root].reshape(3, 3).T @ axis

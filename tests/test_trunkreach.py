@@ -21,10 +21,10 @@ def _pitch(d: np.ndarray) -> np.ndarray:
 
 def test_a_trunk_within_reach_leaves_the_pelvis_alone_and_one_beyond_turns_it_by_the_excess():
     reach = TrunkReach(Rotation.from_euler("y", np.linspace(-10, 20, 121)[:, None], degrees=True).apply([0, 0, 1.0]),
-                       np.array([0.0, 1.0, 0.0]))
+                       np.array([0.0, 1.0, 0.0]), IDENTITY)
     pelvis = Rotation.from_euler("y", [[0.0], [30.0], [5.0]], degrees=True).as_quat()
     trunk = Rotation.from_euler("y", [[-30.0], [0.0], [10.0]], degrees=True).apply([0, 0, 1.0])
-    out = reach.give_way(pelvis, trunk, IDENTITY)
+    out = reach.give_way(pelvis, trunk)
     np.testing.assert_allclose(out[2], pelvis[2])  # 5 degrees over the pelvis: within reach
     local = Rotation.from_quat(out).inv().apply(trunk)
     # 30 degrees back over the pelvis (the reach: 10): the pelvis turns back by 20 less the tolerance
@@ -33,11 +33,11 @@ def test_a_trunk_within_reach_leaves_the_pelvis_alone_and_one_beyond_turns_it_by
     turned = np.degrees((Rotation.from_quat(out[:2]) * Rotation.from_quat(pelvis[:2]).inv()).magnitude())
     np.testing.assert_allclose(turned, 20.0 - TOLERANCE_DEG, atol=0.05)
     # a lost trunk (not finite) leaves its frame alone
-    lost = reach.give_way(pelvis[:1], np.full((1, 3), np.nan), IDENTITY)
+    lost = reach.give_way(pelvis[:1], np.full((1, 3), np.nan))
     np.testing.assert_allclose(lost, pelvis[:1])
     # and so does a lost pelvis, without failing the frames around it
     gap = np.vstack([pelvis[:1], np.full((1, 4), np.nan), pelvis[1:2]])
-    kept = reach.give_way(gap, trunk[[0, 0, 1]], IDENTITY)
+    kept = reach.give_way(gap, trunk[[0, 0, 1]])
     assert np.all(np.isnan(kept[1])) and np.allclose(kept[[0, 2]], out[:2])
 
 

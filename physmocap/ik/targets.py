@@ -267,13 +267,6 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
     return out
 
 
-def _body_rest_quat(character, canon: str) -> np.ndarray:
-    """World rotation (x-y-z-w) of the body carrying the tracked frame ``canon``, at rest."""
-    model, data = character.model, character.rest_data()
-    b = character.tracked[canon].body_id(model)
-    return Rotation.from_matrix(data.xmat[b].reshape(3, 3)).as_quat()
-
-
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, eps), n[..., 0]
@@ -890,9 +883,8 @@ def build_targets(
     reach = trunk_reach(character) if cal is None else cal.trunk_reach
     if reach is not None and "neck" in pset and has_q[col["pelvis"]]:
         ipv = col["pelvis"]
-        body_in_frame = quat_mul(quat_conj(rest_c["pelvis"][1]), _body_rest_quat(character, "pelvis"))
         window = max(1, int(round(SMOOTHING_TIME * motion.fps))) if F > 1 else 1
-        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], body_in_frame, window))
+        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], window))
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or

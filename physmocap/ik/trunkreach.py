@@ -60,16 +60,17 @@ class TrunkReach:
 
     directions: np.ndarray
     axis: np.ndarray
+    #: The pelvis body's rotation in the tracked pelvis frame (x-y-z-w): the targets are the
+    #: tracked frame's, the directions reached the body's.
+    body_in_frame: np.ndarray
 
-    def give_way(self, pelvis: np.ndarray, trunk: np.ndarray, rest_offset: np.ndarray, window: int = 1) -> np.ndarray:
+    def give_way(self, pelvis: np.ndarray, trunk: np.ndarray, window: int = 1) -> np.ndarray:
         """The pelvis targets ``(F, 4)`` x-y-z-w turned by what lies beyond reach.
 
         Args:
             pelvis: ``(F, 4)`` pelvis orientation targets (the tracked frame's world rotation).
             trunk: ``(F, 3)`` world directions of the trunk target (pelvis to neck); rows
                 not finite are left alone.
-            rest_offset: ``(4,)`` the pelvis body's rotation in the tracked frame (the target
-                is the tracked frame's; the directions reached are in the body's frame).
             window: frames over which the turns (rotation vectors in the body's frame) are
                 averaged: the nearest direction reached steps from sample to sample, and the
                 pelvis should not (1: none; a stream's single frame).
@@ -86,7 +87,7 @@ class TrunkReach:
             rows = np.flatnonzero(ok[s:e]) + s
             if rows.size == 0:
                 continue
-            body = Rotation.from_quat(out[rows]) * Rotation.from_quat(rest_offset)
+            body = Rotation.from_quat(out[rows]) * Rotation.from_quat(self.body_in_frame)
             d = body.inv().apply(trunk[rows])
             d /= np.linalg.norm(d, axis=1, keepdims=True)
             dots = d @ self.directions.T
@@ -104,7 +105,7 @@ class TrunkReach:
             turns = uniform_filter1d(turns, size=int(window), axis=0, mode="nearest")
         moved = np.flatnonzero(np.linalg.norm(turns, axis=1) > 1e-12)
         turn = Rotation.from_rotvec(turns[moved]).as_quat()
-        out[moved] = quat_mul(out[moved], turn_in_tracked_frame(turn, rest_offset))
+        out[moved] = quat_mul(out[moved], turn_in_tracked_frame(turn, self.body_in_frame))
         return out
 
 
@@ -164,10 +165,12 @@ def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
     if np.linalg.norm(axis) < 1e-9:
         return None
     axis /= np.linalg.norm(axis)
+    frame = Rotation.from_matrix(pelvis_f.rotation(model, data))
+    body_in_frame = (frame.inv() * Rotation.from_matrix(data.xmat[body_root].reshape(3, 3))).as_quat()
     out = np.empty((samples, 3))
     for k in range(samples):
         data.qpos[:] = rest_q
         data.qpos[adr] = values[k]
         mujoco.mj_kinematics(model, data)
         out[k] = direction()
-    return TrunkReach(out, axis)
+    return TrunkReach(out, axis, body_in_frame)

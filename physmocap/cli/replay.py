@@ -39,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--calibration-seconds", type=float, default=10.0,
                    help="marker recordings: seconds at the start used to calibrate the actor (default 10)")
     p.add_argument("--marker-set", metavar="SET.toml", help="marker recordings: marker roles overriding the aliases")
+    p.add_argument("--no-arm-branches", action="store_true",
+                   help="leave an arm stuck on a branch of its joint ranges that cannot reach the actor where it is "
+                        "(by default it is pulled over to one that can, at its joints' velocity limits)")
     p.set_defaults(func=run)
 
 
@@ -75,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         mapping=args.source_map or motion.meta.get("source_mapping"),
         source=str(motion.source),
         **({} if floor is None else {"source_floor": float(floor)}),
+        **({"arm_branches": False} if args.no_arm_branches else {}),
     )
     F = motion.num_frames
     qpos = np.empty((F, character.model.nq))

@@ -38,7 +38,8 @@ Offline the whole clip is known, so after the first pass:
 A pass is kept, for the whole clip, only if fewer frames have an arm segment more than
 :data:`STUCK_DEG` off the actor's than the best before it (then if the arm segments'
 errors sum lower), and the solver relaxed a hard constraint on no more frames.
-Streaming retargeting cannot look ahead and does not do this.  Radians, metres.
+Streaming retargeting cannot look ahead: :mod:`.armswitch` moves a stuck arm over when
+it finds it stuck, with the same arm solve (:class:`ArmFit`).  Radians, metres.
 """
 
 from __future__ import annotations
@@ -170,8 +171,23 @@ class Guide:
         return self.values[hit] if hit.size == chain.qpos.size else None
 
 
-class _ArmFit:
-    """The arm's own least-squares solve on one frame, the rest of the body held."""
+class ArmFit:
+    r"""The arm's own least-squares solve on one frame, the rest of the body held.
+
+    The residual stacks, for each of the arm's targets, the weighted position error
+    :math:`w_p (p - \hat p)` (metres) and, where the target has an orientation, the
+    weighted rotation from the frame to its target as a rotation vector in the frame,
+    :math:`\phi = w_o\,\log(R^\top \hat R)` (radians); :meth:`solve` minimises half its
+    squared norm within the joints' ranges by Levenberg-Marquardt on the analytic Jacobians
+    (``mj_jac``; the rotation rows :math:`-w_o J_l^{-1}(\phi / w_o) R^\top J_r`, with
+    :math:`J_l^{-1}` the inverse left Jacobian of SO(3)), the joints at a bound that the
+    gradient pushes out of it held there.
+    """
+
+    #: Levenberg-Marquardt iterations at most, and the relative cost decrease below which
+    #: the solve stops.
+    ITERATIONS = 60
+    FTOL = 1e-8
 
     def __init__(self, character, chain: ArmChain, targets, weights: dict) -> None:
         self.model = character.model
@@ -179,30 +195,59 @@ class _ArmFit:
         self.chain = chain
         self.targets = targets
         self.frames = [character.tracked[targets.names[k]] for k in chain.targets]
+        self.ids = [tf.object_id(self.model) for tf in self.frames]
+        self.bodies = [tf.body_id(self.model) for tf in self.frames]
         w = [weights.get(targets.names[k], weight_of(targets.names[k])) for k in chain.targets]
         self.pos_w = np.array([p for p, _ in w])
         self.rot_w = np.array([o if targets.has_orientation[k] else 0.0 for (_, o), k in zip(w, chain.targets)])
+        self._jacp = np.zeros((3, self.model.nv))
+        self._jacr = np.zeros((3, self.model.nv))
 
-    def residual(self, x: np.ndarray, q: np.ndarray, t: int) -> np.ndarray:
-        """Weighted position (metres) and orientation (radians) errors of the arm's targets
-        on frame ``t`` with the arm's joints at ``x`` and the rest at ``q``."""
-        d, m = self.data, self.model
+    def _pose(self, tf, i: int) -> tuple[np.ndarray, np.ndarray]:
+        d = self.data
+        if tf.kind == "site":
+            return d.site_xpos[i], d.site_xmat[i].reshape(3, 3)
+        return d.xpos[i], d.xmat[i].reshape(3, 3)
+
+    def pose(self, x: np.ndarray, q: np.ndarray) -> None:
+        """Set the fit's data to ``q`` with the arm's joints at ``x``, kinematics done."""
+        d = self.data
         d.qpos[:] = q
         d.qpos[self.chain.qpos] = x
-        mujoco.mj_kinematics(m, d)
+        mujoco.mj_kinematics(self.model, d)
+
+    def residual(self, x: np.ndarray, q: np.ndarray, t: int, jacobian: bool = False):
+        """Weighted position (metres) and orientation (radians) errors of the arm's targets
+        on frame ``t`` with the arm's joints at ``x`` and the rest at ``q``; with
+        ``jacobian`` also their ``(rows, K)`` derivatives in the arm's joints."""
+        m, d = self.model, self.data
+        self.pose(x, q)
+        if jacobian:
+            mujoco.mj_comPos(m, d)
         pos = self.targets.positions[t]
         goal = xyzw_to_wxyz(np.asarray(self.targets.orientations[t]))
         valid = self.targets.valid[t]
-        out = np.zeros((len(self.frames), 6))
+        n = len(self.frames)
+        out = np.zeros((n, 6))
+        jac = np.zeros((n, 6, self.chain.dofs.size)) if jacobian else None
         now = np.empty(4)
-        for r, (tf, k, pw, ow) in enumerate(zip(self.frames, self.chain.targets, self.pos_w, self.rot_w)):
+        for r, (tf, i, b, k, pw, ow) in enumerate(zip(self.frames, self.ids, self.bodies, self.chain.targets,
+                                                         self.pos_w, self.rot_w)):
             if not valid[k]:
                 continue
-            out[r, :3] = pw * (tf.position(m, d) - pos[k])
+            p, R = self._pose(tf, i)
+            out[r, :3] = pw * (p - pos[k])
+            if jacobian:
+                mujoco.mj_jac(m, d, self._jacp, self._jacr, p, b)
+                jac[r, :3] = pw * self._jacp[:, self.chain.dofs]
             if ow > 0.0:  # the rotation from the frame to its target, as a rotation vector (radians)
-                mujoco.mju_mat2Quat(now, tf.rotation(m, d).reshape(-1))
+                mujoco.mju_mat2Quat(now, R.reshape(-1))
                 mujoco.mju_subQuat(out[r, 3:], goal[k], now)
                 out[r, 3:] *= ow
+                if jacobian:
+                    jac[r, 3:] = -(_left_jacobian_inverse(out[r, 3:] / ow) @ (ow * R.T)) @ self._jacr[:, self.chain.dofs]
+        if jacobian:
+            return out.reshape(-1), jac.reshape(6 * n, -1)
         return out.reshape(-1)
 
     def cost(self, x: np.ndarray, q: np.ndarray, t: int) -> float:
@@ -210,11 +255,49 @@ class _ArmFit:
         return 0.5 * float(r @ r)
 
     def solve(self, x0: np.ndarray, q: np.ndarray, t: int) -> tuple[np.ndarray, float]:
-        """The arm's joints nearest ``x0`` that best reach frame ``t``'s targets, and the cost."""
+        """The arm's joints nearest ``x0`` that best reach frame ``t``'s targets, and the cost
+        (a local minimum within the ranges: class docstring)."""
         c = self.chain
-        x0 = np.clip(x0, c.lower + 1e-9, c.upper - 1e-9)
-        fit = least_squares(self.residual, x0, bounds=(c.lower, c.upper), args=(q, t), xtol=1e-6, ftol=1e-8)
-        return fit.x, float(fit.cost)
+        x = np.clip(x0, c.lower, c.upper)
+        r, J = self.residual(x, q, t, jacobian=True)
+        cost = 0.5 * float(r @ r)
+        lam = 1e-3
+        for _ in range(self.ITERATIONS):
+            g = J.T @ r
+            free = ~(((x <= c.lower) & (g > 0.0)) | ((x >= c.upper) & (g < 0.0)))
+            if not free.any():
+                break
+            H = (J.T @ J)[np.ix_(free, free)]
+            step = np.zeros_like(x)
+            step[free] = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(H.shape[0])), g[free])
+            xn = np.clip(x + step, c.lower, c.upper)
+            rn, Jn = self.residual(xn, q, t, jacobian=True)
+            cn = 0.5 * float(rn @ rn)
+            if cn < cost:
+                done = cost - cn <= self.FTOL * max(cost, 1e-12) or float(np.abs(xn - x).max()) < 1e-7
+                x, r, J, cost = xn, rn, Jn, cn
+                lam = max(lam * 0.3, 1e-9)
+                if done:
+                    break
+            else:
+                lam *= 10.0
+                if lam > 1e8:
+                    break
+        return x, cost
+
+
+def _left_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
+    r"""``(3, 3)`` inverse left Jacobian of SO(3) at the rotation vector ``phi`` (radians):
+    :math:`I - \tfrac12[\phi]_\times + \big(\tfrac{1}{\theta^2} - \tfrac{1 + \cos\theta}{2\theta\sin\theta}\big)[\phi]_\times^2`,
+    :math:`\theta = |\phi|` (the series' limit :math:`\tfrac{1}{12}` near 0), so that
+    :math:`\log(e^{[\delta]} e^{[\phi]}) \approx \phi + J_l^{-1}(\phi)\,\delta`."""
+    theta = float(np.linalg.norm(phi))
+    K = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
+    if theta < 1e-6:
+        c = 1.0 / 12.0
+    else:
+        c = 1.0 / theta**2 - (1.0 + math.cos(theta)) / (2.0 * theta * math.sin(theta)) if theta < math.pi - 1e-6 else 1.0 / theta**2
+    return np.eye(3) - 0.5 * K + c * (K @ K)
 
 
 def _runs(worst: np.ndarray, gap: int) -> list[tuple[int, int]]:
@@ -229,7 +312,7 @@ def _runs(worst: np.ndarray, gap: int) -> list[tuple[int, int]]:
     return runs
 
 
-def _continue(fit: _ArmFit, qpos: np.ndarray, x: np.ndarray, frames: range, after: int) -> tuple[dict[int, np.ndarray], int | None]:
+def _continue(fit: ArmFit, qpos: np.ndarray, x: np.ndarray, frames: range, after: int) -> tuple[dict[int, np.ndarray], int | None]:
     """The arm solution ``x`` followed over ``frames`` (in that order, each solve started from
     the previous frame's), and the frame beyond ``after`` (past it in the direction of
     travel) where it and the first pass's arm are nearest in pose: where they meet (every
@@ -253,7 +336,7 @@ def _continue(fit: _ArmFit, qpos: np.ndarray, x: np.ndarray, frames: range, afte
     return path, None if best is None else best[1]
 
 
-def _blend(fit: _ArmFit, qpos: np.ndarray, path: dict[int, np.ndarray], cross: int, speed: np.ndarray,
+def _blend(fit: ArmFit, qpos: np.ndarray, path: dict[int, np.ndarray], cross: int, speed: np.ndarray,
            fps: float, into: bool) -> dict[int, np.ndarray]:
     r"""The guide's arm on the frames of ``path``: the first pass's arm blended into ``path``
     around frame ``cross`` (``into``; out of it with ``into`` False) over as many frames as
@@ -278,7 +361,7 @@ def _blend(fit: _ArmFit, qpos: np.ndarray, path: dict[int, np.ndarray], cross: i
 _CROSSING = (0.25, 0.5, 0.75)
 
 
-def _crossing_cost(fit: _ArmFit, a: np.ndarray, b: np.ndarray, q: np.ndarray, t: int) -> float:
+def _crossing_cost(fit: ArmFit, a: np.ndarray, b: np.ndarray, q: np.ndarray, t: int) -> float:
     """How far from frame ``t``'s targets the arm goes on the straight way (in joint
     space) from joints ``a`` to ``b``: the largest cost above the two ends' on the way.
     Near a shoulder's gimbal lock two branches are one pose, and the way between them
@@ -287,7 +370,7 @@ def _crossing_cost(fit: _ArmFit, a: np.ndarray, b: np.ndarray, q: np.ndarray, t:
     return max(fit.cost(a + w * (b - a), q, t) for w in _CROSSING) - ends
 
 
-def _other_branch(fit: _ArmFit, qpos: np.ndarray, t: int) -> np.ndarray | None:
+def _other_branch(fit: ArmFit, qpos: np.ndarray, t: int) -> np.ndarray | None:
     """The arm's joints on frame ``t`` from the best of the first pass's arm and
     :data:`SEEDS` starts within the ranges (a generator seeded by ``t``), or None unless
     they halve the first pass's cost (module docstring, step 2)."""
@@ -342,7 +425,7 @@ def plan_guides(traj, segment_errors: dict[str, np.ndarray], weights: dict | Non
     with Progress(sum(e - s + 1 for _, s, e in work), "arms", enabled=progress) as bar:
         for ci, s, e in work:
             chain = chains[ci]
-            fit = _ArmFit(traj.character, chain, targets, weights or {})
+            fit = ArmFit(traj.character, chain, targets, weights or {})
             speed = PASS_SPEED * np.array([limits.get(model.joint(int(j)).name, math.inf) for j in chain.joints])
             worst = np.max([np.nan_to_num(segment_errors[n][s : e + 1], nan=0.0)
                             for n in ARM_SEGMENTS[chain.side] if n in segment_errors], axis=0)

@@ -186,10 +186,12 @@ class SolverOptions:
             target: on every catch-up (the 120 Hz clips' too) it set the PyMO walk humanoid's
             toes flapping after toe-off, and taking oriented targets' lags everywhere turned
             the G1's left wrist 90 degrees from the actor's on the dance.
-        arm_branches: Offline only: where an arm is left far from the actor's on a branch
-            of its joint ranges that cannot reach it while another can, retarget again
-            with that arm guided onto the other (:mod:`physmocap.ik.branches`).  Streaming
-            retargeting cannot look ahead and ignores it.
+        arm_branches: Where an arm is left far from the actor's on a branch of its joint
+            ranges that cannot reach it while another can: offline, retarget again with
+            that arm guided onto the other where the two meet
+            (:mod:`physmocap.ik.branches`); streaming, pull the arm over to the other once
+            it is found stuck, at the joints' velocity limits
+            (:mod:`physmocap.ik.armswitch`).
         ease_caps: Offline only: where joints sit at their velocity caps (a robot shoulder
             near its gimbal lock), retarget again with their fast moves spread out in
             time, started earlier and ended later (:mod:`physmocap.ik.speedcaps`).

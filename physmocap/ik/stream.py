@@ -31,6 +31,11 @@ Everything it does looks only at the current frame and a short, bounded past:
   touch down, eased in and faded out
   (:class:`~physmocap.ik.body_contacts.BodyContactAnchor`), where offline plans
   each contact over its whole interval.
+* **Arms stuck on the wrong branch** of their joint ranges
+  (:class:`~physmocap.ik.armswitch.ArmSwitch`, ``arm_branches``): an arm found
+  more than 30 degrees off the actor's on a branch that cannot reach it, while
+  another branch can, is pulled over at its joints' velocity limits (offline
+  guides it over, in a second pass, where the two branches meet).
 
 Tracker frames with missing joints go through the causal gap filler
 (:class:`~physmocap.sources.gaps.CausalGapFiller`): short gaps hold the last
@@ -49,6 +54,7 @@ import numpy as np
 from ..errors import InputError, MappingError, OptionError, warn
 from ..motion import Motion, Skeleton
 from ..trajectory import SolverStats, Trajectory
+from .armswitch import ArmSwitch
 from .config import RetargetConfig
 from .body_contacts import BodyContactAnchor, BodyContactStream, release_kneeling_feet
 from .contacts import ContactStream, Contacts, FloorPlane, contact_points
@@ -171,6 +177,8 @@ class StreamingRetargeter:
         self.body_contacts: BodyContactStream | None = None
         self.body_anchors: dict[str, BodyContactAnchor] = {}
         self.latencies: list[float] = []
+        self.arms: ArmSwitch | None = None
+        self._last_qpos: np.ndarray | None = None
         self.iterations: list[int] = []
         self.relaxations: list[int] = []
         #: mean joint speed (m/s) into frame 1 above which frame 0 is taken for a reference pose
@@ -238,6 +246,8 @@ class StreamingRetargeter:
             )
             for part in self.body_contacts.parts
         }
+        self.arms = (ArmSwitch(self.character, targets.names, targets.has_orientation, self.fps, self.config.solver.weights)
+                     if self.config.solver.arm_branches else None)
         if keep_solver and self.pipeline is not None and self.pipeline.names == targets.names:
             self.pipeline.restart_contacts()  # a new calibration; the pose and velocity bounds carry on
         else:
@@ -301,7 +311,11 @@ class StreamingRetargeter:
         body = self.body_contacts.step({c: world[j] for c, j in self.joint_indices.items()})
         if self.body_anchors:
             positions, labels = self._hold_body_parts(positions, targets.names, labels, body)
-        result = self.pipeline.solve(positions, orientations, targets.valid[0], labels)
+        guide = None
+        if self.arms is not None:
+            guide = self.arms.guide(self._last_qpos, positions, orientations, targets.valid[0])
+        result = self.pipeline.solve(positions, orientations, targets.valid[0], labels, guide)
+        self._last_qpos = result.qpos
         self.last_targets = replace(targets, positions=np.array(positions)[None], orientations=np.array(orientations)[None],
                                     source_positions=None, source_recipe=None, calibration=None)
         self.frame += 1

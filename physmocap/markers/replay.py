@@ -56,7 +56,8 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
     if character is not None:
         J = len(names)
         skel = Skeleton(names=tuple(names), parents=-np.ones(J, dtype=np.int64), offsets=np.zeros((J, 3)))
-        retargeter = StreamingRetargeter(character, skeleton=skel, fps=rec.fps, source=str(rec.source))
+        retargeter = StreamingRetargeter(character, skeleton=skel, fps=rec.fps, source=str(rec.source),
+                                         **({"arm_branches": False} if getattr(args, "no_arm_branches", False) else {}))
     F = rec.num_frames
     qa = np.empty((F, stream.actor.character.model.nq))
     qc = np.empty((F, character.model.nq)) if character is not None else None

@@ -49,7 +49,6 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..progress import Progress
 from ..rotations import xyzw_to_wxyz

@@ -95,7 +95,7 @@ class FileResult:
     error: str = ""
     frame: int | None = None  # where a failure happened, when known (see run_job)
     frames: int = 0
-    fps: float = 0.0
+    fps: float = 0.0  # the clip's frame rate (frames/s), rounded to 4 decimals
     limit_violations: int | None = None
     penetration_max_mm: float | None = None
     skating_mean_cm_s: float | None = None
@@ -506,7 +506,7 @@ def _measure(traj: Any, res: FileResult) -> None:
 
     ch = traj.character
     fid = traj.fidelity
-    res.frames, res.fps = int(traj.num_frames), float(traj.fps)
+    res.frames, res.fps = int(traj.num_frames), round(float(traj.fps), 4)  # a BVH frame time of 0.008333 s: 120.0048
     res.limit_violations = int(metrics.joint_limit_violations(ch.model, traj.qpos)["count"])
     res.penetration_max_mm = _figure(metrics.penetration(ch.model, traj.qpos)["max_mm"], 3)
     if traj.contacts is not None:

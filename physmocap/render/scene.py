@@ -28,6 +28,9 @@ CENTRE_RGBA = np.array([0.75, 0.75, 0.72, 1.0], dtype=np.float32)
 CONTACT_RGBA = np.array([0.2, 0.9, 0.3, 1.0], dtype=np.float32)
 GRID_RGBA = np.array([0.35, 0.35, 0.38, 1.0], dtype=np.float32)
 FLOOR_RGBA = np.array([0.16, 0.17, 0.19, 1.0], dtype=np.float32)
+#: Opacity of the character in the ``overlay`` layout: the source skeleton drawn inside its
+#: limbs shows through them.
+OVERLAY_ALPHA = 0.35
 #: Costly effects a preview does without (a scene's shadows, floor reflections and skybox).
 _OFF_FLAGS = (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION, mujoco.mjtRndFlag.mjRND_SKYBOX)
 #: Named views: (azimuth relative to the character's initial heading, elevation), degrees.
@@ -152,6 +155,8 @@ class PreviewScene:
             s = side[model.geom_bodyid[g]]
             rgba = LEFT_RGBA if s == LEFT else RIGHT_RGBA if s == RIGHT else CENTRE_RGBA
             model.geom_rgba[g] = rgba if model.geom_rgba[g][3] > 0 else model.geom_rgba[g]
+        if skeleton is not None and opt.layout == "overlay":  # see-through, the skeleton inside it visible
+            model.geom_rgba[:, 3] = np.minimum(model.geom_rgba[:, 3], OVERLAY_ALPHA)
         self.model = model
         self.data = mujoco.MjData(model)
         self.renderer = mujoco.Renderer(model, opt.height, opt.width, max_geom=model.ngeom + 4000)

@@ -472,6 +472,51 @@ class ContactDetector:
                 self.count[i] = 0
 
 
+class StanceLevels:
+    r"""Each contact point's stance level learnt causally, as the stream goes.
+
+    A stream starts with the levels of its first frame (each point's height, the lower of
+    the two feet), which is a stance level only if the actor stands flat there: a first
+    frame mid-stride or with the heels up stood the OptiTrack actor 4.5 cm too high, its
+    knees bent 10 degrees.  Offline, a point's level is the ``floor_percentile`` of its
+    heights on the frames it moves slower than ``floor_speed``
+    (:func:`estimate_floor`); here the same percentile of its slow heights so far, kept
+    in a histogram of :data:`BIN` metres (bounded memory, exact to the bin), once
+    :data:`MIN_TIME` seconds of slow samples are in, and never above the starting level.
+    Metres, m/s.
+    """
+
+    #: Histogram bin (m) and range (m above the floor) of the heights kept.
+    BIN = 0.001
+    LOW, HIGH = -0.25, 0.50
+    #: Seconds of slow samples a point needs before its level is learnt.
+    MIN_TIME = 0.2
+
+    def __init__(self, start: np.ndarray, fps: float, options: ContactOptions) -> None:
+        self.start = np.array(start, dtype=float)
+        self.levels = self.start.copy()
+        self.options = options
+        self.bins = int(round((self.HIGH - self.LOW) / self.BIN))
+        self.counts = np.zeros((self.start.size, self.bins), dtype=np.int64)
+        self.min_samples = max(1, int(math.ceil(self.MIN_TIME * float(fps))))
+
+    def update(self, heights: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+        """The levels ``(P,)`` after this frame's point heights above the floor ``(P,)``
+        and horizontal speeds ``(P,)`` (m/s)."""
+        slow = np.flatnonzero((speeds < self.options.floor_speed) & np.isfinite(heights))
+        if not slow.size:
+            return self.levels
+        b = np.clip(((heights[slow] - self.LOW) / self.BIN).astype(np.int64), 0, self.bins - 1)
+        self.counts[slow, b] += 1
+        for i in slow:
+            n = int(self.counts[i].sum())
+            if n < self.min_samples:
+                continue
+            k = int(np.searchsorted(np.cumsum(self.counts[i]), self.options.floor_percentile / 100.0 * n))
+            self.levels[i] = min(self.start[i], self.LOW + (k + 0.5) * self.BIN)
+        return self.levels
+
+
 class ContactStream:
     """Streaming contact detection from foot point positions, one frame at a time.
 
@@ -484,7 +529,8 @@ class ContactStream:
     Args:
         points: Point names (``left_heel``, ``left_ball``, ``left_toe_end`` ...).
         fps: Frame rate.
-        floor: The floor plane with each point's stance level.
+        floor: The floor plane with each point's stance level to start from (the
+            levels are learnt as frames come: :class:`StanceLevels`, ``levels``).
         options: Thresholds.
     """
 
@@ -493,7 +539,8 @@ class ContactStream:
         self.points = tuple(points)
         self.fps = float(fps)
         self.floor = floor
-        self.levels = np.array([floor.levels.get(p, 0.0) for p in self.points])
+        self.stance = StanceLevels(np.array([floor.levels.get(p, 0.0) for p in self.points]), fps, opt)
+        self.levels = self.stance.levels
         self.detector = ContactDetector([_kind(p) for p in self.points], fps, opt)
         self.k2 = 2 * _half_window(fps, opt.speed_window)
         self.history: list[np.ndarray] = []
@@ -508,8 +555,10 @@ class ContactStream:
         old = self.history[0]
         span = max(len(self.history) - 1, 1)
         vel = (x - old) * (self.fps / span)
-        h = self.floor.heights(x) - self.levels
-        state = self.detector.step(h, np.linalg.norm(vel[:, :2], axis=1), vel[:, 2])
+        h = self.floor.heights(x)
+        speed = np.linalg.norm(vel[:, :2], axis=1)
+        self.levels = self.stance.update(h, speed)
+        state = self.detector.step(h - self.levels, speed, vel[:, 2])
         on = dict(zip(self.points, state))
         out = {}
         for label, pts in LABEL_POINTS.items():

@@ -106,8 +106,8 @@ def _stuck_case(ch, chain, names, rng):
             arm = next(a for a in switch.arms if a.chain.side == chain.side)
             q_start = q.copy()
             q_start[chain.qpos] = own
-            switch._set_targets(arm, q_start, frames.positions[0], frames.orientations[0], frames.valid[0])
-            if switch._off(arm, own, q_start) > STUCK_DEG + 10:
+            switch.set_targets(arm, q_start, frames.positions[0], frames.orientations[0], frames.valid[0])
+            if switch.worst_segment_deg(arm, own, q_start) > STUCK_DEG + 10:
                 return q_start, frames
     raise AssertionError("no stuck arm found")
 
@@ -146,7 +146,7 @@ def test_a_stuck_arm_is_pulled_onto_the_branch_that_reaches_within_its_velocity_
     steps = np.abs(np.diff(np.array([q[chain.qpos]] + [g[: chain.qpos.size] for g in pulled]), axis=0))
     assert np.all(steps <= limits / fps + 1e-9)
     assert guides[-1] is None and arm.goal is None  # the switch is over
-    assert switch._off(arm, qq[chain.qpos], qq) < STUCK_DEG
+    assert switch.worst_segment_deg(arm, qq[chain.qpos], qq) < STUCK_DEG
     fit = arm.fit
     assert fit.cost(qq[chain.qpos], qq, 0) <= 0.5 * fit.solve(q[chain.qpos], q, 0)[1]
     again = run()[3]
@@ -173,8 +173,8 @@ def test_an_arm_that_only_lags_is_left_alone(character):
         arm = next(a for a in switch.arms if a.chain.side == chain.side)
         q_start = q.copy()
         q_start[chain.qpos] = start
-        switch._set_targets(arm, q_start, frames.positions[0], frames.orientations[0], frames.valid[0])
-        if switch._off(arm, start, q_start) > STUCK_DEG and arm.fit.solve(start, q_start, 0)[1] < 1e-8:
+        switch.set_targets(arm, q_start, frames.positions[0], frames.orientations[0], frames.valid[0])
+        if switch.worst_segment_deg(arm, start, q_start) > STUCK_DEG and arm.fit.solve(start, q_start, 0)[1] < 1e-8:
             break
     else:
         raise AssertionError("no lagging arm found")

@@ -138,7 +138,7 @@ class ArmSwitch:
             return None
         pulls = []
         for arm in self.arms:
-            self._set_targets(arm, q, positions, orientations, valid)
+            self.set_targets(arm, q, positions, orientations, valid)
             pull = self._step(arm, q, frame)
             if pull is not None:
                 pulls.append((arm.chain, pull))
@@ -148,9 +148,10 @@ class ArmSwitch:
                      np.concatenate([x for _, x in pulls]), GUIDE_COST)
 
     # -- one arm, one frame --------------------------------------------------------
-    def _set_targets(self, arm: _Arm, q: np.ndarray, positions, orientations, valid) -> None:
-        """The frame's targets, the arm's moved with its first target onto the character's
-        joint at ``q`` (module docstring)."""
+    def set_targets(self, arm: _Arm, q: np.ndarray, positions, orientations, valid) -> None:
+        """Load the frame's targets (``(N, 3)``, ``(N, 4)`` x-y-z-w, ``(N,)``) where ``arm``'s
+        fit reads them, the arm's moved with its first target onto the character's joint at
+        ``q`` (module docstring); each arm's in turn (they share the frame)."""
         f = self.frames
         f.positions[0] = positions
         f.orientations[0] = orientations
@@ -162,8 +163,9 @@ class ArmSwitch:
             here = self.tracked[f.names[first]].position(self.model, fit.data)
             f.positions[0, arm.chain.targets] += here - f.positions[0, first]
 
-    def _off(self, arm: _Arm, x: np.ndarray, q: np.ndarray) -> float:
-        """The arm's worst segment direction error (degrees) with its joints at ``x``."""
+    def worst_segment_deg(self, arm: _Arm, x: np.ndarray, q: np.ndarray) -> float:
+        """The arm's worst segment direction error (degrees) against the loaded targets
+        (:meth:`set_targets`) with its joints at ``x`` and the rest of the body at ``q``."""
         fit = arm.fit
         fit.pose(x, q)
         f = self.frames
@@ -185,11 +187,11 @@ class ArmSwitch:
             arm.wait -= 1
             return None
         if arm.rng is None:
-            arm.stuck = arm.stuck + 1 if self._off(arm, now, q) > STUCK_DEG else 0
+            arm.stuck = arm.stuck + 1 if self.worst_segment_deg(arm, now, q) > STUCK_DEG else 0
             if arm.stuck < max(1, int(round(STUCK_TIME * self.fps))):
                 return None
             own, arm.own = fit.solve(now, q, 0)
-            if self._off(arm, own, q) <= STUCK_DEG:
+            if self.worst_segment_deg(arm, own, q) <= STUCK_DEG:
                 arm.stuck = 0  # lagging on a branch that reaches
                 return None
             arm.rng, arm.seeds_left = np.random.default_rng(frame), SEEDS

@@ -7,10 +7,12 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from conftest import retargeted, shared_file
+from conftest import RETARGET_DIAGNOSTICS, retargeted, shared_file
 from physmocap.ik.trunkreach import TOLERANCE_DEG, TrunkReach, trunk_reach
 from physmocap.metrics.fidelity import trajectory_fidelity
 from physmocap.models import load_character
+
+pytestmark = RETARGET_DIAGNOSTICS
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -39,6 +41,31 @@ def test_a_trunk_within_reach_leaves_the_pelvis_alone_and_one_beyond_turns_it_by
     gap = np.vstack([pelvis[:1], np.full((1, 4), np.nan), pelvis[1:2]])
     kept = reach.give_way(gap, trunk[[0, 0, 1]])
     assert np.all(np.isnan(kept[1])) and np.allclose(kept[[0, 2]], out[:2])
+
+
+def test_a_stream_s_turns_are_averaged_over_its_last_frames():
+    """Frame by frame with a history, each frame's turn is the mean of its own (what
+    give_way alone gives it) and those of the frames before, at most ``window`` of them:
+    a trunk that steps beyond reach and back moves the pelvis in steps a window long, not at
+    once (the streamed dance robot's pelvis target stepped 2-4 degrees in a frame)."""
+    from collections import deque
+
+    reach = TrunkReach(Rotation.from_euler("y", np.linspace(-10, 20, 121)[:, None], degrees=True).apply([0, 0, 1.0]),
+                       np.array([0.0, 1.0, 0.0]), IDENTITY)
+    leans = [0, 0, -30, -30, -30, -30, 0, 0, 0, -20]
+    window = 3
+    history = deque(maxlen=window)
+    raw, averaged = [], []
+    for lean in leans:
+        trunk = Rotation.from_euler("y", [[lean]], degrees=True).apply([0, 0, 1.0])
+        alone = reach.give_way(IDENTITY[None], trunk)
+        raw.append(Rotation.from_quat(alone).as_rotvec()[0])
+        averaged.append(Rotation.from_quat(reach.give_way(IDENTITY[None], trunk, window, history)).as_rotvec()[0])
+    raw, averaged = np.array(raw), np.array(averaged)
+    for t in range(len(leans)):
+        np.testing.assert_allclose(averaged[t], raw[max(0, t - window + 1) : t + 1].mean(axis=0), atol=1e-12)
+    steps = np.degrees(np.linalg.norm(np.diff(averaged, axis=0), axis=1))
+    assert steps.max() <= np.degrees(np.linalg.norm(raw, axis=1)).max() / window + 1e-9
 
 
 def test_the_robot_s_reach_is_its_waist_s_and_the_same_every_time():

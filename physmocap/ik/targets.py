@@ -36,6 +36,7 @@ All quantities are metres and radians, Z-up, quaternions x-y-z-w.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Callable
@@ -169,6 +170,7 @@ class Calibration:
     limb_axes: dict = field(default_factory=dict)  # limb's upper segment -> its FlexionAxis or None (limbtwist)
     limb_twists: dict = field(default_factory=dict)  # limb's upper segment -> its TwistCalibration (limbtwist)
     trunk_reach: TrunkReach | None = None  # the trunk directions the torso joints reach (trunkreach)
+    trunk_turns: deque | None = None  # a stream's last pelvis turns, averaged (TrunkReach.give_way)
 
 
 @dataclass(eq=False)
@@ -883,8 +885,13 @@ def build_targets(
     reach = trunk_reach(character) if cal is None else cal.trunk_reach
     if reach is not None and "neck" in pset and has_q[col["pelvis"]]:
         ipv = col["pelvis"]
-        window = max(1, int(round(SMOOTHING_TIME * motion.fps))) if F > 1 else 1
-        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], window))
+        window = max(1, int(round(SMOOTHING_TIME * motion.fps)))
+        history = None
+        if cal is not None and F == 1:  # a stream: averaged over its last frames
+            if cal.trunk_turns is None or cal.trunk_turns.maxlen != window:
+                cal.trunk_turns = deque(maxlen=window)
+            history = cal.trunk_turns
+        Q[ipv] = held.keep(reach.give_way(Q[ipv], S[:, col["neck"]] - S[:, ipv], window, history))
 
     # --- world rotation of each torso segment from its rest pose, for rigid placement:
     # Delta(t) = R_a(t) R_a0^-1 Y for rotational sources (M = I on the torso), or

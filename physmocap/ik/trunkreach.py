@@ -28,6 +28,7 @@ stay).  A demanded direction within reach leaves the target as it is.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import mujoco
@@ -64,7 +65,8 @@ class TrunkReach:
     #: tracked frame's, the directions reached the body's.
     body_in_frame: np.ndarray
 
-    def give_way(self, pelvis: np.ndarray, trunk: np.ndarray, window: int = 1) -> np.ndarray:
+    def give_way(self, pelvis: np.ndarray, trunk: np.ndarray, window: int = 1,
+                 history: deque | None = None) -> np.ndarray:
         """The pelvis targets ``(F, 4)`` x-y-z-w turned by what lies beyond reach.
 
         Args:
@@ -73,7 +75,11 @@ class TrunkReach:
                 not finite are left alone.
             window: frames over which the turns (rotation vectors in the body's frame) are
                 averaged: the nearest direction reached steps from sample to sample, and the
-                pelvis should not (1: none; a stream's single frame).
+                pelvis should not (1: none), centred on each frame.
+            history: A stream's: the turns of the frames before (a ``deque`` of at most
+                ``window`` of them, ours to append to); the one frame given is turned by the
+                mean of its turn and theirs, a causal average over ``window`` frames (its
+                lag half of it) where offline's is centred.
         """
         from scipy.ndimage import uniform_filter1d
 
@@ -99,10 +105,13 @@ class TrunkReach:
             axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
             turns[rows[beyond]] = axis * (angle[beyond] - tol)[:, None]
         turns = np.outer(turns @ self.axis, self.axis)  # about the hip line only
+        if history is not None and len(out) == 1:
+            history.append(turns[0])
+            turns = np.mean(np.array(history), axis=0, keepdims=True) * ok[:, None]
+        elif window > 1:
+            turns = uniform_filter1d(turns, size=int(window), axis=0, mode="nearest")
         if not np.any(turns):
             return out
-        if window > 1:
-            turns = uniform_filter1d(turns, size=int(window), axis=0, mode="nearest")
         moved = np.flatnonzero(np.linalg.norm(turns, axis=1) > 1e-12)
         turn = Rotation.from_rotvec(turns[moved]).as_quat()
         out[moved] = quat_mul(out[moved], turn_in_tracked_frame(turn, self.body_in_frame))

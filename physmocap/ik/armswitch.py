@@ -15,8 +15,9 @@ finds it stuck, within its velocity bounds:
 3. **the other branch**: :data:`~.branches.SEEDS` starts within the ranges (a generator
    seeded by the frame number: deterministic), :data:`SEEDS_PER_FRAME` of them a frame so
    that no frame pays for the whole search, the best kept and solved again on each frame
-   for that frame's targets; if it halves the cost of the arm's own branch, the switch
-   begins, else the arm is left alone for :data:`RETRY_TIME` seconds;
+   for that frame's targets, the search ended early by a start that costs less than
+   :data:`CLEAR_RATIO` of the own branch; if the best halves the cost of the arm's own
+   branch, the switch begins, else the arm is left alone for :data:`RETRY_TIME` seconds;
 4. **switch**: every frame the goal (the other branch) is solved again from its last
    value for the new frame's targets, and the IK gets a guide
    (:class:`~.branches.Guide`, :data:`~.branches.GUIDE_COST` per radian) that pulls the

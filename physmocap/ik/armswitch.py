@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..metrics.fidelity import SEGMENTS
+from ..metrics.fidelity import SEGMENTS, angle_deg
 from .branches import ARM_SEGMENTS, GUIDE_COST, MEET_DEG, PASS_SPEED, SEEDS, STUCK_DEG, ArmChain, ArmFit, Guide, arm_chains
 
 __all__ = ["ArmSwitch", "STUCK_TIME", "SEEDS_PER_FRAME", "CLEAR_RATIO", "RETRY_TIME", "SWITCH_TIME"]
@@ -176,7 +176,8 @@ class ArmSwitch:
                 continue
             pa = self.tracked[f.names[a]].position(self.model, fit.data)
             pb = self.tracked[f.names[b]].position(self.model, fit.data)
-            worst = max(worst, _angle_deg(pb - pa, f.positions[0, b] - f.positions[0, a]))
+            off = float(angle_deg(pb - pa, f.positions[0, b] - f.positions[0, a]))
+            worst = max(worst, off) if np.isfinite(off) else worst  # NaN: a degenerate segment
         return worst
 
     def _step(self, arm: _Arm, q: np.ndarray, frame: int) -> np.ndarray | None:
@@ -231,10 +232,3 @@ class ArmSwitch:
         arm.pulled = arm.pulled + np.clip(arm.goal - arm.pulled, -step, step)
         return arm.pulled
 
-
-def _angle_deg(u: np.ndarray, v: np.ndarray) -> float:
-    """Angle between two vectors, degrees (0 if either is zero)."""
-    nu, nv = float(np.linalg.norm(u)), float(np.linalg.norm(v))
-    if nu < 1e-9 or nv < 1e-9:
-        return 0.0
-    return math.degrees(math.acos(max(-1.0, min(1.0, float(u @ v) / (nu * nv)))))

@@ -268,7 +268,10 @@ class ArmFit:
                 break
             H = (J.T @ J)[np.ix_(free, free)]
             step = np.zeros_like(x)
-            step[free] = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(H.shape[0])), g[free])
+            try:
+                step[free] = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(H.shape[0])), g[free])
+            except np.linalg.LinAlgError:  # singular even damped (a residual not finite): stop here
+                break
             xn = np.clip(x + step, c.lower, c.upper)
             rn, Jn = self.residual(xn, q, t, jacobian=True)
             cn = 0.5 * float(rn @ rn)

@@ -477,8 +477,8 @@ class StanceLevels:
 
     A stream starts with the levels of its first frame (each point's height, the lower of
     the two feet), which is a stance level only if the actor stands flat there: a first
-    frame mid-stride or with the heels up stood the OptiTrack actor 4.5 cm too high, its
-    knees bent 10 degrees.  Offline, a point's level is the ``floor_percentile`` of its
+    frame mid-stride or with the heels up (its ankles above where they stand) stood the
+    OptiTrack actor 4.5 cm too low, its knees bent 10 degrees.  Offline, a point's level is the ``floor_percentile`` of its
     heights on the frames it moves slower than ``floor_speed``
     (:func:`estimate_floor`); here the same percentile of its slow heights so far, kept
     in a histogram of :data:`BIN` metres (bounded memory, exact to the bin), once

@@ -333,7 +333,6 @@ class StreamingRetargeter:
         self.latencies.append(time.perf_counter() - t0)
         return result.qpos
 
-
     def _follow_stance_levels(self) -> None:
         """Move the calibration's ankle height in stance (the height the targets stand the
         actor's ankles on the character's: :class:`~physmocap.ik.targets.Calibration`) by

@@ -59,6 +59,7 @@ __all__ = [
     "actor_joint_positions",
     "character_joint_positions",
     "segment_direction_errors",
+    "angle_deg",
     "facing_errors",
     "similarity_fit_2d",
     "path_deviation",
@@ -302,7 +303,7 @@ def _point(joints: dict[str, np.ndarray], name: str) -> np.ndarray | None:
     return joints.get(name)
 
 
-def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle between vectors (degrees), NaN where either is degenerate or unknown."""
     na = np.linalg.norm(a, axis=-1)
     nb = np.linalg.norm(b, axis=-1)
@@ -321,7 +322,7 @@ def segment_direction_errors(actor: dict[str, np.ndarray], character: dict[str, 
         pa, da, pc, dc = _point(actor, a), _point(actor, b), _point(character, a), _point(character, b)
         if pa is None or da is None or pc is None or dc is None:
             continue
-        out[seg] = _angle_deg(dc - pc, da - pa)
+        out[seg] = angle_deg(dc - pc, da - pa)
         _let_go(actor, character)
     return out
 

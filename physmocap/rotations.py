@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 __all__ = [
     "Rotation",
+    "cross",
     "UP_AXES",
     "up_axis_matrix",
     "wxyz_to_xyzw",
@@ -176,24 +177,35 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
     return np.concatenate([-q[..., :3], q[..., 3:4]], axis=-1)
 
 
-def _parts(x: np.ndarray) -> list:
-    """Components of ``x`` along its last axis: Python floats for a single vector (the same
-    IEEE products and sums as numpy's, without numpy's overhead on every 0-d operation),
-    else views ``x[..., i]``."""
-    return x.tolist() if x.ndim == 1 else [x[..., i] for i in range(x.shape[-1])]
+def _single(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether ``a`` and ``b`` each hold one vector (shapes ``(k,)`` or ``(1, ..., 1, k)``)."""
+    return a.size == a.shape[-1] and b.size == b.shape[-1]
 
 
-def _joined(parts: list, single: bool) -> np.ndarray:
-    """The components of :func:`_parts` stacked back along the last axis."""
-    return np.array(parts) if single else np.stack(parts, axis=-1)
+def _parts(x: np.ndarray, single: bool) -> list:
+    """Components of ``x`` along its last axis: Python floats for a vector ``(k,)``, or for
+    any single vector when ``single`` (:func:`_single`: the same IEEE products and sums as
+    numpy's, without numpy's overhead on every small operation), else views ``x[..., i]``."""
+    return x.ravel().tolist() if single or x.ndim == 1 else [x[..., i] for i in range(x.shape[-1])]
+
+
+def _joined(parts: list, a: np.ndarray, b: np.ndarray, single: bool) -> np.ndarray:
+    """The components of :func:`_parts` of ``a`` and ``b`` combined, stacked back along the
+    last axis, shaped as ``a`` and ``b`` broadcast."""
+    if single:
+        out = np.array(parts)
+        lead = max(a.ndim, b.ndim) - 1
+        return out.reshape((1,) * lead + out.shape) if lead else out
+    return np.stack(parts, axis=-1)
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` of xyzw quaternions, broadcasting (rotation ``Ra @ Rb``)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    ax, ay, az, aw = _parts(a)
-    bx, by, bz, bw = _parts(b)
+    single = _single(a, b)
+    ax, ay, az, aw = _parts(a, single)
+    bx, by, bz, bw = _parts(b, single)
     return _joined(
         [
             aw * bx + ax * bw + ay * bz - az * by,
@@ -201,7 +213,9 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
             aw * bz + ax * by - ay * bx + az * bw,
             aw * bw - ax * bx - ay * by - az * bz,
         ],
-        a.ndim == 1 and b.ndim == 1,
+        a,
+        b,
+        single,
     )
 
 
@@ -210,8 +224,9 @@ def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
     # v' = v + w t + u x t with t = 2 u x v (components written out: np.cross is slow)
-    ux, uy, uz, w = _parts(q)
-    vx, vy, vz = _parts(v)
+    single = _single(q, v)
+    ux, uy, uz, w = _parts(q, single)
+    vx, vy, vz = _parts(v, single)
     tx = 2.0 * (uy * vz - uz * vy)
     ty = 2.0 * (uz * vx - ux * vz)
     tz = 2.0 * (ux * vy - uy * vx)
@@ -221,8 +236,22 @@ def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
             vy + w * ty + (uz * tx - ux * tz),
             vz + w * tz + (ux * ty - uy * tx),
         ],
-        q.ndim == 1 and v.ndim == 1,
+        q,
+        v,
+        single,
     )
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross products ``a x b`` of 3-vectors ``(..., 3)``, broadcasting: ``np.cross``'s
+    values bit for bit (its products and differences, in its order), without its overhead
+    (a tenth of the time on one vector)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    single = _single(a, b)
+    ax, ay, az = _parts(a, single)
+    bx, by, bz = _parts(b, single)
+    return _joined([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], a, b, single)
 
 
 def quat_canonical(q: np.ndarray) -> np.ndarray:
@@ -242,7 +271,7 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
-    axis = np.cross(a, b)
+    axis = cross(a, b)
     s = np.linalg.norm(axis, axis=-1, keepdims=True)
     c = np.sum(a * b, axis=-1, keepdims=True)
     theta = np.arctan2(s, c)

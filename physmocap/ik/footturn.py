@@ -59,7 +59,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..rotations import quat_apply, quat_conj, quat_mul
+from ..rotations import cross, quat_apply, quat_conj, quat_mul
 from .easing import smoothstep
 
 
@@ -72,14 +72,6 @@ def _heading(v: np.ndarray) -> float:
     return float(np.arctan2(v[1], v[0]))
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:math:`a \\times b` of two 3-vectors, component by component on Python floats (the same
-    products and differences as ``np.cross``, without its overhead on one pair)."""
-    a0, a1, a2 = a.tolist()
-    b0, b1, b2 = b.tolist()
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
-
-
 def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[float, float]:
     r"""Where a leg's knee points and how bent it is.
 
@@ -89,7 +81,7 @@ def knee_plane(hip: np.ndarray, knee: np.ndarray, ankle: np.ndarray) -> tuple[fl
     (radians; 0 for a straight leg, or a leg whose plane is nearly horizontal, which has
     no such direction)."""
     thigh, shank = knee - hip, ankle - knee
-    n = _cross(thigh, shank)
+    n = cross(thigh, shank)
     norm = float(np.linalg.norm(n))
     if norm < 1e-12:
         return 0.0, 0.0

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..rotations import quat_apply, quat_mul
+from ..rotations import cross, quat_apply, quat_mul
 
 __all__ = ["LIMB_CHAINS", "FlexionAxis", "TwistCalibration", "flexion_axis", "follow_bend", "twist_error"]
 
@@ -140,13 +140,13 @@ def twist_error(
     targets ``target`` (``(F, 4)``) against the actor's hinge normal (module docstring),
     and the actor's bend between ``upper`` and ``lower`` (``(F, 3)``, metres)."""
     h, u = axes.h, axes.u
-    n = np.cross(upper, lower)
+    n = cross(upper, lower)
     bend = np.arctan2(np.linalg.norm(n, axis=-1), np.einsum("ij,ij->i", upper, lower))
     d = quat_apply(target, u)
     predicted = quat_apply(target, h)
     predicted -= np.einsum("ij,ij->i", predicted, d)[:, None] * d
     n -= np.einsum("ij,ij->i", n, d)[:, None] * d
-    phi = np.arctan2(np.einsum("ij,ij->i", np.cross(predicted, n), d), np.einsum("ij,ij->i", predicted, n))
+    phi = np.arctan2(np.einsum("ij,ij->i", cross(predicted, n), d), np.einsum("ij,ij->i", predicted, n))
     return phi, bend
 
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..rotations import Rotation, quat_conj, quat_mul
+from ..rotations import Rotation, cross, quat_conj, quat_mul
 
 __all__ = ["TrunkReach", "trunk_reach", "SAMPLES", "TOLERANCE_DEG", "SMOOTHING_TIME"]
 
@@ -101,7 +101,7 @@ class TrunkReach:
             n = self.directions[best]
             angle = np.arccos(np.clip(dots[np.arange(len(rows)), best], -1.0, 1.0))
             beyond = angle > tol
-            axis = np.cross(n[beyond], d[beyond])
+            axis = cross(n[beyond], d[beyond])
             axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
             turns[rows[beyond]] = axis * (angle[beyond] - tol)[:, None]
         turns = np.outer(turns @ self.axis, self.axis)  # about the hip line only

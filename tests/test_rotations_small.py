@@ -1,0 +1,46 @@
+"""The component-wise quaternion and vector products (``physmocap.rotations``): one vector
+at a time (a stream's frame) takes Python floats, many take numpy views; both must give
+numpy's own values bit for bit and numpy's broadcast shapes."""
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from physmocap.rotations import cross, quat_apply, quat_mul
+
+# pairs of leading shapes that broadcast: single vectors in every shape, and stacks
+SHAPES = [((), ()), ((1,), ()), ((), (1,)), ((1,), (1,)), ((1, 1), (1,)), ((5,), ()), ((), (5,)),
+          ((1,), (5,)), ((1, 1), (5,)), ((5,), (5,)), ((2, 1), (1, 3)), ((1, 2, 1), (4,))]
+
+
+def _quat_mul_reference(a, b):
+    ax, ay, az, aw = np.moveaxis(a, -1, 0)
+    bx, by, bz, bw = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(pair=st.sampled_from(SHAPES), seed=st.integers(0, 2**31 - 1))
+def test_small_products_match_numpy(pair, seed):
+    rng = np.random.default_rng(seed)
+    sa, sb = pair
+    a3, b3 = rng.normal(size=(*sa, 3)), rng.normal(size=(*sb, 3))
+    got, want = cross(a3, b3), np.cross(a3, b3)
+    assert got.shape == want.shape and got.tobytes() == want.tobytes()
+    q = rng.normal(size=(*sa, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    p = rng.normal(size=(*sb, 4))
+    got, want = quat_mul(q, p), _quat_mul_reference(*np.broadcast_arrays(q, p))
+    assert got.shape == want.shape and got.tobytes() == want.tobytes()
+    # rotating a vector: the matrix's answer, in the broadcast shape
+    v = quat_apply(q, b3)
+    R = _matrix(q)
+    assert v.shape == np.broadcast_shapes(q.shape[:-1], b3.shape[:-1]) + (3,)
+    np.testing.assert_allclose(v, np.einsum("...ij,...j->...i", R, b3), atol=1e-12)
+
+
+def _matrix(q):
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)

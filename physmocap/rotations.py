@@ -19,12 +19,16 @@ Conventions used everywhere else in the package:
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 __all__ = [
     "Rotation",
     "cross",
+    "hamilton",
+    "rotate",
     "UP_AXES",
     "up_axis_matrix",
     "wxyz_to_xyzw",
@@ -199,47 +203,47 @@ def _joined(parts: list, a: np.ndarray, b: np.ndarray, single: bool) -> np.ndarr
     return np.stack(parts, axis=-1)
 
 
+def hamilton(a: Sequence, b: Sequence) -> list:
+    """The Hamilton product of quaternions given by their x-y-z-w components (Python floats,
+    or arrays that broadcast): its four components.  The one place the product is written;
+    :func:`quat_mul` and per-joint loops (``motion``'s one-frame kinematics) use it."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return [
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ]
+
+
+def rotate(q: Sequence, v: Sequence) -> list:
+    """Vector ``v`` rotated by the unit quaternion ``q``, both by their components (x-y-z-w;
+    floats or arrays that broadcast): :math:`v' = v + w t + u \times t` with
+    :math:`t = 2 u \times v`.  The one place the rotation is written (see :func:`hamilton`)."""
+    ux, uy, uz, w = q
+    vx, vy, vz = v
+    tx = 2.0 * (uy * vz - uz * vy)
+    ty = 2.0 * (uz * vx - ux * vz)
+    tz = 2.0 * (ux * vy - uy * vx)
+    return [vx + w * tx + (uy * tz - uz * ty), vy + w * ty + (uz * tx - ux * tz), vz + w * tz + (ux * ty - uy * tx)]
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product ``a * b`` of xyzw quaternions, broadcasting (rotation ``Ra @ Rb``)."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     single = _single(a, b)
-    ax, ay, az, aw = _parts(a, single)
-    bx, by, bz, bw = _parts(b, single)
-    return _joined(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ],
-        a,
-        b,
-        single,
-    )
+    return _joined(hamilton(_parts(a, single), _parts(b, single)), a, b, single)
 
 
 def quat_apply(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``v (..., 3)`` by unit quaternions ``q (..., 4)`` xyzw, broadcasting."""
     q = np.asarray(q, dtype=float)
     v = np.asarray(v, dtype=float)
-    # v' = v + w t + u x t with t = 2 u x v (components written out: np.cross is slow)
+    # components written out (:func:`rotate`): np.cross is slow
     single = _single(q, v)
-    ux, uy, uz, w = _parts(q, single)
-    vx, vy, vz = _parts(v, single)
-    tx = 2.0 * (uy * vz - uz * vy)
-    ty = 2.0 * (uz * vx - ux * vz)
-    tz = 2.0 * (ux * vy - uy * vx)
-    return _joined(
-        [
-            vx + w * tx + (uy * tz - uz * ty),
-            vy + w * ty + (uz * tx - ux * tz),
-            vz + w * tz + (ux * ty - uy * tx),
-        ],
-        q,
-        v,
-        single,
-    )
+    return _joined(rotate(_parts(q, single), _parts(v, single)), q, v, single)
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -44,3 +44,19 @@ def _matrix(q):
     return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
                      np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
                      np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def test_one_frame_kinematics_match_the_clips():
+    """A stream's one-frame forward kinematics (joint by joint on floats) gives the clip's
+    (depth by depth on arrays) bit for bit, translated joints included."""
+    from physmocap.motion import forward_kinematics
+    from physmocap.resources import example_clip
+    from physmocap.sources import load_motion
+
+    m = load_motion(example_clip())
+    rng = np.random.default_rng(3)
+    rot = m.rotations[:40] * rng.uniform(0.5, 1.5, size=(40, 1, 1))  # not unit: the same products still
+    P, W = forward_kinematics(m.skeleton, rot, m.translations[:40], m.translated)
+    for t in range(40):
+        p, w = forward_kinematics(m.skeleton, rot[t : t + 1], m.translations[t : t + 1], m.translated)
+        assert p.tobytes() == P[t : t + 1].tobytes() and w.tobytes() == W[t : t + 1].tobytes()

@@ -15,6 +15,7 @@ from __future__ import annotations
 import mmap
 import os
 import tempfile
+import weakref
 from typing import Iterator
 
 import numpy as np
@@ -37,6 +38,11 @@ class _SpillMap(mmap.mmap):
     is not ours: dropping its pages would throw away a copy-on-write mapping's changes."""
 
 
+#: The mappings of this module alive in the process: while there is none, :func:`release`
+#: has nothing to look for (a short clip's or a stream's hundreds of calls a frame).
+_LIVE: "weakref.WeakSet[_SpillMap]" = weakref.WeakSet()
+
+
 def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
     """A shared, writable mapping of a new unlinked temporary file of ``nbytes`` bytes
     (zeros, or the bytes of the C-contiguous ``fill`` written through the file, so no page
@@ -52,7 +58,9 @@ def _mapped(nbytes: int, fill: np.ndarray | None = None) -> mmap.mmap | None:
             else:
                 fill.tofile(fh)
             fh.flush()
-            return _SpillMap(fh.fileno(), nbytes)
+            mapping = _SpillMap(fh.fileno(), nbytes)
+            _LIVE.add(mapping)
+            return mapping
     except (OSError, ValueError):
         return None
 
@@ -118,6 +126,8 @@ def release(array: np.ndarray | None) -> None:
     """Unmap the pages of the temporary file under ``array`` (or any view of a spilled
     array) from this process: they leave its resident memory, and their data stay in the
     file.  Nothing for an array in memory."""
+    if not _LIVE:
+        return
     mapping = _mapping(array)
     if mapping is not None and hasattr(mmap, "MADV_DONTNEED"):  # not on Windows: the pages stay
         mapping.madvise(mmap.MADV_DONTNEED)

@@ -617,6 +617,8 @@ def _columns(frames: int, keys: list[int], width: int) -> tuple[np.ndarray, dict
 def _continuous_signs(q: np.ndarray) -> np.ndarray:
     """``q`` (``(F, 4)`` x-y-z-w), in place, each quaternion negated where needed so that
     consecutive frames' dot products are not negative (the same rotations)."""
+    if len(q) < 2:
+        return q  # one frame (a stream's): nothing to follow
     d = np.sum(q[1:] * q[:-1], axis=-1)
     flip = np.cumsum(d < 0) % 2 == 1
     q[1:][flip] *= -1.0
@@ -748,9 +750,11 @@ def build_targets(
     col = {c: i for i, c in enumerate(present)}
 
     # --- actor rest pose: skeleton rest for rotational sources, the first valid frame otherwise
-    if motion.is_rotational:
+    # (read for the calibration only)
+    S_rest: np.ndarray | None = None
+    if cal is None and motion.is_rotational:
         S_rest = motion.skeleton.rest_positions()[idx]
-    else:
+    elif cal is None:
         S_rest = np.array([S[np.argmax(valid[:, i]), i] for i in range(N)])
     # --- calibration pose (rotational sources): the rest pose if it stands, else the most
     # upright frame of the motion (see physmocap.ik.calibration)
@@ -786,16 +790,17 @@ def build_targets(
             + np.linalg.norm(points[chain[1]] - points[chain[2]])
         )
 
-    actor_pts = {c: S_rest[col[c]] for c in present}  # for bone lengths (any pose)
     char_pts = {c: rest_c[c][0] for c in present}
-    if motion.is_rotational:
-        la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
-    else:  # no rest pose: median leg length over the clip's valid frames
-        la = [x for x in (_median_leg(S, valid, col, s) for s in ("left", "right")) if x]
-    lc = [x for x in (leg_len(char_pts, s) for s in ("left", "right")) if x]
     if cal is not None:
         scale = cal.scale
     else:
+        assert S_rest is not None
+        actor_pts = {c: S_rest[col[c]] for c in present}  # for bone lengths (any pose)
+        if motion.is_rotational:
+            la = [x for x in (leg_len(actor_pts, s) for s in ("left", "right")) if x]
+        else:  # no rest pose: median leg length over the clip's valid frames
+            la = [x for x in (_median_leg(S, valid, col, s) for s in ("left", "right")) if x]
+        lc = [x for x in (leg_len(char_pts, s) for s in ("left", "right")) if x]
         scale = float(np.mean(lc) / np.mean(la)) if (la and lc and opt.scale_root) else 1.0
 
     if cal is not None:

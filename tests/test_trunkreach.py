@@ -103,3 +103,23 @@ def test_the_dance_robot_s_pelvis_gives_way_where_its_waist_cannot_follow():
     fid = trajectory_fidelity(traj)
     assert fid.segments["torso"].median_deg < 4.5 and fid.segments["right_upper_arm"].median_deg < 6.0
     assert fid.facing_p95_deg < 10.0  # tipped about its hip line, the pelvis keeps its heading
+
+
+def test_reach_is_measured_once_per_character_and_a_copy_starts_afresh():
+    """The reach is kept on the character (a stream measures it before its first frame), the
+    same object every call; a character copied with ``dataclasses.replace`` measures its own."""
+    import dataclasses
+
+    from physmocap.ik.stream import StreamingRetargeter
+    from physmocap.resources import example_clip
+    from physmocap.sources import load_motion
+
+    ch = load_character("humanoid")
+    m = load_motion(example_clip())
+    StreamingRetargeter(ch, skeleton=m.skeleton, fps=m.fps, translated=m.translated)
+    kept = ch._derived[("trunk_reach", 4096)]
+    assert kept is not None and trunk_reach(ch) is kept
+    copy = dataclasses.replace(ch)
+    assert not copy._derived
+    again = trunk_reach(copy)
+    assert again is not kept and np.array_equal(again.directions, kept.directions)

@@ -63,6 +63,7 @@ from .footplan import body_part_target
 from .frame import FrameRetargeter
 from .retarget import map_motion
 from .targets import Targets, build_targets, character_rest_frames
+from .trunkreach import trunk_reach
 
 __all__ = ["StreamingRetargeter", "stream_motion", "STREAMING_DEFAULTS", "streaming_config", "streaming_iterations"]
 
@@ -194,6 +195,9 @@ class StreamingRetargeter:
         #: The last frame's targets as the IK got them (feet levelled, body contacts held): one
         #: frame of :class:`~physmocap.ik.targets.Targets` (None before the first frame).
         self.last_targets: Targets | None = None
+        # what depends on the character alone is worked out here, before the first frame
+        # (the trunk's reach: tens of milliseconds), not in the first frame's latency
+        trunk_reach(self.character)
 
     # -- input ----------------------------------------------------------------
     def _motion(self, rotations, translations, positions, confidence) -> Motion:

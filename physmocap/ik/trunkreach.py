@@ -130,7 +130,16 @@ def trunk_reach(character, samples: int = SAMPLES) -> TrunkReach | None:
     None when it tracks no pelvis or no neck, when no hinge lies between them (a rigid trunk),
     or when a ball joint does (its cone of ranges is not sampled here: no give-way rather than
     one measured on part of the trunk's joints).  Slide joints stay at rest.  Deterministic:
-    the samples come from a generator seeded with 0."""
+    the samples come from a generator seeded with 0.  Measured once per character
+    (:meth:`~physmocap.models.Character.derived`; tens of milliseconds) and kept."""
+    derived = getattr(character, "derived", None)
+    if derived is None:  # a stand-in for a character
+        return _measure_reach(character, samples)
+    return derived(("trunk_reach", int(samples)), lambda: _measure_reach(character, samples))
+
+
+def _measure_reach(character, samples: int) -> TrunkReach | None:
+    """:func:`trunk_reach`, measured."""
     tracked = character.tracked
     if "pelvis" not in tracked or "neck" not in tracked:
         return None

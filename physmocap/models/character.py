@@ -19,6 +19,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable, Hashable
 
 import mujoco
 import numpy as np
@@ -119,6 +120,9 @@ class Character:
     velocity_groups: tuple[tuple[str, ...], ...] = ()
     rest_pose: str = ""
     _rest: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    #: What is worked out from the character alone once and kept (:meth:`derived`); a copy
+    #: made with ``dataclasses.replace`` starts afresh.
+    _derived: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def rest_positions(self) -> dict[str, np.ndarray]:
         """Canonical joint -> world position (m) in the rest pose (copies)."""
@@ -130,6 +134,13 @@ class Character:
         data.qpos[:] = self.rest_qpos
         mujoco.mj_kinematics(self.model, data)
         return data
+
+    def derived(self, key: Hashable, make: Callable[[], Any]) -> Any:
+        """``make()``, computed once per character and key and kept (a quantity of the
+        character alone, e.g. its trunk's reach: a stream prepares it before its first frame)."""
+        if key not in self._derived:
+            self._derived[key] = make()
+        return self._derived[key]
 
     def frame_id(self, canonical: str) -> int:
         """MuJoCo id of the site or body tracked for ``canonical``."""

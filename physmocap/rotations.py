@@ -28,6 +28,8 @@ __all__ = [
     "Rotation",
     "cross",
     "hamilton",
+    "quat_from_rotvec",
+    "quat_to_rotvec",
     "rotate",
     "UP_AXES",
     "up_axis_matrix",
@@ -263,6 +265,32 @@ def quat_canonical(q: np.ndarray) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     return np.where(q[..., 3:4] < 0.0, -q, q)
+
+
+def quat_from_rotvec(v: np.ndarray) -> np.ndarray:
+    r"""Unit quaternions (x-y-z-w) of rotation vectors ``v (..., 3)`` (axis times angle,
+    radians): :math:`(\hat v \sin(\theta/2), \cos(\theta/2))`, :math:`\theta = |v|`
+    (the sine's series :math:`\tfrac12 - \theta^2/48` below a microradian); what
+    ``Rotation.from_rotvec(v).as_quat()`` gives, to round-off, without its overhead."""
+    v = np.asarray(v, dtype=float)
+    angle = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
+    small = angle < 1e-6
+    scale = np.where(small, 0.5 - angle * angle / 48.0, np.sin(0.5 * angle) / np.where(small, 1.0, angle))
+    return np.concatenate([v * scale, np.cos(0.5 * angle)], axis=-1)
+
+
+def quat_to_rotvec(q: np.ndarray) -> np.ndarray:
+    r"""Rotation vectors ``(..., 3)`` (axis times angle, radians, the angle in
+    :math:`[0, \pi]`) of quaternions ``q (..., 4)`` x-y-z-w (normalised here):
+    :math:`\theta = 2 \operatorname{atan2}(|u|, w)` on the canonical sign :math:`w \ge 0`,
+    :math:`v = u\, \theta / |u|` (the series :math:`2 + \theta^2/12` below a
+    microradian); what ``Rotation.from_quat(q).as_rotvec()`` gives, to round-off."""
+    q = quat_canonical(q)
+    n = np.sqrt(np.sum(q[..., :3] * q[..., :3], axis=-1, keepdims=True))
+    angle = 2.0 * np.arctan2(n, q[..., 3:4])
+    small = angle < 1e-6
+    scale = np.where(small, 2.0 + angle * angle / 12.0, angle / np.where(small, 1.0, n))
+    return q[..., :3] * scale
 
 
 def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:

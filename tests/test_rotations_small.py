@@ -60,3 +60,23 @@ def test_one_frame_kinematics_match_the_clips():
     for t in range(40):
         p, w = forward_kinematics(m.skeleton, rot[t : t + 1], m.translations[t : t + 1], m.translated)
         assert p.tobytes() == P[t : t + 1].tobytes() and w.tobytes() == W[t : t + 1].tobytes()
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), scale=st.sampled_from([1e-12, 1e-7, 1e-3, 1.0, 3.1]))
+def test_rotation_vectors_match_scipy(seed, scale):
+    """quat_from_rotvec / quat_to_rotvec give scipy's answers to round-off, tiny angles,
+    angles near pi and a negative scalar part included."""
+    from scipy.spatial.transform import Rotation
+
+    from physmocap.rotations import quat_from_rotvec, quat_to_rotvec
+
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(20, 3))
+    v *= scale / np.linalg.norm(v, axis=1, keepdims=True) * rng.uniform(0.5, 1.0, size=(20, 1))
+    np.testing.assert_allclose(quat_from_rotvec(v), Rotation.from_rotvec(v).as_quat(), atol=1e-14)
+    q = rng.normal(size=(20, 4))
+    q[:5, :3] *= scale  # near the identity, both signs of w
+    q[5:10, 3] = -np.abs(q[5:10, 3])
+    np.testing.assert_allclose(quat_to_rotvec(q), Rotation.from_quat(q).as_rotvec(), atol=1e-12)
+    assert quat_from_rotvec(v[0]).shape == (4,) and quat_to_rotvec(q[0]).shape == (3,)

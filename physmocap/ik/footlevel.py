@@ -41,7 +41,7 @@ from typing import Mapping
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..rotations import quat_apply, quat_between
+from ..rotations import quat_apply, quat_between, quat_conj, quat_from_rotvec, quat_mul, quat_to_rotvec
 
 __all__ = ["FootLevel", "FootLeveller", "level_feet", "MIN_STANCE_TIME"]
 
@@ -64,36 +64,43 @@ class FootLevel:
     stance_frames: int
 
 
-def _heading(rot: Rotation, forward: np.ndarray) -> np.ndarray:
-    """Heading (radians about +Z) of ``forward`` turned by ``rot``, projected on the floor."""
-    f = rot.apply(forward)
+def _heading(rot: np.ndarray, forward: np.ndarray) -> np.ndarray:
+    """Heading (radians about +Z) of ``forward`` turned by ``rot`` (x-y-z-w), projected on the floor."""
+    f = quat_apply(rot, forward)
     return np.arctan2(f[..., 1], f[..., 0])
 
 
-def _foot_rest(rest: Mapping[str, tuple[np.ndarray, np.ndarray]], side: str) -> tuple[Rotation, np.ndarray] | None:
-    """The character's rest foot orientation :math:`Q_{c,0}` and its forward direction on the
-    floor (towards the toe, else the ankle site's x axis); None where it has none."""
+def _unit_quats(q: np.ndarray) -> np.ndarray:
+    """``q`` ``(..., 4)`` normalised."""
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _foot_rest(rest: Mapping[str, tuple[np.ndarray, np.ndarray]], side: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """The character's rest foot orientation :math:`Q_{c,0}` (``(4,)`` x-y-z-w) and its
+    forward direction on the floor (towards the toe, else the ankle site's x axis); None
+    where it has none."""
     ankle, toe = f"{side}_ankle", f"{side}_toe"
-    q_c0 = Rotation.from_quat(rest[ankle][1])
-    fwd = rest[toe][0] - rest[ankle][0] if toe in rest else q_c0.apply([1.0, 0.0, 0.0])
+    q_c0 = _unit_quats(np.asarray(rest[ankle][1], dtype=float))
+    fwd = rest[toe][0] - rest[ankle][0] if toe in rest else quat_apply(q_c0, [1.0, 0.0, 0.0])
     fwd = np.array([fwd[0], fwd[1], 0.0])
     if np.linalg.norm(fwd) < 1e-9:
         return None
     return q_c0, fwd / np.linalg.norm(fwd)
 
 
-def _flat_corrections(Q: Rotation, toe_dir: np.ndarray | None, q_c0: Rotation, fwd: np.ndarray) -> Rotation:
-    r"""Per stance frame, the rotation :math:`Q^{-1} R_z(\psi) Q_{c,0}` that makes the foot flat
-    with the actor's heading :math:`\psi` (from ``toe_dir``, ankle to toe, where given)."""
-    heading = np.arctan2(toe_dir[:, 1], toe_dir[:, 0]) if toe_dir is not None else _heading(Q * q_c0.inv(), fwd)
+def _flat_corrections(Q: np.ndarray, toe_dir: np.ndarray | None, q_c0: np.ndarray, fwd: np.ndarray) -> np.ndarray:
+    r"""Per stance frame ``(F, 4)`` x-y-z-w, the rotation :math:`Q^{-1} R_z(\psi) Q_{c,0}` that
+    makes the foot flat with the actor's heading :math:`\psi` (from ``toe_dir``, ankle to
+    toe, where given); ``Q`` ``(F, 4)`` unit quaternions."""
+    heading = np.arctan2(toe_dir[:, 1], toe_dir[:, 0]) if toe_dir is not None else _heading(quat_mul(Q, quat_conj(q_c0)), fwd)
     psi = heading - np.arctan2(fwd[1], fwd[0])
-    return Q.inv() * (Rotation.from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])) * q_c0)
+    return quat_mul(quat_conj(Q), quat_mul(quat_from_rotvec(np.outer(psi, [0.0, 0.0, 1.0])), q_c0))
 
 
-def _toe_offset(foot: Rotation, q_c0: Rotation, rest: Mapping, side: str) -> np.ndarray:
-    """``(F, 3)`` the toe joint relative to the ankle for feet oriented ``foot``: the
-    character's rest offset turned rigidly with the foot."""
-    return (foot * q_c0.inv()).apply(rest[f"{side}_toe"][0] - rest[f"{side}_ankle"][0])
+def _toe_offset(foot: np.ndarray, q_c0: np.ndarray, rest: Mapping, side: str) -> np.ndarray:
+    """``(F, 3)`` the toe joint relative to the ankle for feet oriented ``foot`` (``(F, 4)``
+    x-y-z-w): the character's rest offset turned rigidly with the foot."""
+    return quat_apply(quat_mul(foot, quat_conj(q_c0)), rest[f"{side}_toe"][0] - rest[f"{side}_ankle"][0])
 
 
 def level_feet(
@@ -151,7 +158,7 @@ def level_feet(
             continue
         q_c0, fwd = frame
         toe_dir = positions[stance, col[toe]] - positions[stance, ia] if toe in col else None
-        C = _flat_corrections(Rotation.from_quat(ori[stance, ia]), toe_dir, q_c0, fwd).mean()
+        C = Rotation.from_quat(_flat_corrections(_unit_quats(ori[stance, ia]), toe_dir, q_c0, fwd)).mean()
         old_ankle_q = ori[good, ia].copy()
         new = Rotation.from_quat(old_ankle_q) * C
         q_new = new.as_quat()
@@ -166,7 +173,7 @@ def level_feet(
         old_dir = positions[good, it] - positions[good, ia]
         tipped = tip in col and tip in rest
         old_toes = positions[good, col[tip]] - positions[good, it] if tipped else None  # read before the toe moves
-        pos[good, it] = pos[good, ia] + _toe_offset(new, q_c0, rest, side)
+        pos[good, it] = pos[good, ia] + _toe_offset(new.as_quat(), q_c0, rest, side)
         if tipped:
             ie = col[tip]
             turn = quat_between(old_dir, pos[good, it] - pos[good, ia])
@@ -176,7 +183,7 @@ def level_feet(
     return pos, ori, levels
 
 
-def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: Rotation, rest_dir: np.ndarray) -> np.ndarray:
+def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: np.ndarray, rest_dir: np.ndarray) -> np.ndarray:
     r"""``(F, 3)`` toe segments (toe joint to tip, world) with the toes levelled like the foot.
 
     Skeletons also disagree on where the toe tip sits relative to the foot, so
@@ -193,13 +200,13 @@ def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: R
         toe_dir: ``(F, 3)`` the actor's toe segments (toe joint to tip), world.
         foot: ``F`` levelled foot orientations (the ankle's targets).
         stance: ``(F,)`` flat-stance frames.
-        q_c0: The character's rest orientation of the foot.
+        q_c0: The character's rest orientation of the foot (``(4,)`` x-y-z-w).
         rest_dir: The character's rest toe segment (toe joint to tip), world.
     """
     local = foot.inv().apply(toe_dir)
     unit = local / np.maximum(np.linalg.norm(local, axis=-1, keepdims=True), 1e-12)
     mean = unit[stance].mean(axis=0)
-    want = q_c0.inv().apply(rest_dir)
+    want = quat_apply(quat_conj(q_c0), rest_dir)
     if np.linalg.norm(mean) < 1e-6 or np.linalg.norm(want) < 1e-9:
         return toe_dir
     D = quat_between(mean, want)
@@ -245,11 +252,11 @@ class FootLeveller:
         self._count = {side: 0 for side in self.feet}
         self._eased = {side: 0 for side in self.feet}
 
-    def correction(self, side: str) -> Rotation | None:
-        """The foot's current correction :math:`C` (None before enough flat stance)."""
+    def correction(self, side: str) -> np.ndarray | None:
+        """The foot's current correction :math:`C` (``(4,)`` x-y-z-w; None before enough flat stance)."""
         if self._count.get(side, 0) < self.need:
             return None
-        return Rotation.from_quat(self._sum[side] / np.linalg.norm(self._sum[side]))
+        return self._sum[side] / np.linalg.norm(self._sum[side])
 
     def step(self, positions: np.ndarray, orientations: np.ndarray, labels: Mapping[str, bool]) -> tuple[np.ndarray, np.ndarray]:
         """``(positions, orientations)`` of one frame ``(N, 3)``, ``(N, 4)`` with the feet
@@ -260,10 +267,10 @@ class FootLeveller:
             q = ori[ia]
             if not (np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5 and np.all(np.isfinite(pos[ia]))):
                 continue
-            Q = Rotation.from_quat(q)
+            Q = _unit_quats(q)
             if labels.get(f"{side}_heel", False) and labels.get(f"{side}_toe", False):
                 toe_dir = None if it is None else (positions[it] - positions[ia])[None]
-                sample = _flat_corrections(Rotation.from_quat(q[None]), toe_dir, q_c0, fwd).as_quat()[0]
+                sample = _flat_corrections(Q[None], toe_dir, q_c0, fwd)[0]
                 if sample @ self._sum[side] < 0:
                     sample = -sample
                 self._sum[side] += sample
@@ -273,11 +280,9 @@ class FootLeveller:
                 continue
             self._eased[side] = min(self._eased[side] + 1, self.ease_frames)
             w = self._eased[side] / self.ease_frames
-            applied = Rotation.from_rotvec(w * C.as_rotvec())
-            new = Q * applied
-            q_new = new.as_quat()
+            q_new = quat_mul(Q, quat_from_rotvec(w * quat_to_rotvec(C)))  # slerp from the identity
             ori[ia] = -q_new if q_new @ q < 0 else q_new
             if it is not None and np.all(np.isfinite(pos[it])):
-                rigid = pos[ia] + _toe_offset(Rotation.from_quat(q_new[None]), q_c0, self.rest, side)[0]
+                rigid = pos[ia] + _toe_offset(q_new[None], q_c0, self.rest, side)[0]
                 pos[it] = (1.0 - w) * positions[it] + w * rigid
         return pos, ori

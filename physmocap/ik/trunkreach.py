@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from ..rotations import Rotation, cross, quat_conj, quat_mul
+from ..rotations import Rotation, cross, quat_apply, quat_conj, quat_from_rotvec, quat_mul
 
 __all__ = ["TrunkReach", "trunk_reach", "SAMPLES", "TOLERANCE_DEG", "SMOOTHING_TIME"]
 
@@ -93,8 +93,8 @@ class TrunkReach:
             rows = np.flatnonzero(ok[s:e]) + s
             if rows.size == 0:
                 continue
-            body = Rotation.from_quat(out[rows]) * Rotation.from_quat(self.body_in_frame)
-            d = body.inv().apply(trunk[rows])
+            unit = out[rows] / np.linalg.norm(out[rows], axis=1, keepdims=True)
+            d = quat_apply(quat_conj(quat_mul(unit, self.body_in_frame)), trunk[rows])  # in the body's frame
             d /= np.linalg.norm(d, axis=1, keepdims=True)
             dots = d @ self.directions.T
             best = np.argmax(dots, axis=1)
@@ -113,7 +113,7 @@ class TrunkReach:
         if not np.any(turns):
             return out
         moved = np.flatnonzero(np.linalg.norm(turns, axis=1) > 1e-12)
-        turn = Rotation.from_rotvec(turns[moved]).as_quat()
+        turn = quat_from_rotvec(turns[moved])
         out[moved] = quat_mul(out[moved], turn_in_tracked_frame(turn, self.body_in_frame))
         return out
 

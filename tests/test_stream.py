@@ -368,3 +368,19 @@ def test_a_reference_pose_message_names_the_frame_streamed_after_it():
             live.step(rotations=walk.rotations[t], translations=walk.translations[t], index=t)
     said = [str(w.message) for w in caught if "reference pose" in str(w.message)]
     assert len(said) == 1 and "into frame 7, the next one streamed" in said[0], said
+
+
+def test_stream_keeps_its_target_options_after_the_first_frame(walk):
+    """Every frame's targets are built with the stream's own target options (they were the
+    defaults after the calibrating frame): fewer oriented joints stay fewer."""
+    from physmocap.ik.stream import StreamingRetargeter
+    from physmocap.models import load_character
+
+    oriented = ("pelvis", "left_ankle", "right_ankle")
+    live = StreamingRetargeter(load_character("humanoid"), skeleton=walk.skeleton, fps=walk.fps,
+                               translated=walk.translated, oriented=oriented)
+    for t in range(4):
+        live.step(walk.rotations[t], walk.translations[t])
+        names = live.last_targets.names
+        with_q = {n for n, q in zip(names, live.last_targets.has_orientation) if q}
+        assert with_q <= set(oriented), (t, sorted(with_q - set(oriented)))

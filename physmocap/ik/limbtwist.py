@@ -141,7 +141,7 @@ def twist_error(
     and the actor's bend between ``upper`` and ``lower`` (``(F, 3)``, metres)."""
     h, u = axes.h, axes.u
     n = cross(upper, lower)
-    bend = np.arctan2(np.linalg.norm(n, axis=-1), np.einsum("ij,ij->i", upper, lower))
+    bend = np.arctan2(np.sqrt(np.add.reduce(n * n, axis=-1)), np.einsum("ij,ij->i", upper, lower))  # |n|
     d = quat_apply(target, u)
     predicted = quat_apply(target, h)
     predicted -= np.einsum("ij,ij->i", predicted, d)[:, None] * d

@@ -312,7 +312,7 @@ class StreamingRetargeter:
             self._first_world = None
         assert self.pipeline is not None and self.contacts is not None
         targets = build_targets(
-            motion, self.joint_indices, self.character, calibration=self.calibration, kinematics=fk
+            motion, self.joint_indices, self.character, self.config.targets, calibration=self.calibration, kinematics=fk
         )
         world = fk[0][0]
         labels = self.contacts.step(np.array([world[j] for j in self.points.values()]))

@@ -47,8 +47,8 @@ from ..canonical import CANONICAL_NAMES, canonical_parent
 from ..options import check_fields
 from ..errors import MappingError, OptionError, warn
 from ..motion import Motion
-from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul
-from ..spill import blocks, release, spilled_copy, spilled_empty
+from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_mul, quat_to_rotvec
+from ..spill import blocks, is_spilled, release, spilled_copy, spilled_empty
 from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
 from .limbtwist import LIMB_CHAINS, MIN_BEND, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
@@ -171,6 +171,7 @@ class Calibration:
     limb_twists: dict = field(default_factory=dict)  # limb's upper segment -> its TwistCalibration (limbtwist)
     trunk_reach: TrunkReach | None = None  # the trunk directions the torso joints reach (trunkreach)
     trunk_turns: deque | None = None  # a stream's last pelvis turns, averaged (TrunkReach.give_way)
+    bone_lengths: dict = field(default_factory=dict)  # joint -> the character's rest distance to its parent (m)
 
 
 @dataclass(eq=False)
@@ -270,7 +271,7 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
 
 
 def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    n = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's sum, without its overhead
     return v / np.maximum(n, eps), n[..., 0]
 
 
@@ -953,8 +954,10 @@ def build_targets(
     pelvis_delta = delta.get("pelvis")
     off = char_pts["pelvis"] - anchor_c0
     T[:, ip] = anchor + (quat_apply(pelvis_delta, off) if pelvis_delta is not None else off)
+    spilled = [a for a in (S, T, held.array, turned.array) if is_spilled(a)]
+    lengths = {} if cal is None else cal.bone_lengths  # the character's: worked out once
     for c in present:
-        for array in (S, T, held.array, turned.array):  # the columns read for the previous joint
+        for array in spilled:  # the columns read for the previous joint
             release(array)
         if c == "pelvis":
             continue
@@ -993,12 +996,14 @@ def build_targets(
                 carried = quat_apply(delta[carrier], rest_neck)
                 delta[carrier] = turned.keep(quat_mul(quat_between(carried, neck_now), delta[carrier]))
             continue
-        length = float(np.linalg.norm(char_pts[c] - char_pts[p]))
+        length = lengths.get(c)
+        if length is None:
+            length = lengths[c] = float(np.linalg.norm(char_pts[c] - char_pts[p]))
         d, n = _unit(S[:, i] - S[:, j])
         if c.endswith("_toe") and p.endswith("_ankle") and c.split("_", 1)[0] in toe_turn:
             d = quat_apply(toe_turn[c.split("_", 1)[0]], d)  # the ball turns with its rigid foot
         bad = (n < 1e-6) | ~valid[:, i] | ~valid[:, j]
-        if np.any(bad):
+        if bad.any():
             # undefined direction: keep the character's rest direction, rotated like the parent
             rest_dir = _unit(char_pts[c] - char_pts[p])[0]
             if has_q[j]:
@@ -1030,6 +1035,7 @@ def build_targets(
             limb_axes=limb_axes,
             limb_twists=twists,
             trunk_reach=reach,
+            bone_lengths=lengths,
         )
     release(S)
     del delta, turned  # let go before the orientations and positions are laid out frame by frame
@@ -1046,7 +1052,7 @@ def build_targets(
         source_positions=S,
         info={
             "source_floor": float(floor_s),
-            "yaw_deg": float(np.degrees(Rotation.from_quat(yaw).magnitude())),
+            "yaw_deg": float(np.degrees(np.linalg.norm(quat_to_rotvec(yaw)))),
             **level_info,
         },
         calibration=cal,

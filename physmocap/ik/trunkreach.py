@@ -107,7 +107,7 @@ class TrunkReach:
         turns = np.outer(turns @ self.axis, self.axis)  # about the hip line only
         if history is not None and len(out) == 1:
             history.append(turns[0])
-            turns = np.mean(np.array(history), axis=0, keepdims=True) * ok[:, None]
+            turns = np.add.reduce(np.array(history), axis=0, keepdims=True) / len(history) * ok[:, None]  # np.mean's
         elif window > 1:
             turns = uniform_filter1d(turns, size=int(window), axis=0, mode="nearest")
         if not np.any(turns):

@@ -333,6 +333,7 @@ class FrameSolver:
         self.step_limit = FrameStepLimit(model, group_box_speeds(character.velocity_limits, groups), 1.0 / fps)
         #: a ball joint written as hinges: its body's turn along each axis (None: no group)
         self.group_limit = GroupStepLimit(model, groups, character.velocity_limits, 1.0 / fps) if groups else None
+        self._grouped = False  # a step of the current frame needed the groups' rows (see _step)
         self.root_limit = RootStepLimit(model, 1.0 / fps)
         self._trust = np.full(model.nv, float(opt.trust_region))
         contact_sites = [model.site(s).id for side in character.contacts.values() for s in side]
@@ -576,12 +577,24 @@ class FrameSolver:
                 constraints=constraints,
             )
 
+        grouping = self.step_limit in boxes and self.group_limit is not None
+        if grouping and self._grouped:
+            # an earlier step of this frame needed the groups' rows: the next most likely
+            # does too (a body turning at its speed cap), so they go in at once
+            try:
+                problem = build([*general, self.group_limit])
+                v = self._solve(problem)
+                self._qp = problem if constraints and opt.second_order_correction else None
+                return v
+            except (mink.NoSolutionFound, ValueError, np.linalg.LinAlgError):
+                pass
         problem = build(general)
         v = self._solve(problem)
-        if self.step_limit in boxes and self.group_limit is not None and self.group_limit.crossed(self.configuration, v):
+        if grouping and self.group_limit.crossed(self.configuration, v):
             # the same QP with the hinge groups' rows; where the rows (degenerate at a gimbal
             # lock) leave no solution, the step without them stands and the frame's end
             # projection (GroupStepLimit.project) bounds the groups: no relaxation for them
+            self._grouped = True
             grouped = build([*general, self.group_limit])
             try:
                 v, problem = self._solve(grouped), grouped
@@ -888,6 +901,7 @@ class FrameSolver:
         self._first = bool(first)
         opt = self.options
         self.step_limit.set_previous(self.q_prev)
+        self._grouped = False  # no step of this frame has needed the hinge groups' rows yet
         if self.group_limit is not None:
             self.group_limit.set_previous(self.q_prev)
         self.root_limit.set_previous(self.q_prev)

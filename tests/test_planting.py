@@ -3,6 +3,8 @@ the behaviours the metrics cannot see (feasible double support, causal hand-back
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -300,6 +302,48 @@ def test_a_lost_toe_target_does_not_let_a_streamed_toe_go():
     faster = positions.copy()
     faster[toe, 0] += 0.02  # 2.4 m/s between two tracked frames: the actor's toe is off
     assert not planting._toes_moving(faster, labels, valid)["left_toe"]
+
+
+def test_stream_heel_lets_go_when_its_target_lifts_and_rolls_on():
+    """A stream's heel is let go at push-off: once its ankle target has risen above its lowest
+    in the contact and moves on faster than heel_release_speed, under its (lagging) label or
+    after it; a heel whose target slides without lifting (a shuffle) stays held, and a new
+    contact starts afresh (Planting._heels_moving)."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("robot")
+    names = tuple(ch.tracked)
+    fps = 120.0
+    planting = Planting(ch, names, fps, anchored=True)
+    ankle = names.index("left_ankle")
+    step = planting.options.heel_release_speed / fps * 1.5  # faster than the release speed
+    labels = {"left_heel": True, "left_toe": True}
+    pos = np.zeros((len(names), 3))
+    pos[ankle] = [0.0, 0.0, 0.08]
+    for _ in range(3):  # standing
+        assert planting._heels_moving(pos, labels)["left_heel"]
+    for _ in range(3):  # sliding flat: held
+        pos[ankle, 0] += step
+        assert planting._heels_moving(pos, labels)["left_heel"]
+    pos[ankle, 2] += 2 * planting.options.release_margin  # lifted: a move now lets it go
+    assert planting._heels_moving(pos, labels)["left_heel"]  # lifted, not moving yet
+    pos[ankle, 0] += step
+    assert not planting._heels_moving(pos, labels)["left_heel"]
+    pos[ankle, 0] += 0.001  # slowing down, the label still on: still let go
+    assert not planting._heels_moving(pos, labels)["left_heel"]
+    off = {"left_heel": False, "left_toe": False}
+    assert not planting._heels_moving(pos, off)["left_heel"]
+    pos[ankle] = [0.3, 0.0, 0.08]  # a new contact
+    assert planting._heels_moving(pos, labels)["left_heel"]
+    # after its label, a heel still held low lets go as its target lifts and moves on
+    pos[ankle, 2] += 2 * planting.options.release_margin
+    planting._heels_moving(pos, off)
+    pos[ankle, 0] += step
+    planting._heels_moving(pos, off)
+    assert planting._heel_gone["left"]
+    disabled = Planting(ch, names, fps, dataclasses.replace(planting.options, heel_release_speed=0.0), anchored=True)
+    assert disabled._heels_moving(pos, labels) == labels
 
 
 def _right_toe_hold(character: str):

@@ -107,6 +107,11 @@ class PlantOptions:
             push-off while the actor's ankle rose and moved 10-20 cm on, its thigh 20-40
             degrees behind the actor's (the streamed CMU walk's worst segment 8.8 degrees,
             3.8 at 0.4; 6.0 at 0.6, 4.1 at 0.5, 3.9 at 0.3).
+        heel_release_speed: Streaming only: a heel lets go, until its label begins again,
+            once its ankle target has risen ``release_margin`` above its lowest in the contact
+            and moves horizontally faster than this (m/s): the heel lifting at push-off, its
+            causal label still on or its sites still held low (:meth:`Planting._heels_moving`).
+            0: never.
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
             ``clearance``, so a swing foot held at its clearance is held as
@@ -202,6 +207,7 @@ class PlantOptions:
     pivot_threshold: float = 0.035
     heading_rate: float = 1.0
     toe_release_speed: float = 0.4
+    heel_release_speed: float = 0.4
     smooth_transitions: bool = True
     transition_window: float = 0.1
     transition_sigma: float = 0.0167
@@ -822,6 +828,13 @@ class Planting:
         #: per side, a causal toe hold let go early (:meth:`_toes_moving`), until its label ends
         self._toe_gone = {"left": False, "right": False}
         self._toe_prev: dict[str, np.ndarray] = {}
+        #: per side, a causal heel hold let go at push-off (:meth:`_heels_moving`), until its
+        #: label begins again; its ankle target's lowest height in the contact; whether it
+        #: was labelled on the last frame; its last horizontal position
+        self._heel_gone = {"left": False, "right": False}
+        self._heel_low = {"left": np.inf, "right": np.inf}
+        self._heel_labelled = {"left": False, "right": False}
+        self._heel_prev: dict[str, np.ndarray] = {}
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
         foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
@@ -951,6 +964,45 @@ class Planting:
                 radii=points[:, 3],
                 height=float((points[:, 2] - points[:, 3]).min() - self.locks.floor),
             )
+        return out
+
+    def _heels_moving(self, positions: np.ndarray, labels: Mapping[str, bool],
+                      valid: np.ndarray | None = None) -> Mapping[str, bool]:
+        """``labels`` with the heel of a causally anchored foot let go once its ankle target
+        lifts (rises more than ``release_margin`` above its lowest since the heel's label
+        began) and moves horizontally faster than ``PlantOptions.heel_release_speed``
+        (between two frames on which it is tracked: ``valid``): under its label, and after
+        it while its sites stay held because they have not lifted (``lock_low``); let go
+        until the label begins again.  A rigid heel held low cannot lift, and its hold kept
+        the foot where it landed while the actor's ankle rolled on over the toes: the
+        streamed PyMO walk's robot stored up 10-12 cm at every push-off, which the body
+        followed (its pelvis 6.7 cm from the actor's scaled path on average).  A heel whose
+        target slides without lifting (a shuffle, a spin) stays held.  The heel's sites are
+        then released (:meth:`_stream_hints`); the toes hold the foot alone, and
+        :meth:`_toes_moving` lets them go in turn."""
+        out = dict(labels)
+        if self.options.heel_release_speed <= 0:
+            return out
+        limit = self.options.heel_release_speed / self.locks.fps
+        for side, foot in self.feet.items():
+            key = f"{side}_heel"
+            labelled = bool(labels.get(key, False))
+            if valid is not None and not bool(valid[foot[0]]):
+                self._heel_prev.pop(side, None)  # lost: its stand-in position is no motion
+                continue
+            ankle = np.asarray(positions[foot[0]], dtype=float)
+            if labelled and not self._heel_labelled[side]:  # a new contact
+                self._heel_gone[side], self._heel_low[side] = False, float(ankle[2])
+            self._heel_labelled[side] = labelled
+            if labelled or not self._heel_gone[side]:
+                self._heel_low[side] = min(self._heel_low[side], float(ankle[2]))
+            prev = self._heel_prev.get(side)
+            self._heel_prev[side] = ankle[:2].copy()
+            lifted = float(ankle[2]) > self._heel_low[side] + self.options.release_margin
+            if lifted and prev is not None and float(np.linalg.norm(ankle[:2] - prev)) > limit:
+                self._heel_gone[side] = True
+            if self._heel_gone[side]:
+                out[key] = False
         return out
 
     def _toes_moving(self, positions: np.ndarray, labels: Mapping[str, bool],
@@ -1096,6 +1148,8 @@ class Planting:
         bending = self._toes_bending(positions, first)
         bends = np.array([bending.get(side, False) for side in self._site_side], dtype=bool)
         gone = np.array([self._toe_gone[side] for side in self._site_side], dtype=bool)
+        heel_sites = np.array([self.site_label[site].endswith("_heel") for site in self.sites], dtype=bool)
+        gone |= np.array([self._heel_gone[side] for side in self._site_side], dtype=bool) & heel_sites
         n = len(self.sites)
         return PlanHints(
             rolling=np.zeros(n, dtype=bool),
@@ -1138,7 +1192,10 @@ class Planting:
         if not self.options.plant:
             return out, [], [], offsets
         if self.anchored:
-            labels = self._toes_moving(positions, labels, valid)
+            # the toes' release reads the heels' labels, not their early release: a heel let go
+            # leaves the foot rolling on its held toes (let go with the heel, the whole foot
+            # snapped 2-3 cm onto its targets in one frame at push-off: the CMU walk humanoid)
+            labels = self._heels_moving(positions, self._toes_moving(positions, labels, valid), valid)
         flags = np.array([bool(labels.get(self.site_label[site], False)) for site in self.sites])
         toe = np.array([bool(labels.get(f"{side}_toe", False)) for side in self._site_side], dtype=bool)
         heel = np.array([bool(labels.get(f"{side}_heel", False)) for side in self._site_side], dtype=bool)

@@ -116,6 +116,7 @@ def test_a_rolled_foot_is_levelled_about_its_forward_axis(yaw, roll):
     assert np.array_equal(level_roll(many, rest, w, block=2), level_roll(many, rest, w))  # block by block
 
 
+@RETARGET_DIAGNOSTICS
 @pytest.mark.parametrize("clip", ["pymo_walk.bvh", "cmu_05_10_dance_spins.bvh"])
 def test_a_rigid_foot_rolls_over_its_edge_not_a_corner(clip):
     """Issue 9: planted feet slip under 1 cm/s.  Before: the robot's foot followed the PyMO

@@ -14,7 +14,8 @@ each the median of ``--runs`` runs, in frames per second of CPU time
 machine) and of wall time.  The runs are interleaved (every clip and character
 once, then again), so that a slow spell of the machine spreads over all of them.
 Peak memory is the process's maximum resident set size at the end (ru_maxrss).
-Also prints the streaming retargeter's latency on the CMU walk.
+Also prints the streaming retargeter's latency on the CMU walk (with ``--compare``, the
+reference's too, run by run alternating, and the ratios of the medians and the p99s).
 
 ``--compare REF_DIR`` runs the same benchmark on another checkout (``REF_DIR``,
 e.g. the main branch) in a subprocess with ``PYTHONPATH=REF_DIR``, run by run
@@ -90,6 +91,31 @@ def _measure(clip: str, character: str, frames: int | None, plant: bool, options
     }
 
 
+def _stream_latencies(clip: str, character: str) -> list[float]:
+    """Per-frame latencies (ms, wall) of streaming ``clip`` onto ``character``, the first frame
+    (the calibration) excluded."""
+    from physmocap.ik.stream import stream_motion
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    return [1000.0 * t for t in stream_motion(load_motion(DATA / clip), load_character(character)).solver.latency[1:]]
+
+
+def _stream_worker() -> int:
+    """``--stream-worker CLIP CHARACTER``: one stream's latencies, printed as JSON (for ``--compare``)."""
+    warnings.simplefilter("ignore")
+    print(json.dumps(_stream_latencies(sys.argv[2], sys.argv[3])))
+    return 0
+
+
+def _subprocess_stream(ref: Path, clip: str, character: str) -> list[float]:
+    """:func:`_stream_latencies` in a fresh process with ``PYTHONPATH=ref`` (a checkout)."""
+    env = dict(os.environ, PYTHONPATH=str(ref))
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--stream-worker", clip, character],
+                         env=env, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def _worker() -> int:
     """``--worker CLIP CHARACTER FRAMES PLANT WARMUP [OPTIONS_JSON]``: one run, printed as JSON
     (for ``--compare``)."""
@@ -119,6 +145,8 @@ def _char_label(name: str) -> str:
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--worker":
         return _worker()
+    if len(sys.argv) > 1 and sys.argv[1] == "--stream-worker":
+        return _stream_worker()
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=5, help="interleaved runs of every clip and character; medians are printed (default 5)")
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames of each clip")
@@ -182,20 +210,21 @@ def main() -> int:
                   f"  wall x{med(ours[key], 'wall_fps') / med(ref[key], 'wall_fps'):.2f}")
     walk = DATA / "cmu_12_01_walk.bvh"
     if walk.exists() and not args.no_stream:
-        from physmocap.ik.stream import stream_motion
-        from physmocap.models import load_character
-        from physmocap.sources import load_motion
-
-        motion = load_motion(walk)
         for name in args.characters:
-            lat = []
-            for _ in range(args.runs):
-                lat.extend(stream_motion(motion, load_character(name)).solver.latency[1:])
-            lat_ms = np.array(lat) * 1000.0
-            print(
-                f"streaming {walk.name} onto {_char_label(name)}: latency median {np.median(lat_ms):.2f} ms,"
-                f" p99 {np.percentile(lat_ms, 99):.2f} ms (first frame excluded)"
-            )
+            lat: dict[str, list[float]] = {"this": [], "ref": []}
+            for _ in range(args.runs):  # interleaved with the reference's, as above
+                if args.compare is not None:
+                    lat["ref"].extend(_subprocess_stream(args.compare, walk.name, name))
+                lat["this"].extend(_subprocess_stream(REPO, walk.name, name) if args.fresh
+                                   else _stream_latencies(walk.name, name))
+            for key, label in (("this", "this checkout"), ("ref", f"reference {args.compare}")):
+                if lat[key]:
+                    ms = np.array(lat[key])
+                    print(f"streaming {walk.name} onto {_char_label(name)} ({label}): latency median"
+                          f" {np.median(ms):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms (first frame excluded)")
+            if lat["ref"]:
+                print(f"  ratio this / reference: median x{np.median(lat['this']) / np.median(lat['ref']):.2f},"
+                      f" p99 x{np.percentile(lat['this'], 99) / np.percentile(lat['ref'], 99):.2f}")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f"peak memory (max RSS): {peak:.0f} MB")
     return 0

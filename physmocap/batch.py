@@ -61,6 +61,9 @@ STATE_FILE = ".physmocap-batch.json"
 WORKER_EXIT_SECONDS = 10.0
 #: Seconds to wait for a Ray address to answer before giving up.
 RAY_CONNECT_SECONDS = 5.0
+#: An HTTP/2 client's connection preface and an empty SETTINGS frame (RFC 9113, 3.4 and 6.5):
+#: what :func:`_probe` sends a Ray address to see a gRPC server answer.
+HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
 
 
 @dataclass(frozen=True)
@@ -435,7 +438,11 @@ def job_options(job: Job, options: dict[str, Any]) -> dict[str, Any]:
     from .cli.retarget import MARKER_OPTIONS_UNSET
     from .sources.markers import is_marker_file
 
-    shared = options if is_marker_file(job.input) else {**options, **MARKER_OPTIONS_UNSET}
+    try:
+        markers = is_marker_file(job.input)
+    except PhysmocapError:  # an .mcap that does not read: its own run fails and is recorded
+        markers = False
+    shared = options if markers else {**options, **MARKER_OPTIONS_UNSET}
     return {**shared, **job.options}
 
 
@@ -753,11 +760,31 @@ def _probe(address: str, option: str) -> None:
     if not sep or not host or not port.isdigit():
         raise OptionError(f"{option}: expected local, auto, HOST:PORT or ray://HOST:PORT")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_SECONDS).close()
+        conn = socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_SECONDS)
     except OSError as exc:
         reason = exc.strerror or str(exc) or type(exc).__name__
         raise OptionError(f"{option}: no Ray cluster answers there ({reason}); start one with "
                           "'ray start --head' or give the address it prints") from None
+    with conn:
+        if os.environ.get("RAY_USE_TLS", "0").lower() in ("1", "true"):
+            return  # gRPC over TLS: the plain handshake below does not apply
+        # Ray's cluster (and client) servers speak gRPC, HTTP/2: to the client's connection
+        # preface and an empty SETTINGS frame they answer with a SETTINGS frame (type 4, the
+        # fourth byte of a frame header).  Anything else listening there (a web server) would
+        # leave ray.init retrying for minutes.
+        try:
+            conn.sendall(HTTP2_PREFACE)
+            head = b""
+            while len(head) < 4:
+                chunk = conn.recv(4 - len(head))
+                if not chunk:
+                    break
+                head += chunk
+        except OSError:
+            head = b""
+        if len(head) < 4 or head[3] != 4:
+            raise OptionError(f"{option}: something listens there but it does not answer as a Ray cluster "
+                              "does (gRPC); give the address 'ray start --head' prints") from None
 
 
 def _ray_results(jobs: list[Job], options: dict[str, Any], ray: Any, func: Callable[..., FileResult]) -> Iterator[FileResult]:

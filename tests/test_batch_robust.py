@@ -186,6 +186,49 @@ def test_an_unreachable_ray_address_is_one_error_within_seconds(folder, monkeypa
     assert len(err.strip().splitlines()) == 1
 
 
+def test_a_web_server_at_the_ray_address_is_one_error_at_once(folder, capsys):
+    """Something that listens but is no Ray cluster (a web server) left ray.init retrying for
+    minutes: the probe's HTTP/2 handshake refuses it at once."""
+    pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
+    import http.server
+    import threading
+
+    class Quiet(http.server.BaseHTTPRequestHandler):
+        def log_message(self, *args):  # the server's own request log is not the batch's stderr
+            pass
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), Quiet)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        address = f"127.0.0.1:{server.server_address[1]}"
+        start = time.monotonic()
+        assert _batch(folder, "--ray", address) == 2
+        assert time.monotonic() - start < 10
+    finally:
+        server.shutdown()
+        server.server_close()
+    err = capsys.readouterr().err
+    assert f"--ray {address}: something listens there but it does not answer as a Ray cluster" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_an_unreadable_mcap_in_the_folder_fails_alone(folder, capsys):
+    """A file whose type cannot be told (an .mcap that does not read) is one failed file of the
+    summary, not the batch's end; a reader's error names its frame in the summary."""
+    (folder / "in" / "garbage.mcap").write_bytes(b"\x00not an mcap file\n" * 40)
+    bvh = (folder / "in" / "a.bvh").read_text().splitlines()
+    first = next(i for i, line in enumerate(bvh) if line.startswith("Frame Time")) + 1
+    row = bvh[first + 12].split()
+    row[4] = "nan"
+    bvh[first + 12] = " ".join(row)
+    (folder / "in" / "nan.bvh").write_text("\n".join(bvh) + "\n")
+    assert _batch(folder, "--jobs", "1") == 1
+    rows = _rows(folder / "out")
+    assert rows["garbage.mcap"]["status"] == "failed" and "not an MCAP file" in rows["garbage.mcap"]["error"]
+    assert (rows["nan.bvh"]["status"], rows["nan.bvh"]["frame"]) == ("failed", 12)
+    assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"
+
+
 def test_ray_refusing_to_connect_is_one_error(folder, monkeypatch, capsys):
     ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
 

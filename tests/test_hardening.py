@@ -63,6 +63,32 @@ def test_output_that_is_the_input_is_refused(tmp_path, capsys, command):
     assert src.read_bytes() == original
 
 
+@pytest.mark.parametrize("flag", ["-o", "--stats"])
+def test_replay_never_overwrites_its_recording(tmp_path, capsys, flag):
+    src = tmp_path / "walk.bvh"
+    original = resolve_input("example").read_bytes()
+    src.write_bytes(original)
+    assert main(["replay", str(src), flag, str(src)]) == 2
+    assert "the output is the input file" in _one_line(capsys)
+    assert src.read_bytes() == original
+
+
+def test_report_never_overwrites_its_trajectory(tmp_path, capsys):
+    traj = tmp_path / "walk.npz"
+    assert main(["retarget", "example", "-o", str(traj), "--end", "20", "--quiet"]) == 0
+    capsys.readouterr()
+    original = traj.read_bytes()
+    assert main(["report", str(traj), "--json", str(traj)]) == 2
+    assert "the output is the input file" in _one_line(capsys)
+    assert traj.read_bytes() == original
+
+
+@pytest.mark.parametrize("options", [["--calibration-seconds", "-1"], ["--marker-set", "set.toml"], ["--calibrate", "rom.c3d"]])
+def test_replay_refuses_marker_options_on_a_skeleton(tmp_path, capsys, options):
+    assert main(["replay", "example", *options]) == 2
+    assert "for marker recordings only" in _one_line(capsys)
+
+
 @pytest.mark.parametrize("ft,needle", [("1e-300", "frame rate"), ("0.000001", "frame rate"), ("100", "frame rate")])
 def test_implausible_frame_rates_are_refused(tmp_path, capsys, ft, needle):
     path = tmp_path / "odd.bvh"

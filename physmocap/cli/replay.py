@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import OptionError
 from ..resources import display_path
-from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_writable
+from ..fileio import OutputSet, announce, atomic_open, check_distinct, check_not_input, check_writable, suffix_error
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compare", action="store_true", help="also retarget offline and report the difference")
     p.add_argument("--calibrate", metavar="ROM", help="marker recordings: calibrate the actor on this range-of-motion "
                    "clip (.c3d, .trc, .mcap) instead of the recording's first seconds")
-    p.add_argument("--calibration-seconds", type=float, default=10.0,
+    p.add_argument("--calibration-seconds", type=float, default=None,
                    help="marker recordings: seconds at the start used to calibrate the actor (default 10)")
     p.add_argument("--marker-set", metavar="SET.toml", help="marker recordings: marker roles overriding the aliases")
     p.add_argument("--no-arm-branches", action="store_true",
@@ -58,12 +58,19 @@ def run(args: argparse.Namespace) -> int:
         from .retarget import WRITERS
 
         if out.suffix.lower() not in WRITERS:
-            raise OptionError(f"cannot write {out.suffix!r}; use one of {sorted(WRITERS)}", path=out)
+            raise suffix_error(out, WRITERS)
         check_writable(args.output)
     if args.stats:
         check_writable(args.stats)
     check_distinct([out, args.stats])
-    if is_marker_file(args.input):
+    # a run never overwrites its capture or the files that describe it
+    check_not_input([out, args.stats], [args.input, args.map, args.source_map, args.calibrate, args.marker_set])
+    if not is_marker_file(args.input):
+        given = [flag for flag, value in (("--calibrate", args.calibrate), ("--marker-set", args.marker_set),
+                                          ("--calibration-seconds", args.calibration_seconds is not None)) if value]
+        if given:
+            raise OptionError(f"{', '.join(given)}: for marker recordings only (.c3d, .trc, marker .mcap)", path=args.input)
+    else:
         from ..markers.replay import replay_markers
 
         return replay_markers(args, out)

@@ -58,12 +58,13 @@ def _source_path(args: argparse.Namespace, stored: str) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..fileio import check_writable
+    from ..fileio import check_not_input, check_writable
     from ..ik.contacts import detect_contacts, load_contact_csv
     from ..report import load_trajectory, tracking_targets
 
     if args.json:
         check_writable(args.json, "report")
+        check_not_input([args.json], [args.trajectory, args.source, args.contacts, args.map, args.source_map])
     if args.plots:
         from ..fileio import check_output_dir
         from ..plots import require_matplotlib

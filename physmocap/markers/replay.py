@@ -35,7 +35,7 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
     from ..motion import Skeleton
     from ..sources.markers import read_markers
     from ..trajectory import Trajectory
-    from .stream import MarkerStream, calibration_slice
+    from .stream import CALIBRATION_SECONDS, MarkerStream, calibration_slice
 
     if args.compare or args.source_map or args.floor is not None:
         raise OptionError("--compare, --source-map and --floor are for skeleton recordings, not markers")
@@ -44,10 +44,11 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
     if args.calibrate:
         cal = read_markers(args.calibrate)
     else:
-        cal = calibration_slice(rec, args.calibration_seconds)
-        if args.calibration_seconds * rec.fps > rec.num_frames:
+        seconds = CALIBRATION_SECONDS if args.calibration_seconds is None else args.calibration_seconds
+        cal = calibration_slice(rec, seconds)
+        if seconds * rec.fps > rec.num_frames:
             warn(f"{rec.source}: the recording lasts {rec.num_frames / rec.fps:.3g} s, less than the "
-                 f"{args.calibration_seconds:g} s of --calibration-seconds; the actor is calibrated on all of it")
+                 f"{seconds:g} s of --calibration-seconds; the actor is calibrated on all of it")
     t0 = time.perf_counter()
     stream = MarkerStream.calibrate(cal, args.marker_set, labels=rec.labels)
     calib_s = time.perf_counter() - t0

@@ -721,9 +721,10 @@ def _parse_chunk_exact(
             break
         if len(toks) != C:
             raise InputError(
-                f"frame {frame}: expected {C} numbers (one per channel), found {len(toks)}",
+                f"expected {C} numbers (one per channel), found {len(toks)}",
                 path=path,
                 line=line,
+                frame=frame,
             )
         rows.append(_check_tokens(toks, line, path, labels, frame))
     return np.array(rows, dtype=float).reshape(-1, C), pending
@@ -737,22 +738,25 @@ def _check_tokens(toks: list[bytes], line: int, path: Path, labels: list[str], f
         if not _NUMBER_RE.fullmatch(tok):
             if tok.lower().lstrip("+-") in ("nan", "inf", "infinity"):
                 raise InputError(
-                    f"frame {frame}: {label} (value {k + 1}) is {tok!r}; expected a finite number",
+                    f"{label} (value {k + 1}) is {tok!r}; expected a finite number",
                     path=path,
                     line=line,
+                    frame=frame,
                 )
             raise InputError(
-                f"frame {frame}: expected a number for {label} (value {k + 1}), found {_show(tok)}",
+                f"expected a number for {label} (value {k + 1}), found {_show(tok)}",
                 path=path,
                 line=line,
+                frame=frame,
             )
         v = float(tok)
         if not abs(v) <= MAX_ABS_VALUE:
             raise InputError(
-                f"frame {frame}: {label} (value {k + 1}) is {tok}, out of range "
+                f"{label} (value {k + 1}) is {tok}, out of range "
                 f"(|value| > {MAX_ABS_VALUE:g})",
                 path=path,
                 line=line,
+                frame=frame,
             )
         out.append(v)
     return out
@@ -860,9 +864,10 @@ def _read_rows(fh, header: _Header, lay: _Layout, leftover: bytes, path: Path, s
         if pending is not None:
             # A short row turned out not to be the last one.
             raise InputError(
-                f"frame {store.n}: expected {C} numbers (one per channel), found {pending.count}",
+                f"expected {C} numbers (one per channel), found {pending.count}",
                 path=path,
                 line=pending.line,
+                frame=store.n,
             )
         values = _parse_chunk_fast(chunk, C)
         if values is None:
@@ -976,10 +981,11 @@ def read_bvh(
     if pending is not None:
         truncated = " (the file looks truncated)" if declared > rows else ""
         raise InputError(
-            f"frame {rows}: expected {C} numbers (one per channel), found {pending.count}{truncated}; "
+            f"expected {C} numbers (one per channel), found {pending.count}{truncated}; "
             f"the {rows} complete frames before it can be kept by cutting the file at this line",
             path=path,
             line=pending.line,
+            frame=rows,
         )
     elif rows != declared:
         warn(

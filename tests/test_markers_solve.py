@@ -180,6 +180,13 @@ def test_cmu_take_solved_end_to_end(tmp_path, capsys):
         assert main(["solve", str(c3d), "-o", str(out), "--report", str(rep), "--end", "360"]) == 0
     out_text = capsys.readouterr().out  # the result table on stdout, as retarget's report
     assert "marker residuals" in out_text and "ignored (no segment explains them): RBAC-1" in out_text
+    assert "frames/s CPU" in out_text  # the run's speed is printed, not kept in the report file
+    again = tmp_path / "again.json"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["solve", str(c3d), "-o", str(tmp_path / "again.bvh"), "--report", str(again), "--end", "360",
+                     "--quiet"]) == 0
+    assert again.read_bytes() == rep.read_bytes()  # deterministic: no timings in the file
     report = json.loads(rep.read_text())
     assert report["frames"] == 360
     assert report["overall"]["rms_mm"] < 12.0

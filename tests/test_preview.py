@@ -99,6 +99,9 @@ def test_a_saved_trajectory_previews_from_the_source_frame_it_records(backend, t
         (["preview", "example", "-o", "{tmp}/x.png", "--camera", "diagonal"], "--camera"),
         (["preview", "example", "-o", "{tmp}/x.png", "--frames", "1,a"], "--frames"),
         (["preview", "{tmp}/none.npz", "-o", "{tmp}/x.png"], "not found"),
+        (["preview", "example", "-o", "{tmp}/x.png", "--camera", "nan,10"], "azimuth and elevation must be finite"),
+        # every frame of the clip in one row: 321 megapixels (3.4 GB while it was assembled)
+        (["preview", "example", "-o", "{tmp}/x.png", "--count", "100000", "--quiet"], "megapixels, more than 64"),
     ],
 )
 def test_bad_input_is_one_clear_line(argv, needle, tmp_path, capsys):

@@ -134,5 +134,5 @@ def run(args: argparse.Namespace) -> int:
             if not args.quiet:
                 announce(f"wrote {args.report}")
     if not args.quiet:
-        print_report(rep)
+        print_report(rep, frames_per_second=sol.frames_per_second()[0])
     return 0

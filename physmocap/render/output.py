@@ -186,6 +186,24 @@ def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = 
     return sorted(set(np.linspace(0, num_frames - 1, count).round().astype(int).tolist()))
 
 
+#: Most pixels in a contact sheet (about 190 MB of RGB while it is assembled; image viewers
+#: and Pillow refuse much larger ones as decompression bombs).
+MAX_SHEET_PIXELS = 64_000_000
+
+
+def check_sheet(path: Path, frames: int, width: int, height: int, rows: int) -> None:
+    """Refuse a contact sheet of ``frames`` columns of ``rows`` panels ``width`` x ``height``
+    over :data:`MAX_SHEET_PIXELS`, before any rendering."""
+    pixels = frames * rows * width * height
+    if pixels > MAX_SHEET_PIXELS:
+        raise OptionError(
+            f"a contact sheet of {frames} frames at {width}x{height} is {pixels / 1e6:.0f} megapixels, more than "
+            f"{MAX_SHEET_PIXELS / 1e6:.0f}: fewer frames (--count, --frames) or a smaller --size; a video (.mp4, .gif) "
+            "shows every frame",
+            path=path,
+        )
+
+
 def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, first: int, progress: bool | None) -> None:
     """A PNG grid: one column per frame, the character row above the source row (with the
     ``overlay`` layout one row, the source skeleton drawn over the character)."""

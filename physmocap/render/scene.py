@@ -54,7 +54,9 @@ def parse_camera(text: str) -> CameraView:
         az, el = (float(x) for x in t.split(","))
     except ValueError:
         raise OptionError(f"--camera: expected one of {', '.join(VIEWS)} or AZIMUTH,ELEVATION, got {text!r}") from None
-    if not (np.isfinite(az) and np.isfinite(el) and -90.0 <= el <= 90.0):
+    if not (np.isfinite(az) and np.isfinite(el)):
+        raise OptionError(f"--camera: azimuth and elevation must be finite numbers of degrees, got {text!r}")
+    if not -90.0 <= el <= 90.0:
         raise OptionError(f"--camera: elevation must be within -90..90 degrees, got {text!r}")
     return CameraView(az, el)
 

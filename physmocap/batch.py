@@ -467,10 +467,10 @@ def run_job(job: Job, options: dict[str, Any], on_frames: FrameCallback | None =
     solving = _SolveTracker(on_frames)
     try:
         ns = argparse.Namespace(**{**job_options(job, options), "input": job.input, "quiet": True})
-        Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         with warnings.catch_warnings(), observe(solving):
             warnings.simplefilter("ignore")
             traj = retarget_from_args(ns)
+            Path(job.output).parent.mkdir(parents=True, exist_ok=True)  # once there is a result to write
             write_outputs(traj, [Path(job.output)], ns, quiet=True)
         _measure(traj, res)
         res.status = "done"  # only once every figure is measured: a failing metric fails the file
@@ -861,7 +861,8 @@ def run_batch(
     from .progress import Progress
 
     out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise OutputError("is a file: the outputs need a folder (OUTDIR)", path=out)
     keys = {j.output: options_key(job_options(j, options)) for j in jobs}
     state = {} if force else _load_state(out)
     todo = [j for j in jobs if force or not _done(j, keys[j.output], state)]
@@ -872,6 +873,10 @@ def run_batch(
             kept = {k: v for k, v in state[j.output]["result"].items() if k in FileResult.__dataclass_fields__}
             results[j.output] = FileResult(**{**kept, "seconds": 0.0})
     ray_mod, connected = _ray_connect(ray) if ray is not None and todo else (None, False)
+    try:  # after Ray: a batch that cannot start leaves no folder
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create the output folder: {exc.strerror or exc}", path=out) from None
     try:
         with Progress(len(todo), "batch", enabled=progress, unit="files", tally="frames") as bar:
             _run(todo, options, workers, ray_mod, bar, state, keys, results, out)

@@ -229,6 +229,17 @@ def test_an_unreadable_mcap_in_the_folder_fails_alone(folder, capsys):
     assert rows["a.bvh"]["status"] == rows["b.bvh"]["status"] == "done"
 
 
+def test_a_batch_that_cannot_start_leaves_no_folder(folder, capsys):
+    """An output folder that is a file is one error; a batch that fails before its first file
+    (Ray unreachable) makes no output folder."""
+    (folder / "file").write_text("")
+    assert main(["batch", str(folder / "in"), "-o", str(folder / "file"), "--quiet"]) == 2
+    assert "is a file: the outputs need a folder" in capsys.readouterr().err
+    assert main(["batch", str(folder / "in"), "-o", str(folder / "new" / "out"), "--ray", f"127.0.0.1:{_free_port()}",
+                 "--quiet"]) == 2
+    assert not (folder / "new").exists()
+
+
 def test_ray_refusing_to_connect_is_one_error(folder, monkeypatch, capsys):
     ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
 

@@ -774,8 +774,9 @@ def build_targets(
             calib_pts = {c: S[pose.frame, col[c]] for c in present}
             pose_rot = dict(zip(present, actor.frame_rotations(pose.frame, [joint_indices[c] for c in present])))
         if not pose.standing:
+            seen = "any frame" if F > 1 else "the first frame (a stream calibrates on the frames it has)"
             warn(
-                f"{motion.source}: no usable calibration pose: neither the rest pose nor any frame shows "
+                f"{motion.source}: no usable calibration pose: neither the rest pose nor {seen} shows "
                 f"the actor standing upright; orientations calibrated on {pose.describe()}, the most upright"
             )
     else:

@@ -161,3 +161,20 @@ def test_rest_pose_outside_limits(biped):
     mp.write_text(mp.read_text() + "\n[rest.joints]\nelbowL = 30\n")
     with pytest.raises(MappingError, match="rest pose puts joint 'elbowL'"):
         load_character(xml)
+
+
+@pytest.mark.parametrize("command", [["character", "info"], ["character", "init"], ["retarget", "example", "--character"]])
+def test_mujocos_own_warnings_leave_no_log_file(tmp_path, monkeypatch, capsys, command):
+    """MuJoCo's default handler wrote MUJOCO_LOG.TXT into the working folder and printed its
+    warning on stdout ('XML contains a NaN'): they are physmocap's to report, on stderr."""
+    from physmocap.cli import main
+
+    text = (FIXTURES / "biped.xml").read_text()
+    at = text.index('pos="') + len('pos="')
+    bad = tmp_path / "nan.xml"
+    bad.write_text(text[:at] + "nan " + text[at:])
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, str(bad), *(["-o", str(tmp_path / "x.npz")] if command[0] == "retarget" else [])]) == 2
+    out, err = capsys.readouterr()
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+    assert "NaN" not in out and "MuJoCo cannot load this MJCF" in err and "Traceback" not in err

@@ -15,17 +15,18 @@ computes, in the rest pose standing on the floor (z = 0):
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Hashable
+from typing import Any, Callable, Hashable, Iterator
 
 import mujoco
 import numpy as np
 
 from ..canonical import REQUIRED_JOINTS, canonical_parent
-from ..errors import InputError, MappingError
+from ..errors import InputError, MappingError, warn
 from ..resources import mjcf_dir
 from ..rotations import Rotation, quat_mul, wxyz_to_xyzw, xyzw_to_wxyz
 from . import rom
@@ -216,19 +217,49 @@ def _load_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
     return model
 
 
-def _compile_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
-    """Compile the MJCF; with a mapping's ``[sites]``, add those sites first (MjSpec)."""
+@contextlib.contextmanager
+def mujoco_warnings(path: Path) -> Iterator[None]:
+    """MuJoCo's warnings while ``path`` loads (its own handler prints them on stdout and
+    writes ``MUJOCO_LOG.TXT`` into the working folder): collected, then given as physmocap
+    warnings naming the file (stderr) once it has loaded; dropped when it does not (the
+    error says what is wrong)."""
+    heard: list[str] = []
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: heard.append(" ".join(str(message).split())))
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(before)
+    for message in heard:
+        warn(f"{path}: MuJoCo: {message}")
+
+
+def read_mjcf(path: Path) -> mujoco.MjModel:
+    """The MJCF at ``path`` compiled: one clear error for a missing file, a folder or a file
+    MuJoCo refuses; MuJoCo's warnings on stderr (:func:`mujoco_warnings`)."""
+    return _read(path, spec=False)
+
+
+def _read(path: Path, spec: bool) -> mujoco.MjModel | mujoco.MjSpec:
+    """The MJCF at ``path`` compiled, or its ``MjSpec`` (``spec``); one clear error for a
+    missing file, a folder or a file MuJoCo refuses, MuJoCo's warnings on stderr."""
     if not path.exists():
         raise InputError("MJCF file not found", path=path)
     if path.is_dir():
         raise InputError("is a directory, expected an MJCF file", path=path)
     try:
-        if mp is None or not mp.sites:
-            return mujoco.MjModel.from_xml_path(os.fspath(path))
-        spec = mujoco.MjSpec.from_file(os.fspath(path))
+        with mujoco_warnings(path):
+            return mujoco.MjSpec.from_file(os.fspath(path)) if spec else mujoco.MjModel.from_xml_path(os.fspath(path))
     except (ValueError, OSError) as exc:
         msg = " ".join(str(exc).split())
         raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
+
+
+def _compile_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
+    """Compile the MJCF; with a mapping's ``[sites]``, add those sites first (MjSpec)."""
+    if mp is None or not mp.sites:
+        return read_mjcf(path)
+    spec = _read(path, spec=True)
     for name, (body_name, pos) in mp.sites.items():
         body = spec.body(body_name)
         if body is None:
@@ -237,7 +268,8 @@ def _compile_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
             raise mp.error(f"the model already has a site {name!r}", "sites", name)
         body.add_site(name=name, pos=list(pos))
     try:
-        return spec.compile()
+        with mujoco_warnings(path):
+            return spec.compile()
     except (ValueError, OSError) as exc:
         msg = " ".join(str(exc).split())
         raise InputError(f"MuJoCo cannot compile this MJCF with the added sites: {msg}", path=path) from None

@@ -65,7 +65,7 @@ import mujoco
 import numpy as np
 
 from ..canonical import CANONICAL_NAMES
-from ..errors import InputError, MappingError
+from ..errors import MappingError
 
 __all__ = ["Guess", "Proposal", "propose_mapping", "name_side", "name_parts", "rest_keyframe", "REST_KEY_WORDS"]
 
@@ -300,15 +300,9 @@ def _axis_name(v: np.ndarray) -> str:
 
 
 def _load(path: Path) -> mujoco.MjModel:
-    if not path.exists():
-        raise InputError("MJCF file not found", path=path)
-    if path.is_dir():
-        raise InputError("is a directory, expected an MJCF file", path=path)
-    try:
-        return mujoco.MjModel.from_xml_path(os.fspath(path))
-    except (ValueError, OSError) as exc:
-        msg = " ".join(str(exc).split())
-        raise InputError(f"MuJoCo cannot load this MJCF: {msg}", path=path) from None
+    from .character import read_mjcf
+
+    return read_mjcf(path)
 
 
 #: Words that name a standing keyframe, in order of preference (Menagerie's models use

@@ -63,6 +63,30 @@ def test_output_that_is_the_input_is_refused(tmp_path, capsys, command):
     assert src.read_bytes() == original
 
 
+def test_sigterm_removes_the_half_written_output(tmp_path, monkeypatch, capsys):
+    """SIGTERM (kill, timeout, a scheduler) ends a command as Ctrl-C does: its half-written
+    output is removed (a killed preview left a hidden partial video) and it exits 143."""
+    import signal
+
+    import physmocap.cli.convert as convert
+    from physmocap.fileio import atomic_open
+
+    out = tmp_path / "walk.bvh"
+
+    def writes_then_is_killed(args):
+        with atomic_open(out) as fh:
+            fh.write("HIERARCHY\n")
+            os.kill(os.getpid(), signal.SIGTERM)
+        return 0
+
+    monkeypatch.setattr(convert, "run", writes_then_is_killed)
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["convert", "example", str(out)]) == 143
+    assert "physmocap: terminated" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    assert signal.getsignal(signal.SIGTERM) is before  # put back for a program that calls main
+
+
 @pytest.mark.parametrize("flag", ["-o", "--stats"])
 def test_replay_never_overwrites_its_recording(tmp_path, capsys, flag):
     src = tmp_path / "walk.bvh"

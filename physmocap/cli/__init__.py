@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 import warnings
 from typing import Sequence
@@ -72,10 +73,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     (a program that calls it keeps its warnings as they were)."""
     previous = warnings.formatwarning
     warnings.formatwarning = _format_warning
+    terminate = _on_sigterm()
     try:
         return _run(argv)
     finally:
         warnings.formatwarning = previous
+        if terminate is not None:
+            signal.signal(signal.SIGTERM, terminate)
+
+
+class Terminated(BaseException):
+    """SIGTERM while a command runs (``kill``, ``timeout``, a job scheduler): raised where the
+    command is, so that every half-written output is removed on the way out, as on Ctrl-C."""
+
+
+def _on_sigterm():
+    """Turn SIGTERM into :class:`Terminated` while :func:`main` runs (in the main thread only);
+    returns the handler to restore (None: none installed)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def raise_terminated(signum, frame):
+        raise Terminated()
+
+    return signal.signal(signal.SIGTERM, raise_terminated)
 
 
 def _run(argv: Sequence[str] | None) -> int:
@@ -94,6 +117,9 @@ def _run(argv: Sequence[str] | None) -> int:
     except KeyboardInterrupt:
         print("physmocap: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("physmocap: terminated", file=sys.stderr)
+        return 143
     except BrokenPipeError:
         return 0
     except OSError as exc:  # disk full, quota, file too large, permission: one line, not a traceback

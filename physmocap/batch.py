@@ -347,7 +347,7 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz", options: 
     if not entries:
         raise InputError("no input files found (looked for " + ", ".join(INPUT_SUFFIXES) + ")", path=source)
     jobs: list[Job] = []
-    seen: dict[str, int] = {}
+    seen: dict[str, tuple[int, Path]] = {}  # output -> the manifest line and input that write it
     folders: set[Path] = set()
     characters = _CharacterCheck(options or {})
     for e in entries:
@@ -358,9 +358,12 @@ def plan(source: str, outdir: str | os.PathLike, suffix: str = ".npz", options: 
         if target == e.input.resolve():
             raise OptionError(f"the output {target} is the input itself", path=source, line=e.line or None)
         if str(target) in seen:
-            where = f"lines {seen[str(target)]} and {e.line}" if e.line else "two inputs"
-            raise OptionError(f"{where} write the same output {target}", path=source)
-        seen[str(target)] = e.line
+            line, first = seen[str(target)]
+            where = f"lines {line} and {e.line}" if e.line else f"{first} and {e.input}"
+            shown = os.path.relpath(target) if not os.path.isabs(outdir) else target
+            raise OptionError(f"{where} would write the same output {shown}; give one of them its own output "
+                              "in a manifest (CSV or JSON lines: input, output)", path=source)
+        seen[str(target)] = (e.line, e.input)
         # the input as given (absolute, links kept): its path in the summary is the one the user wrote
         jobs.append(Job(input=os.path.abspath(e.input), output=str(target), options=dict(e.options)))
     return jobs

@@ -125,7 +125,7 @@ def test_jsonl_manifest_redoes_only_the_file_whose_options_changed(folder):
         ("m.jsonl", '{"input": "a.bvh", "no-plant": "maybe"}\n', "m.jsonl:1: --no-plant is a flag"),
         ("m.csv", "input,start,end\na.bvh,30,10\n", "m.csv:2: --start 30 --end 10: the range is empty"),
         ("m.csv", "output\nx.npz\n", "m.csv:1: a CSV manifest starts with a header row naming an 'input' column"),
-        ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 write the same output"),
+        ("m.jsonl", '{"input": "a.bvh"}\n{"input": "a.bvh"}\n', "lines 1 and 2 would write the same output"),
         ("m.csv", "input\nnope.bvh\n", "m.csv:2: input "),
         ("m.jsonl", '{"input": "a.bvh", "fps": "nan"}\n', "m.jsonl:1: --fps: the frame rate must be a number in (0, 2000]"),
         ("m.jsonl", '{"input": "a.bvh", "output": "a.bvh"}\n', "m.jsonl:1: the output "),

@@ -240,6 +240,13 @@ def test_a_batch_that_cannot_start_leaves_no_folder(folder, capsys):
     assert not (folder / "new").exists()
 
 
+def test_two_inputs_with_one_output_are_named(folder, capsys):
+    (folder / "in" / "a.trc").write_text("")  # a.bvh's output too: the plan refuses before reading
+    assert _batch(folder) == 2
+    err = capsys.readouterr().err
+    assert "a.bvh and " in err and "a.trc would write the same output" in err and "manifest" in err
+
+
 def test_ray_refusing_to_connect_is_one_error(folder, monkeypatch, capsys):
     ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'physmocap[cluster]'")
 

@@ -835,6 +835,8 @@ class Planting:
         self._heel_low = {"left": np.inf, "right": np.inf}
         self._heel_labelled = {"left": False, "right": False}
         self._heel_prev: dict[str, np.ndarray] = {}
+        #: the sites labelled by a heel (every foot's, rigid or not)
+        self._heel_labelled_sites = np.array([self.site_label[site].endswith("_heel") for site in self.sites], dtype=bool)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
         foot_joints = {f"{side}_{j}" for side in ("left", "right") for j in FOOT_JOINTS}
         foot_joints |= {f"{side}_knee" for side in ("left", "right")}
@@ -1148,8 +1150,7 @@ class Planting:
         bending = self._toes_bending(positions, first)
         bends = np.array([bending.get(side, False) for side in self._site_side], dtype=bool)
         gone = np.array([self._toe_gone[side] for side in self._site_side], dtype=bool)
-        heel_sites = np.array([self.site_label[site].endswith("_heel") for site in self.sites], dtype=bool)
-        gone |= np.array([self._heel_gone[side] for side in self._site_side], dtype=bool) & heel_sites
+        gone |= np.array([self._heel_gone[side] for side in self._site_side], dtype=bool) & self._heel_labelled_sites
         n = len(self.sites)
         return PlanHints(
             rolling=np.zeros(n, dtype=bool),

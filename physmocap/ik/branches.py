@@ -292,7 +292,9 @@ def _left_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
     r"""``(3, 3)`` inverse left Jacobian of SO(3) at the rotation vector ``phi`` (radians):
     :math:`I - \tfrac12[\phi]_\times + \big(\tfrac{1}{\theta^2} - \tfrac{1 + \cos\theta}{2\theta\sin\theta}\big)[\phi]_\times^2`,
     :math:`\theta = |\phi|` (the series' limit :math:`\tfrac{1}{12}` near 0), so that
-    :math:`\log(e^{[\delta]} e^{[\phi]}) \approx \phi + J_l^{-1}(\phi)\,\delta`."""
+    :math:`\log(e^{[\delta]} e^{[\phi]}) \approx \phi + J_l^{-1}(\phi)\,\delta`.
+    (mink's ``SO3.ljacinv`` is the same formula but divides by zero near 1e-8 rad and loses
+    half its digits near 1e-5: an arm solve's rotation errors start there.)"""
     theta = float(np.linalg.norm(phi))
     K = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
     if theta < 1e-6:

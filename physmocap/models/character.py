@@ -234,15 +234,10 @@ def mujoco_warnings(path: Path) -> Iterator[None]:
         warn(f"{path}: MuJoCo: {message}")
 
 
-def read_mjcf(path: Path) -> mujoco.MjModel:
-    """The MJCF at ``path`` compiled: one clear error for a missing file, a folder or a file
-    MuJoCo refuses; MuJoCo's warnings on stderr (:func:`mujoco_warnings`)."""
-    return _read(path, spec=False)
-
-
-def _read(path: Path, spec: bool) -> mujoco.MjModel | mujoco.MjSpec:
-    """The MJCF at ``path`` compiled, or its ``MjSpec`` (``spec``); one clear error for a
-    missing file, a folder or a file MuJoCo refuses, MuJoCo's warnings on stderr."""
+def read_mjcf(path: Path, spec: bool = False) -> mujoco.MjModel | mujoco.MjSpec:
+    """The MJCF at ``path`` compiled (or its ``MjSpec``, ``spec``, to add to before
+    compiling): one clear error for a missing file, a folder or a file MuJoCo refuses;
+    MuJoCo's warnings on stderr (:func:`mujoco_warnings`)."""
     if not path.exists():
         raise InputError("MJCF file not found", path=path)
     if path.is_dir():
@@ -259,7 +254,7 @@ def _compile_model(path: Path, mp: Mapping | None = None) -> mujoco.MjModel:
     """Compile the MJCF; with a mapping's ``[sites]``, add those sites first (MjSpec)."""
     if mp is None or not mp.sites:
         return read_mjcf(path)
-    spec = _read(path, spec=True)
+    spec = read_mjcf(path, spec=True)
     for name, (body_name, pos) in mp.sites.items():
         body = spec.body(body_name)
         if body is None:

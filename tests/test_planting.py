@@ -163,6 +163,79 @@ def test_release_hands_back_without_a_pop():
     assert jumps.max() < 0.6 * 1.2 * 2.5 / fps * 30  # smoothly: no single-frame pop
 
 
+def test_a_foot_anchor_turns_with_its_holds_and_lets_go_from_where_the_foot_is():
+    """FootAnchor.turn moves its anchors about the pivot, so the targets turn with a planted
+    foot's holds; a foot let go fades its offset from where the character's ankle is (against
+    the previous frame's target), not from where its anchor put the target."""
+    from physmocap.ik.planting import FootAnchor
+
+    a = FootAnchor(120.0, release_time=0.25)
+    ankle, toe = np.array([0.0, 0.0]), np.array([0.1, 0.0])
+    assert np.allclose(a.step(True, True, ankle, toe, ankle, toe), 0.0)
+    a.turn(np.array([0.1, 0.0]), np.pi / 2)  # a quarter turn about the toe
+    assert np.allclose(a.heel_anchor, [0.1, -0.1]) and np.allclose(a.toe_anchor, [0.1, 0.0])
+    assert np.allclose(a.step(True, True, ankle, toe), [0.1, -0.1])  # the ankle's target turned along
+    # let go with the ankle 3 cm short of where the anchor put its target: the first free frame's
+    # offset starts there (0.03 off the previous frame's target), not at the anchor's
+    now = ankle + np.array([0.13, -0.1])
+    first = a.step(False, False, ankle, toe, now, toe)
+    assert abs(first[0] - 0.13) < 0.01 and abs(first[1] + 0.1) < 0.01, first
+    for _ in range(40):
+        last = a.step(False, False, ankle, toe, now, toe)
+    assert np.allclose(last, 0.0)
+
+
+def test_stream_toe_lets_go_as_its_target_rises_off_the_floor():
+    """A toe held alone lets go under its label once its target rises more than release_margin
+    above its lowest in the contact (a take-off the causal label lags); not while its target
+    stays down, and not while the heel is labelled (Planting._toes_moving)."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("robot")
+    names = tuple(ch.tracked)
+    planting = Planting(ch, names, 120.0, anchored=True)
+    toe = names.index("left_toe")
+    margin = planting.options.release_margin
+    pos = np.zeros((len(names), 3))
+    pos[toe] = [0.2, 0.0, 0.03]
+    flat = {"left_heel": True, "left_toe": True}
+    on_toes = {"left_heel": False, "left_toe": True}
+    for _ in range(3):
+        assert planting._toes_moving(pos, flat)["left_toe"]
+    pos[toe, 2] += 2 * margin  # risen, the heel still labelled: held
+    assert planting._toes_moving(pos, flat)["left_toe"]
+    pos[toe, 2] -= 2 * margin
+    for _ in range(3):  # on the toes, the toe target down: held
+        assert planting._toes_moving(pos, on_toes)["left_toe"]
+    pos[toe, 2] += 0.5 * margin  # rising within the margin: held
+    assert planting._toes_moving(pos, on_toes)["left_toe"]
+    pos[toe, 2] += margin  # past it and rising: let go, until the label ends
+    assert not planting._toes_moving(pos, on_toes)["left_toe"]
+    assert not planting._toes_moving(pos, on_toes)["left_toe"]
+
+
+def test_stream_heel_raised_in_place_lets_go():
+    """A heel whose ankle target rises past engage_height + release_margin above its lowest in
+    the contact lets go however slowly it moves (a heel raised in place; Planting._heels_moving)."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("robot")
+    names = tuple(ch.tracked)
+    planting = Planting(ch, names, 120.0, anchored=True)
+    ankle = names.index("left_ankle")
+    opt = planting.options
+    labels = {"left_heel": True, "left_toe": True}
+    pos = np.zeros((len(names), 3))
+    pos[ankle] = [0.0, 0.0, 0.08]
+    assert planting._heels_moving(pos, labels)["left_heel"]
+    pos[ankle, 2] += 0.9 * (opt.engage_height + opt.release_margin)
+    assert planting._heels_moving(pos, labels)["left_heel"]  # not yet past the band
+    pos[ankle, 2] += 0.2 * (opt.engage_height + opt.release_margin)
+    assert not planting._heels_moving(pos, labels)["left_heel"]
+
+
 def test_toes_leave_the_floor_without_swinging_at_their_velocity_cap():
     """Toe-off (issue 9, "pops at toe-off"): the CMU actor rolls over its toe tips (its toe bone
     pitches with the foot).  Holding the character's toe segment flat until the label ended

@@ -400,3 +400,28 @@ def test_streamed_robot_keeps_the_actors_path_through_push_offs():
     fid = trajectory_fidelity(traj)
     assert fid.drift_mean_cm < 4.5, fid.drift_mean_cm
     assert fid.floor.slip_mean_cm_s < 1.0, fid.floor.slip_mean_cm_s
+
+
+def test_a_streamed_foot_turned_while_planted_takes_its_targets_along():
+    """The CMU jumps' robot landed a foot 35-40 degrees off the actor's heading (its hip yaw at
+    its limit in the air) and the stream turned the planted foot onto the actor's heading about
+    its toes (FootPlanter.turn) while its targets stayed where it had landed: its ankle ended
+    12 cm from its target, the leg stretched back towards it (right thigh 29 degrees off the
+    actor's, p95 of frames 1850-2350), and the foot jumped 10 cm along the floor in one frame
+    when it let go.  The targets' anchors now turn with the holds (FootAnchor.turn): 16
+    degrees, a largest jump of 6 cm (the landing)."""
+    from physmocap.ik.stream import stream_motion
+    from physmocap.metrics.fidelity import trajectory_fidelity
+    from physmocap.models import load_character
+    from physmocap.sources import load_motion
+
+    ch = load_character("robot")
+    traj = stream_motion(load_motion(shared_file("cmu_01_01_jumps.bvh")).slice_frames(1850, 2350), ch)
+    for side in ("left", "right"):
+        sites = traj.site_positions(list(ch.contacts[side]))
+        low = (sites[1:, :, 2] < 0.03) & (sites[:-1, :, 2] < 0.03)
+        jump = np.where(low, np.linalg.norm(np.diff(sites[:, :, :2], axis=0), axis=2), 0.0).max()
+        assert jump < 0.07, (side, jump)  # before: 7.9 and 9.8 cm
+    fid = trajectory_fidelity(traj)
+    assert fid.segments["right_thigh"].p95_deg < 20.0, fid.segments["right_thigh"].p95_deg
+    assert fid.floor.slip_mean_cm_s < 0.5, fid.floor.slip_mean_cm_s

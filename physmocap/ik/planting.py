@@ -110,7 +110,8 @@ class PlantOptions:
         heel_release_speed: Streaming only: a heel lets go, until its label begins again,
             once its ankle target has risen ``release_margin`` above its lowest in the contact
             and moves horizontally faster than this (m/s): the heel lifting at push-off, its
-            causal label still on or its sites still held low (:meth:`Planting._heels_moving`).
+            causal label still on or its sites still held low (:meth:`Planting._heels_moving`);
+            and whatever its speed once it has risen ``engage_height + release_margin``.
             0: never.
         engage_height: Height (metres) below which a labelled site is held:
             above the 1 cm stance band of the quality metrics and above
@@ -417,7 +418,8 @@ class FootPlanter:
             self.anchor[k, :2] = patch[:2]
             self.on_corner[k] = True
 
-    def turn(self, foot: int, angle: float, heights: np.ndarray | None = None, labelled: np.ndarray | None = None) -> None:
+    def turn(self, foot: int, angle: float, heights: np.ndarray | None = None,
+             labelled: np.ndarray | None = None) -> np.ndarray | None:
         r"""Turn the holds of ``foot`` by ``angle`` radians about the vertical axis.
 
         Two held points of one foot fix its heading, so a foot the plan turns
@@ -429,11 +431,12 @@ class FootPlanter:
         Nothing happens with fewer than two points held (one point does not fix the heading).
         The turned points other than the pivot are held softly on this frame (``cost_xy``):
         a hard hold turned where the leg cannot follow at once (a hip rotation at its
-        limit) would make the constraints infeasible.
+        limit) would make the constraints infeasible.  Returns the pivot's horizontal
+        position (metres), None if nothing turned.
         """
         held = np.flatnonzero(self.locked & (self.feet == foot))
         if held.size < 2 or angle == 0.0:
-            return
+            return None
         k = self._pivot_site(held, heights, labelled)
         self.turning[held[held != k]] = True
         pivot = self.anchor[k, :2].copy()
@@ -441,6 +444,7 @@ class FootPlanter:
         d = self.anchor[held, :2] - pivot
         self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
         self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
+        return pivot
 
     def heights(self, data: mujoco.MjData) -> np.ndarray:
         """``(n,)`` metres: every contact site's height over the floor in ``data``."""
@@ -639,7 +643,13 @@ class FootAnchor:
       contact follows the heel's offset, so switching is continuous);
     * after release, :math:`o` fades to zero along a smoothstep over
       ``release_time``, so the foot rejoins the actor's motion during the
-      swing without a pop.
+      swing without a pop.  It fades from where the character's ankle is
+      (previous frame's solution against that frame's target), not from the
+      anchor's offset: a foot held on its toes, its ankle short of a target its
+      shape cannot reach, jumped that gap in one frame when it let go (the streamed
+      CMU walk humanoid's right foot, 2.6 cm at frame 96).
+    * a foot whose holds turn (:meth:`FootPlanter.turn`) turns its anchors with
+      them (:meth:`turn`).
     """
 
     def __init__(self, fps: float, release_time: float = 0.25) -> None:
@@ -650,6 +660,7 @@ class FootAnchor:
         self._fade_from = np.zeros(2)
         self._fade_left = 0
         self._was_held = False
+        self._last_ankle: np.ndarray | None = None  # the previous frame's (unshifted) ankle target
 
     @property
     def held(self) -> bool:
@@ -675,6 +686,7 @@ class FootAnchor:
             base: The offset a free foot returns to (the root offset; default 0).
         """
         base = np.zeros(2) if base is None else np.asarray(base, dtype=float)
+        last, self._last_ankle = self._last_ankle, np.array(ankle_xy, dtype=float)
         free = self.heel_anchor is None and self.toe_anchor is None
         if heel and self.heel_anchor is None:
             self.heel_anchor = (ankle_now if free and ankle_now is not None else ankle_xy + self.offset).copy()
@@ -692,7 +704,9 @@ class FootAnchor:
             new = self.toe_anchor - toe_xy
         else:
             if self._fade_left == 0 and self._was_held:
-                self._fade_from = self.offset - base  # hand back relative to the base
+                # hand back relative to the base, from where the character's ankle is
+                start = self.offset if ankle_now is None or last is None else ankle_now - last
+                self._fade_from = start - base
                 self._fade_left = self.release_frames
             if self._fade_left > 0:
                 self._fade_left -= 1
@@ -706,6 +720,21 @@ class FootAnchor:
         self._was_held = True
         self.offset = new
         return new
+
+    def turn(self, pivot: np.ndarray, angle: float) -> None:
+        r"""Turn the anchors by ``angle`` radians about the vertical through ``pivot`` (metres,
+        horizontal), :math:`A \leftarrow p + R_z(\alpha)(A - p)`: the foot's holds have turned
+        (:meth:`FootPlanter.turn`), and its targets turn with them.  Left where they were,
+        the ankle's target stayed where the foot landed while the foot turned about its toes
+        and the ankle with it: the streamed jumps' robot turned a planted foot 58 degrees
+        onto the actor's heading over a second, its ankle ended 12 cm from its target, and
+        the foot jumped 10 cm in one frame when it let go."""
+        c, s = math.cos(angle), math.sin(angle)
+        for name in ("heel_anchor", "toe_anchor"):
+            a = getattr(self, name)
+            if a is not None:
+                d = a - pivot
+                setattr(self, name, np.array([pivot[0] + c * d[0] - s * d[1], pivot[1] + s * d[0] + c * d[1]]))
 
 
 def _toward_zero(offset: np.ndarray, by: float) -> np.ndarray:
@@ -828,6 +857,9 @@ class Planting:
         #: per side, a causal toe hold let go early (:meth:`_toes_moving`), until its label ends
         self._toe_gone = {"left": False, "right": False}
         self._toe_prev: dict[str, np.ndarray] = {}
+        #: per side, the toe target's lowest height while its toe is labelled, and its last height
+        self._toe_low = {"left": np.inf, "right": np.inf}
+        self._toe_z: dict[str, float] = {}
         #: per side, a causal heel hold let go at push-off (:meth:`_heels_moving`), until its
         #: label begins again; its ankle target's lowest height in the contact; whether it
         #: was labelled on the last frame; its last horizontal position
@@ -981,7 +1013,10 @@ class Planting:
         followed (its pelvis 6.7 cm from the actor's scaled path on average).  A heel whose
         target slides without lifting (a shuffle, a spin) stays held.  The heel's sites are
         then released (:meth:`_stream_hints`); the toes hold the foot alone, and
-        :meth:`_toes_moving` lets them go in turn."""
+        :meth:`_toes_moving` lets them go in turn.  A heel whose ankle target has risen past
+        the band a free site lets go above (``engage_height + release_margin``) lets go
+        however slowly it moves: a heel raised in place (the end of the CMU walk), held low
+        while its target rose 3 cm, jumped up with the toes' release."""
         out = dict(labels)
         if self.options.heel_release_speed <= 0:
             return out
@@ -1000,8 +1035,13 @@ class Planting:
                 self._heel_low[side] = min(self._heel_low[side], float(ankle[2]))
             prev = self._heel_prev.get(side)
             self._heel_prev[side] = ankle[:2].copy()
-            lifted = float(ankle[2]) > self._heel_low[side] + self.options.release_margin
+            rise = float(ankle[2]) - self._heel_low[side]
+            lifted = rise > self.options.release_margin
             if lifted and prev is not None and float(np.linalg.norm(ankle[:2] - prev)) > limit:
+                self._heel_gone[side] = True
+            # risen past the band a free site lets go above: the actor's heel is off the floor
+            # however slowly it moves (a heel raised in place)
+            if rise > self.options.engage_height + self.options.release_margin:
                 self._heel_gone[side] = True
             if self._heel_gone[side]:
                 out[key] = False
@@ -1017,8 +1057,11 @@ class Planting:
         foot already swinging stores up a 20-35 cm offset that the body follows.  Let go
         until the toe's label ends; after it, a toe still held because it has not lifted
         (``lock_low``) lets go the same way (its target racing on, the foot rolled about the
-        held tip and fell 34 cm behind: the 30 fps Bandai walk).  A foot without a toe target
-        is left alone."""
+        held tip and fell 34 cm behind: the 30 fps Bandai walk).  Under its label a toe held
+        alone also lets go once its target rises, more than ``release_margin`` above its
+        lowest in the contact: a foot taking off upwards (a jump) was held by its toe for the
+        label's lag while the actor's ankle rose 5-6 cm, then sprang up 6 cm in one frame (the
+        streamed CMU jumps' robot, frame 595).  A foot without a toe target is left alone."""
         out = dict(labels)
         limit = self.options.toe_release_speed / self.locks.fps
         for side, foot in self.feet.items():
@@ -1028,16 +1071,20 @@ class Planting:
                 self._toe_prev.pop(side, None)  # lost: its stand-in position is no motion
                 continue
             toe = np.asarray(positions[foot[1], :2], dtype=float)
-            prev = self._toe_prev.get(side)
-            self._toe_prev[side] = toe.copy()
+            z = float(positions[foot[1], 2])
+            prev, z_prev = self._toe_prev.get(side), self._toe_z.get(side)
+            self._toe_prev[side], self._toe_z[side] = toe.copy(), z
             key = f"{side}_toe"
             if not labels.get(key, False):
                 # the label over: a toe still held because it has not lifted (lock_low) lets go
                 # once its target moves off as fast
                 self._toe_gone[side] = prev is not None and float(np.linalg.norm(toe - prev)) > limit
+                self._toe_low[side] = np.inf
                 continue
+            self._toe_low[side] = min(self._toe_low[side], z)
             if not self._toe_gone[side] and prev is not None and not labels.get(f"{side}_heel", False):
-                self._toe_gone[side] = float(np.linalg.norm(toe - prev)) > limit
+                rising = z_prev is not None and z > z_prev and z > self._toe_low[side] + self.options.release_margin
+                self._toe_gone[side] = float(np.linalg.norm(toe - prev)) > limit or rising
             if self._toe_gone[side]:
                 out[key] = False
         return out
@@ -1125,7 +1172,9 @@ class Planting:
         heights = self.locks.heights(data)
         for s, side in enumerate(("left", "right")):
             if turns.get(side, 0.0) != 0.0:
-                self.locks.turn(s, turns[side], heights, labelled)
+                pivot = self.locks.turn(s, turns[side], heights, labelled)
+                if pivot is not None and self.anchored:  # the targets' anchors turn with the holds
+                    self.anchors[side].turn(pivot, turns[side])
 
     def _stream_hints(self, positions: np.ndarray, labels: Mapping[str, bool], toe: np.ndarray, heel: np.ndarray,
                       first: bool) -> PlanHints:

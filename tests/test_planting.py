@@ -185,16 +185,41 @@ def test_a_foot_anchor_turns_with_its_holds_and_lets_go_from_where_the_foot_is()
     assert np.allclose(last, 0.0)
 
 
+def test_stream_toe_of_a_foot_with_toes_lets_go_as_its_target_takes_off():
+    """A toe segment bends as its target rises slowly (an actor rolling over his toes): its
+    hold stays; a target rising faster than toe_release_speed (a take-off) lets it go
+    (Planting._toes_moving, the target's speed in three dimensions)."""
+    from physmocap.ik.planting import Planting
+    from physmocap.models import load_character
+
+    ch = load_character("humanoid")
+    names = tuple(ch.tracked)
+    fps = 120.0
+    planting = Planting(ch, names, fps, anchored=True)
+    assert not planting._rigid["left"]
+    toe = names.index("left_toe")
+    slow = 0.5 * planting.options.toe_release_speed / fps
+    pos = np.zeros((len(names), 3))
+    pos[toe] = [0.2, 0.0, 0.03]
+    on_toes = {"left_heel": False, "left_toe": True}
+    for _ in range(20):  # 2 cm up, slowly: held
+        pos[toe, 2] += slow
+        assert planting._toes_moving(pos, on_toes)["left_toe"]
+    pos[toe, 2] += 3 * slow  # straight up, faster than the release speed: let go
+    assert not planting._toes_moving(pos, on_toes)["left_toe"]
+
+
 def test_stream_toe_lets_go_as_its_target_rises_off_the_floor():
-    """A toe held alone lets go under its label once its target rises more than release_margin
-    above its lowest in the contact (a take-off the causal label lags); not while its target
-    stays down, and not while the heel is labelled (Planting._toes_moving)."""
+    """A rigid foot's toe held alone lets go under its label once its target rises more than
+    release_margin above its lowest in the contact (a take-off the causal label lags); not while
+    its target stays down, and not while the heel is labelled (Planting._toes_moving)."""
     from physmocap.ik.planting import Planting
     from physmocap.models import load_character
 
     ch = load_character("robot")
     names = tuple(ch.tracked)
     planting = Planting(ch, names, 120.0, anchored=True)
+    assert planting._rigid["left"]
     toe = names.index("left_toe")
     margin = planting.options.release_margin
     pos = np.zeros((len(names), 3))
@@ -205,7 +230,8 @@ def test_stream_toe_lets_go_as_its_target_rises_off_the_floor():
         assert planting._toes_moving(pos, flat)["left_toe"]
     pos[toe, 2] += 2 * margin  # risen, the heel still labelled: held
     assert planting._toes_moving(pos, flat)["left_toe"]
-    pos[toe, 2] -= 2 * margin
+    pos[toe, 2] -= 2 * margin  # and down again, still flat
+    assert planting._toes_moving(pos, flat)["left_toe"]
     for _ in range(3):  # on the toes, the toe target down: held
         assert planting._toes_moving(pos, on_toes)["left_toe"]
     pos[toe, 2] += 0.5 * margin  # rising within the margin: held

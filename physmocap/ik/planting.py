@@ -646,8 +646,8 @@ class FootAnchor:
       swing without a pop.  It fades from where the character's ankle is
       (previous frame's solution against that frame's target), not from the
       anchor's offset: a foot held on its toes, its ankle short of a target its
-      shape cannot reach, jumped that gap in one frame when it let go (the streamed
-      CMU walk humanoid's right foot, 2.6 cm at frame 96).
+      shape cannot reach, jumped that gap in one frame when it let go (fewer pops on
+      the streamed jumps, dance and Bandai walk; README, Streaming).
     * a foot whose holds turn (:meth:`FootPlanter.turn`) turns its anchors with
       them (:meth:`turn`).
     """
@@ -1057,11 +1057,15 @@ class Planting:
         foot already swinging stores up a 20-35 cm offset that the body follows.  Let go
         until the toe's label ends; after it, a toe still held because it has not lifted
         (``lock_low``) lets go the same way (its target racing on, the foot rolled about the
-        held tip and fell 34 cm behind: the 30 fps Bandai walk).  Under its label a toe held
-        alone also lets go once its target rises, more than ``release_margin`` above its
-        lowest in the contact: a foot taking off upwards (a jump) was held by its toe for the
-        label's lag while the actor's ankle rose 5-6 cm, then sprang up 6 cm in one frame (the
-        streamed CMU jumps' robot, frame 595).  A foot without a toe target is left alone."""
+        held tip and fell 34 cm behind: the 30 fps Bandai walk).  Under its label the speed is
+        the target's in three dimensions: a foot taking off upwards (a jump) was held by its toe
+        for the label's lag while the actor's ankle rose 5-6 cm, then sprang up 6 cm in one
+        frame (the streamed CMU jumps' robot, frame 595).  A rigid foot's toe (no toe joint:
+        ``_rigid``) also lets go once its target rises more than ``release_margin`` above its
+        lowest in the contact, however slowly: the foot cannot bend its toes to stay down.  A
+        foot with toes bends them instead (the CMU actor's toe targets rise 1-2 cm as he rolls
+        over them; let go there, the humanoid's knee bent 7 degrees early at every left push-off
+        of the CMU walk).  A foot without a toe target is left alone."""
         out = dict(labels)
         limit = self.options.toe_release_speed / self.locks.fps
         for side, foot in self.feet.items():
@@ -1069,6 +1073,7 @@ class Planting:
                 continue  # no toe target: the ankle's speed is not the toe's
             if valid is not None and not bool(valid[foot[1]]):
                 self._toe_prev.pop(side, None)  # lost: its stand-in position is no motion
+                self._toe_z.pop(side, None)
                 continue
             toe = np.asarray(positions[foot[1], :2], dtype=float)
             z = float(positions[foot[1], 2])
@@ -1083,8 +1088,11 @@ class Planting:
                 continue
             self._toe_low[side] = min(self._toe_low[side], z)
             if not self._toe_gone[side] and prev is not None and not labels.get(f"{side}_heel", False):
-                rising = z_prev is not None and z > z_prev and z > self._toe_low[side] + self.options.release_margin
-                self._toe_gone[side] = float(np.linalg.norm(toe - prev)) > limit or rising
+                step = math.hypot(float(np.linalg.norm(toe - prev)), z - z_prev) if z_prev is not None else 0.0
+                # a rigid foot cannot bend its toes as its toe target rises: it follows the rise
+                rising = self._rigid[side] and z_prev is not None and z > z_prev and \
+                    z > self._toe_low[side] + self.options.release_margin
+                self._toe_gone[side] = step > limit or rising
             if self._toe_gone[side]:
                 out[key] = False
         return out

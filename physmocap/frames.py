@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from .rotations import Rotation
+from .vectors import unit
 
 __all__ = [
     "frame_from_axes",
@@ -45,9 +46,9 @@ _EPS = 1e-9
 
 def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     """Normalise ``v (..., 3)``; where it is (near) zero use ``fallback``."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    u, n = unit(v, _EPS)
     fb = np.broadcast_to(np.asarray(fallback, dtype=float), v.shape)
-    return np.where(n > _EPS, v / np.maximum(n, _EPS), fb)
+    return np.where(n[..., None] > _EPS, u, fb)
 
 
 def _any_perpendicular(z: np.ndarray) -> np.ndarray:

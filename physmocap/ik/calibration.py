@@ -35,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..vectors import unit
+
 __all__ = ["CalibrationPose", "standing_score", "is_standing", "calibration_pose"]
 
 #: Cosine of the largest torso tilt from vertical that still counts as standing (20 degrees).
@@ -63,11 +65,6 @@ class CalibrationPose:
         return "the rest pose" if self.frame is None else f"frame {self.frame}"
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-9)
-
-
 #: The joints :func:`standing_score` and :func:`is_standing` read (where present).
 POSE_JOINTS = frozenset(("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
                          "neck", "head", "chest", "spine"))
@@ -80,13 +77,13 @@ def _parts(P: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if top is None or not all(c in P for c in need):
         return None
     mid = 0.5 * (P["left_hip"] + P["right_hip"])
-    up = _unit(P[top] - mid)[..., 2]
+    up = unit(P[top] - mid)[0][..., 2]
     straight = []
     for s in ("left", "right"):
         h, k, a = P[f"{s}_hip"], P[f"{s}_knee"], P[f"{s}_ankle"]
         length = np.linalg.norm(k - h, axis=-1) + np.linalg.norm(a - k, axis=-1)
         straight.append(np.linalg.norm(a - h, axis=-1) / np.maximum(length, 1e-9))
-    level = 1.0 - np.abs(_unit(P["left_hip"] - P["right_hip"])[..., 2])
+    level = 1.0 - np.abs(unit(P["left_hip"] - P["right_hip"])[0][..., 2])
     below = np.maximum(P["left_ankle"][..., 2], P["right_ankle"][..., 2]) < np.minimum(
         P["left_hip"][..., 2], P["right_hip"][..., 2]
     )

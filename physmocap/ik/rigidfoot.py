@@ -30,20 +30,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..rotations import quat_apply, quat_between, quat_conj, quat_mul
+from ..vectors import unit
 
 __all__ = ["tip_reference", "toe_line_correction", "level_roll"]
-
-
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-12), n[..., 0]
 
 
 def tip_reference(rotation: np.ndarray, ankle: np.ndarray, tip: np.ndarray) -> np.ndarray | None:
     """The actor's toe-tip direction ``u (3,)`` in the frame of its foot, from one pose
     (``rotation (4,)``: the foot's world rotation; ``ankle``, ``tip (3,)``: positions), or
     None where the tip coincides with the ankle."""
-    d, n = _unit(np.asarray(tip, dtype=float) - np.asarray(ankle, dtype=float))
+    d, n = unit(np.asarray(tip, dtype=float) - np.asarray(ankle, dtype=float), 1e-12)
     if not np.isfinite(n) or n < 1e-6:
         return None
     return quat_apply(quat_conj(np.asarray(rotation, dtype=float)), d)
@@ -61,7 +57,7 @@ def toe_line_correction(rotations: np.ndarray, ankle: np.ndarray, tip: np.ndarra
         u: ``(3,)`` from :func:`tip_reference`.
         valid: ``(F,)`` frames where both positions are known.
     """
-    actual, n = _unit(tip - ankle)
+    actual, n = unit(tip - ankle, 1e-12)
     rigid = quat_apply(rotations, np.broadcast_to(u, actual.shape))
     C = quat_between(rigid, actual)
     bad = ~valid | (n < 1e-6) | ~np.all(np.isfinite(C), axis=-1)

@@ -53,6 +53,7 @@ from .calibration import POSE_JOINTS, CalibrationPose, calibration_pose
 from .limbtwist import LIMB_CHAINS, MIN_BEND, FlexionAxis, TwistCalibration, flexion_axis, follow_bend
 from .rigidfoot import tip_reference, toe_line_correction
 from .trunkreach import SMOOTHING_TIME, TrunkReach, trunk_reach
+from ..vectors import unit
 
 __all__ = ["Calibration", "Targets", "TargetOptions", "build_targets", "character_rest_frames", "DEFAULT_WEIGHTS"]
 
@@ -268,11 +269,6 @@ def character_rest_frames(character) -> dict[str, tuple[np.ndarray, np.ndarray]]
     for canon, tf in character.tracked.items():
         out[canon] = (tf.position(model, data).copy(), Rotation.from_matrix(tf.rotation(model, data)).as_quat())
     return out
-
-
-def _unit(v: np.ndarray, eps: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    n = np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's sum, without its overhead
-    return v / np.maximum(n, eps), n[..., 0]
 
 
 def _yaw_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -975,7 +971,7 @@ def build_targets(
             # the trunk line, pelvis to neck, follows the actor's (the chain of torso joints
             # between has other proportions on every skeleton; see _rest_alignment)
             length = float(np.linalg.norm(char_pts[c] - char_pts["pelvis"]))
-            d, n = _unit(S[:, i] - S[:, ip])
+            d, n = unit(S[:, i] - S[:, ip])
             ok_n = (n > 1e-6) & valid[:, i] & valid[:, ip]
             T[:, i] = np.where(ok_n[:, None], T[:, ip] + length * d, T[:, j] + (char_pts[c] - char_pts[p]))
             # The upper torso turns with its corrected neck.  The rigid carrier of the
@@ -990,7 +986,7 @@ def build_targets(
             # its pelvis rose and fell faster than the actor's).
             rest_neck, neck_now = char_pts[c] - char_pts[p], T[:, i] - T[:, j]
             if has_q[j]:
-                walked = float(np.linalg.norm(rest_neck)) * _unit(S[:, i] - S[:, j])[0]
+                walked = float(np.linalg.norm(rest_neck)) * unit(S[:, i] - S[:, j])[0]
                 Q[j] = held.keep(quat_mul(quat_between(walked, neck_now), Q[j]))
             carrier = p if p in delta else ("chest" if "chest" not in pset else None)
             if carrier is not None and carrier in delta:
@@ -1000,13 +996,13 @@ def build_targets(
         length = lengths.get(c)
         if length is None:
             length = lengths[c] = float(np.linalg.norm(char_pts[c] - char_pts[p]))
-        d, n = _unit(S[:, i] - S[:, j])
+        d, n = unit(S[:, i] - S[:, j])
         if c.endswith("_toe") and p.endswith("_ankle") and c.split("_", 1)[0] in toe_turn:
             d = quat_apply(toe_turn[c.split("_", 1)[0]], d)  # the ball turns with its rigid foot
         bad = (n < 1e-6) | ~valid[:, i] | ~valid[:, j]
         if bad.any():
             # undefined direction: keep the character's rest direction, rotated like the parent
-            rest_dir = _unit(char_pts[c] - char_pts[p])[0]
+            rest_dir = unit(char_pts[c] - char_pts[p])[0]
             if has_q[j]:
                 fallback = quat_apply(quat_mul(Q[j], quat_conj(rest_c[p][1])), rest_dir)
             else:

@@ -40,6 +40,7 @@ import numpy as np
 from ..errors import InputError, warn
 from .markerset import MarkerSet
 from .recording import MarkerRecording
+from ..vectors import unit
 
 __all__ = ["JointCentres", "joint_centres", "up_axis", "MARKER_DIAMETER"]
 
@@ -57,9 +58,9 @@ class JointCentres:
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 1e-9, v / n, np.nan)
+    """``v`` normalised along its last axis; NaN where it is shorter than 1e-9 (or NaN)."""
+    u, n = unit(v)
+    return np.where(n[..., None] > 1e-9, u, np.nan)
 
 
 def _perp(v: np.ndarray, axis: np.ndarray) -> np.ndarray:

@@ -101,8 +101,8 @@ class PlantOptions:
         toe_release_speed: Streaming only: a toe held alone (heel up) lets go, until its
             label ends, once its target moves faster than this (m/s; in three dimensions, so
             a take-off straight up counts): a causal label ends 50-70 ms after the foot has
-            left the floor (:meth:`Planting._toes_moving`; after the label, horizontally).  Half the contact detector's default
-            ``toe_speed_exit``, which the detector acts on only after ``min_gap``: at that
+            left the floor (:meth:`Planting._toes_moving`; after the label, horizontally).
+            Half the contact detector's default ``toe_speed_exit``, which the detector acts on only after ``min_gap``: at that
             speed (0.8, until stop 38) a robot's rigid foot stayed pinned by its tip at
             push-off while the actor's ankle rose and moved 10-20 cm on, its thigh 20-40
             degrees behind the actor's (the streamed CMU walk's worst segment 8.8 degrees,

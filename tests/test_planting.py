@@ -440,7 +440,7 @@ def test_stream_heel_lets_go_when_its_target_lifts_and_rolls_on():
     planting._heels_moving(pos, off)
     pos[ankle, 0] += step
     planting._heels_moving(pos, off)
-    assert planting._heel_gone["left"]
+    assert planting._heel_watch["left"].gone
     disabled = Planting(ch, names, fps, dataclasses.replace(planting.options, heel_release_speed=0.0), anchored=True)
     assert disabled._heels_moving(pos, labels) == labels
 

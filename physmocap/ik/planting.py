@@ -102,10 +102,10 @@ class PlantOptions:
             label ends, once its target moves faster than this (m/s; in three dimensions, so
             a take-off straight up counts): a causal label ends 50-70 ms after the foot has
             left the floor (:meth:`Planting._toes_moving`; after the label, horizontally).
-            Half the contact detector's default ``toe_speed_exit``, which the detector acts on only after ``min_gap``: at that
-            speed (0.8, until stop 38) a robot's rigid foot stayed pinned by its tip at
-            push-off while the actor's ankle rose and moved 10-20 cm on, its thigh 20-40
-            degrees behind the actor's (the streamed CMU walk's worst segment 8.8 degrees,
+            Half the contact detector's default ``toe_speed_exit``, which the detector acts on
+            only after ``min_gap``: at that speed (0.8, until stop 38) a robot's rigid foot
+            stayed pinned by its tip at push-off while the actor's ankle rose and moved 10-20
+            cm on, its thigh 20-40 degrees behind the actor's (the streamed CMU walk's worst segment 8.8 degrees,
             3.8 at 0.4; 6.0 at 0.6, 4.1 at 0.5, 3.9 at 0.3).
         heel_release_speed: Streaming only: a heel lets go, until its label begins again,
             once its ankle target has risen ``release_margin`` above its lowest in the contact
@@ -737,6 +737,26 @@ class FootAnchor:
                 setattr(self, name, np.array([pivot[0] + c * d[0] - s * d[1], pivot[1] + s * d[0] + c * d[1]]))
 
 
+@dataclass
+class _ReleaseWatch:
+    """What a stream's causal release of one foot point reads of its target during a contact
+    (:meth:`Planting._heels_moving`, :meth:`Planting._toes_moving`): the target's position on
+    the last frame it was tracked, its lowest height in the contact (metres), whether its label
+    was on last frame, and whether its hold has been let go early."""
+
+    last: np.ndarray | None = None
+    low: float = math.inf
+    labelled: bool = False
+    gone: bool = False
+
+    def step(self, position: np.ndarray | None) -> np.ndarray | None:
+        """``position - last`` (metres, ``(3,)``; None on the first tracked frame), and
+        ``position`` kept as the last; None for ``position`` (the target lost: its stand-in
+        position is no motion) forgets the last."""
+        last, self.last = self.last, None if position is None else np.array(position, dtype=float)
+        return None if last is None or position is None else self.last - last
+
+
 def _toward_zero(offset: np.ndarray, by: float) -> np.ndarray:
     """``offset`` shortened by ``by`` metres (to none at most)."""
     n = float(np.linalg.norm(offset))
@@ -854,19 +874,9 @@ class Planting:
         self.anchors = {side: FootAnchor(fps, opt.anchor_release_time) for side in ("left", "right")}
         #: horizontal offset of the whole body from the actor's (scaled) path, metres
         self.root_offset = np.zeros(2)
-        #: per side, a causal toe hold let go early (:meth:`_toes_moving`), until its label ends
-        self._toe_gone = {"left": False, "right": False}
-        self._toe_prev: dict[str, np.ndarray] = {}
-        #: per side, the toe target's lowest height while its toe is labelled, and its last height
-        self._toe_low = {"left": np.inf, "right": np.inf}
-        self._toe_z: dict[str, float] = {}
-        #: per side, a causal heel hold let go at push-off (:meth:`_heels_moving`), until its
-        #: label begins again; its ankle target's lowest height in the contact; whether it
-        #: was labelled on the last frame; its last horizontal position
-        self._heel_gone = {"left": False, "right": False}
-        self._heel_low = {"left": np.inf, "right": np.inf}
-        self._heel_labelled = {"left": False, "right": False}
-        self._heel_prev: dict[str, np.ndarray] = {}
+        #: per side, the causal releases of its toe (:meth:`_toes_moving`) and heel (:meth:`_heels_moving`)
+        self._toe_watch = {side: _ReleaseWatch() for side in ("left", "right")}
+        self._heel_watch = {side: _ReleaseWatch() for side in ("left", "right")}
         #: the sites labelled by a heel (every foot's, rigid or not)
         self._heel_labelled_sites = np.array([self.site_label[site].endswith("_heel") for site in self.sites], dtype=bool)
         self._root_alpha = 1.0 - np.exp(-1.0 / (max(opt.root_follow_time, 1e-6) * fps)) if opt.root_follow_time > 0 else 0.0
@@ -1024,26 +1034,25 @@ class Planting:
         for side, foot in self.feet.items():
             key = f"{side}_heel"
             labelled = bool(labels.get(key, False))
+            watch = self._heel_watch[side]
             if valid is not None and not bool(valid[foot[0]]):
-                self._heel_prev.pop(side, None)  # lost: its stand-in position is no motion
+                watch.step(None)
                 continue
             ankle = np.asarray(positions[foot[0]], dtype=float)
-            if labelled and not self._heel_labelled[side]:  # a new contact
-                self._heel_gone[side], self._heel_low[side] = False, float(ankle[2])
-            self._heel_labelled[side] = labelled
-            if labelled or not self._heel_gone[side]:
-                self._heel_low[side] = min(self._heel_low[side], float(ankle[2]))
-            prev = self._heel_prev.get(side)
-            self._heel_prev[side] = ankle[:2].copy()
-            rise = float(ankle[2]) - self._heel_low[side]
-            lifted = rise > self.options.release_margin
-            if lifted and prev is not None and float(np.linalg.norm(ankle[:2] - prev)) > limit:
-                self._heel_gone[side] = True
+            if labelled and not watch.labelled:  # a new contact
+                watch.gone, watch.low = False, float(ankle[2])
+            watch.labelled = labelled
+            if labelled or not watch.gone:
+                watch.low = min(watch.low, float(ankle[2]))
+            moved = watch.step(ankle)
+            rise = float(ankle[2]) - watch.low
+            if rise > self.options.release_margin and moved is not None and float(np.linalg.norm(moved[:2])) > limit:
+                watch.gone = True
             # risen past the band a free site lets go above: the actor's heel is off the floor
             # however slowly it moves (a heel raised in place)
             if rise > self.options.engage_height + self.options.release_margin:
-                self._heel_gone[side] = True
-            if self._heel_gone[side]:
+                watch.gone = True
+            if watch.gone:
                 out[key] = False
         return out
 
@@ -1071,29 +1080,26 @@ class Planting:
         for side, foot in self.feet.items():
             if foot[1] == foot[0]:
                 continue  # no toe target: the ankle's speed is not the toe's
+            watch = self._toe_watch[side]
             if valid is not None and not bool(valid[foot[1]]):
-                self._toe_prev.pop(side, None)  # lost: its stand-in position is no motion
-                self._toe_z.pop(side, None)
+                watch.step(None)
                 continue
-            toe = np.asarray(positions[foot[1], :2], dtype=float)
-            z = float(positions[foot[1], 2])
-            prev, z_prev = self._toe_prev.get(side), self._toe_z.get(side)
-            self._toe_prev[side], self._toe_z[side] = toe.copy(), z
+            toe = np.asarray(positions[foot[1]], dtype=float)
+            moved = watch.step(toe)
             key = f"{side}_toe"
             if not labels.get(key, False):
                 # the label over: a toe still held because it has not lifted (lock_low) lets go
                 # once its target moves off as fast
-                self._toe_gone[side] = prev is not None and float(np.linalg.norm(toe - prev)) > limit
-                self._toe_low[side] = np.inf
+                watch.gone = moved is not None and float(np.linalg.norm(moved[:2])) > limit
+                watch.low = math.inf
                 continue
-            self._toe_low[side] = min(self._toe_low[side], z)
-            if not self._toe_gone[side] and prev is not None and not labels.get(f"{side}_heel", False):
-                step = math.hypot(float(np.linalg.norm(toe - prev)), z - z_prev) if z_prev is not None else 0.0
+            watch.low = min(watch.low, float(toe[2]))
+            if not watch.gone and moved is not None and not labels.get(f"{side}_heel", False):
+                step = math.hypot(float(np.linalg.norm(moved[:2])), float(moved[2]))
                 # a rigid foot cannot bend its toes as its toe target rises: it follows the rise
-                rising = self._rigid[side] and z_prev is not None and z > z_prev and \
-                    z > self._toe_low[side] + self.options.release_margin
-                self._toe_gone[side] = step > limit or rising
-            if self._toe_gone[side]:
+                rising = self._rigid[side] and moved[2] > 0 and float(toe[2]) > watch.low + self.options.release_margin
+                watch.gone = step > limit or bool(rising)
+            if watch.gone:
                 out[key] = False
         return out
 
@@ -1206,8 +1212,8 @@ class Planting:
         rolling_foot = toe & ~heel & rolled
         bending = self._toes_bending(positions, first)
         bends = np.array([bending.get(side, False) for side in self._site_side], dtype=bool)
-        gone = np.array([self._toe_gone[side] for side in self._site_side], dtype=bool)
-        gone |= np.array([self._heel_gone[side] for side in self._site_side], dtype=bool) & self._heel_labelled_sites
+        gone = np.array([self._toe_watch[side].gone for side in self._site_side], dtype=bool)
+        gone |= np.array([self._heel_watch[side].gone for side in self._site_side], dtype=bool) & self._heel_labelled_sites
         n = len(self.sites)
         return PlanHints(
             rolling=np.zeros(n, dtype=bool),

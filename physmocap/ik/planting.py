@@ -440,10 +440,7 @@ class FootPlanter:
         k = self._pivot_site(held, heights, labelled)
         self.turning[held[held != k]] = True
         pivot = self.anchor[k, :2].copy()
-        c, s = np.cos(angle), np.sin(angle)
-        d = self.anchor[held, :2] - pivot
-        self.anchor[held, 0] = pivot[0] + c * d[:, 0] - s * d[:, 1]
-        self.anchor[held, 1] = pivot[1] + s * d[:, 0] + c * d[:, 1]
+        self.anchor[held, :2] = _turn_about(self.anchor[held, :2], pivot, angle)
         return pivot
 
     def heights(self, data: mujoco.MjData) -> np.ndarray:
@@ -729,12 +726,21 @@ class FootAnchor:
         and the ankle with it: the streamed jumps' robot turned a planted foot 58 degrees
         onto the actor's heading over a second, its ankle ended 12 cm from its target, and
         the foot jumped 10 cm in one frame when it let go."""
-        c, s = math.cos(angle), math.sin(angle)
-        for name in ("heel_anchor", "toe_anchor"):
-            a = getattr(self, name)
-            if a is not None:
-                d = a - pivot
-                setattr(self, name, np.array([pivot[0] + c * d[0] - s * d[1], pivot[1] + s * d[0] + c * d[1]]))
+        if self.heel_anchor is not None:
+            self.heel_anchor = _turn_about(self.heel_anchor, pivot, angle)
+        if self.toe_anchor is not None:
+            self.toe_anchor = _turn_about(self.toe_anchor, pivot, angle)
+
+
+def _turn_about(points: np.ndarray, pivot: np.ndarray, angle: float) -> np.ndarray:
+    r"""Horizontal points ``(..., 2)`` (metres) turned by ``angle`` radians about the vertical
+    through ``pivot`` ``(2,)``: :math:`p + R_z(\alpha)(a - p)` (a new array)."""
+    c, s = np.cos(angle), np.sin(angle)
+    d = np.asarray(points, dtype=float) - pivot
+    out = np.empty_like(d)
+    out[..., 0] = pivot[0] + c * d[..., 0] - s * d[..., 1]
+    out[..., 1] = pivot[1] + s * d[..., 0] + c * d[..., 1]
+    return out
 
 
 @dataclass

@@ -92,8 +92,14 @@ def main() -> int:
     from physmocap.models import load_character
     from physmocap.sources import load_motion
 
-    motion = load_motion(path)
-    character = load_character(args.character)
+    from physmocap.errors import PhysmocapError
+
+    try:
+        motion = load_motion(path)
+        character = load_character(args.character)
+    except PhysmocapError as e:
+        print(f"bench_floor: {e}", file=sys.stderr)
+        return 2
     retarget(motion.slice_frames(0, min(30, motion.num_frames)), character, RetargetConfig(), progress=False)
     c0 = time.process_time()
     retarget(motion, character, RetargetConfig(), progress=False)

@@ -876,11 +876,11 @@ def run_batch(
             kept = {k: v for k, v in state[j.output]["result"].items() if k in FileResult.__dataclass_fields__}
             results[j.output] = FileResult(**{**kept, "seconds": 0.0})
     ray_mod, connected = _ray_connect(ray) if ray is not None and todo else (None, False)
-    try:  # after Ray: a batch that cannot start leaves no folder
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create the output folder: {exc.strerror or exc}", path=out) from None
     try:
+        try:  # after Ray: a batch that cannot start leaves no folder
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise OutputError(f"cannot create the output folder: {exc.strerror or exc}", path=out) from None
         with Progress(len(todo), "batch", enabled=progress, unit="files", tally="frames") as bar:
             _run(todo, options, workers, ray_mod, bar, state, keys, results, out)
     finally:

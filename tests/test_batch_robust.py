@@ -240,6 +240,25 @@ def test_a_batch_that_cannot_start_leaves_no_folder(folder, capsys):
     assert not (folder / "new").exists()
 
 
+def test_ray_is_shut_down_when_the_output_folder_cannot_be_made(folder, monkeypatch, capsys):
+    """Ray is connected before the output folder is made (a batch that cannot reach Ray leaves
+    no folder); a folder that then cannot be made still shuts the Ray session down."""
+    import physmocap.batch as batch
+
+    calls = []
+
+    class FakeRay:
+        @staticmethod
+        def shutdown():
+            calls.append("shutdown")
+
+    monkeypatch.setattr(batch, "_ray_connect", lambda address: (FakeRay, True))
+    (folder / "file").write_text("")
+    assert main(["batch", str(folder / "in"), "-o", str(folder / "file" / "out"), "--ray", "local", "--quiet"]) == 2
+    assert "cannot create the output folder" in capsys.readouterr().err
+    assert calls == ["shutdown"]
+
+
 def test_two_inputs_with_one_output_are_named(folder, capsys):
     (folder / "in" / "a.trc").write_text("")  # a.bvh's output too: the plan refuses before reading
     assert _batch(folder) == 2

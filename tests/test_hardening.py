@@ -87,6 +87,24 @@ def test_sigterm_removes_the_half_written_output(tmp_path, monkeypatch, capsys):
     assert signal.getsignal(signal.SIGTERM) is before  # put back for a program that calls main
 
 
+def test_a_caller_s_own_sigterm_handling_is_kept(monkeypatch):
+    """A program that calls main with SIGTERM ignored (or handled itself) keeps it so: main
+    installs its own only over the default action."""
+    import signal
+
+    import physmocap.cli.convert as convert
+
+    seen = []
+    monkeypatch.setattr(convert, "run", lambda args: seen.append(signal.getsignal(signal.SIGTERM)) or 0)
+    previous = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        assert main(["convert", "example", os.devnull]) == 0
+        assert seen == [signal.SIG_IGN]
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 @pytest.mark.parametrize("flag", ["-o", "--stats"])
 def test_replay_never_overwrites_its_recording(tmp_path, capsys, flag):
     src = tmp_path / "walk.bvh"

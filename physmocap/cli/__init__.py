@@ -88,11 +88,14 @@ class Terminated(BaseException):
 
 
 def _on_sigterm():
-    """Turn SIGTERM into :class:`Terminated` while :func:`main` runs (in the main thread only);
-    returns the handler to restore (None: none installed)."""
+    """Turn SIGTERM into :class:`Terminated` while :func:`main` runs (in the main thread only,
+    and only where SIGTERM has its default action: a caller that ignores it, or handles it
+    itself, keeps its own); returns the handler to restore (None: none installed)."""
     import threading
 
     if threading.current_thread() is not threading.main_thread():
+        return None
+    if signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
         return None
 
     def raise_terminated(signum, frame):

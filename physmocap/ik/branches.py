@@ -270,7 +270,9 @@ class ArmFit:
             step = np.zeros_like(x)
             try:
                 step[free] = -np.linalg.solve(H + lam * (np.diag(np.diag(H)) + 1e-9 * np.eye(H.shape[0])), g[free])
-            except np.linalg.LinAlgError:  # singular even damped (a residual not finite): stop here
+            except np.linalg.LinAlgError:  # exactly singular even damped: stop here
+                break
+            if not np.isfinite(step).all():  # a residual or Jacobian not finite (solve does not raise)
                 break
             xn = np.clip(x + step, c.lower, c.upper)
             rn, Jn = self.residual(xn, q, t, jacobian=True)

@@ -48,7 +48,7 @@ import numpy as np
 
 from ..frames import chest_frame, pelvis_frame
 from ..models.rom import dof_entry, joint_range_deg
-from ..vectors import unit
+from ..vectors import direction as _direction
 
 __all__ = ["Movement", "MOVEMENTS", "anatomical_angles", "movement_range", "beyond_range", "motion_angles", "bend_past_range"]
 
@@ -121,7 +121,7 @@ def _bend_axis(
     bent = np.isfinite(s) & (s > np.sin(np.radians(axis_min_deg))) & (np.sum(u * v, axis=-1) < np.cos(np.radians(axis_min_deg)))
     if bent.sum() < 3:
         return fallback
-    local = np.einsum("fji,fj->fi", frame[bent], unit(n[bent], 1e-12)[0])  # R^T n
+    local = np.einsum("fji,fj->fi", frame[bent], _direction(n[bent], 1e-12))  # R^T n
     a = np.median(local, axis=0)
     norm = np.linalg.norm(a)
     return fallback if norm < 0.3 else a / norm
@@ -170,12 +170,12 @@ def anatomical_angles(
     for side in ("left", "right"):
         hip, knee, ankle = (f"{side}_{j}" for j in ("hip", "knee", "ankle"))
         if all(j in P for j in (hip, knee, ankle)):
-            u, v = unit(P[knee] - P[hip], 1e-12)[0], unit(P[ankle] - P[knee], 1e-12)[0]
+            u, v = _direction(P[knee] - P[hip], 1e-12), _direction(P[ankle] - P[knee], 1e-12)
             frame = rot.get(hip, pelvis)
             fallback = np.array([0.0, 1.0, 0.0]) if hip not in rot else None
             if fallback is None:  # the pelvis's left axis in the thigh's frame, at the calibration pose
                 t0 = calibration_frame or 0
-                fallback = unit(frame[t0].T @ pelvis[t0][:, 1], 1e-12)[0]
+                fallback = _direction(frame[t0].T @ pelvis[t0][:, 1], 1e-12)
             axis = _bend_axis(u, v, frame, fallback, axis_min_deg)
             out[f"{side}_knee_flexion"] = _signed_bend(u, v, frame, axis)
             # hip: the thigh in the pelvis frame, from the calibration pose
@@ -188,12 +188,12 @@ def anatomical_angles(
             out[f"{side}_hip_adduction"] = add
         shoulder, elbow, wrist = (f"{side}_{j}" for j in ("shoulder", "elbow", "wrist"))
         if all(j in P for j in (shoulder, elbow, wrist)):
-            u, v = unit(P[elbow] - P[shoulder], 1e-12)[0], unit(P[wrist] - P[elbow], 1e-12)[0]
+            u, v = _direction(P[elbow] - P[shoulder], 1e-12), _direction(P[wrist] - P[elbow], 1e-12)
             if shoulder in rot:
                 frame = rot[shoulder]
                 t0 = calibration_frame or 0
                 ref = chest if chest is not None else pelvis
-                fallback = unit(frame[t0].T @ -ref[t0][:, 1], 1e-12)[0]
+                fallback = _direction(frame[t0].T @ -ref[t0][:, 1], 1e-12)
                 axis = _bend_axis(u, v, frame, fallback, axis_min_deg)
                 out[f"{side}_elbow_flexion"] = _signed_bend(u, v, frame, axis)
             else:  # position-only: unsigned (over-flexion only)

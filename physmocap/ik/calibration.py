@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..vectors import unit
+from ..vectors import direction
 
 __all__ = ["CalibrationPose", "standing_score", "is_standing", "calibration_pose"]
 
@@ -77,13 +77,13 @@ def _parts(P: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray
     if top is None or not all(c in P for c in need):
         return None
     mid = 0.5 * (P["left_hip"] + P["right_hip"])
-    up = unit(P[top] - mid)[0][..., 2]
+    up = direction(P[top] - mid)[..., 2]
     straight = []
     for s in ("left", "right"):
         h, k, a = P[f"{s}_hip"], P[f"{s}_knee"], P[f"{s}_ankle"]
         length = np.linalg.norm(k - h, axis=-1) + np.linalg.norm(a - k, axis=-1)
         straight.append(np.linalg.norm(a - h, axis=-1) / np.maximum(length, 1e-9))
-    level = 1.0 - np.abs(unit(P["left_hip"] - P["right_hip"])[0][..., 2])
+    level = 1.0 - np.abs(direction(P["left_hip"] - P["right_hip"])[..., 2])
     below = np.maximum(P["left_ankle"][..., 2], P["right_ankle"][..., 2]) < np.minimum(
         P["left_hip"][..., 2], P["right_hip"][..., 2]
     )

@@ -39,9 +39,9 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from ..rotations import quat_apply, quat_between, quat_conj, quat_from_rotvec, quat_mul, quat_to_rotvec
+from ..rotations import Rotation, quat_apply, quat_between, quat_conj, quat_from_rotvec, quat_mul, quat_to_rotvec
+from ..vectors import direction
 
 __all__ = ["FootLevel", "FootLeveller", "level_feet", "MIN_STANCE_TIME"]
 
@@ -204,7 +204,7 @@ def _level_toes(toe_dir: np.ndarray, foot: Rotation, stance: np.ndarray, q_c0: n
         rest_dir: The character's rest toe segment (toe joint to tip), world.
     """
     local = foot.inv().apply(toe_dir)
-    unit = local / np.maximum(np.linalg.norm(local, axis=-1, keepdims=True), 1e-12)
+    unit = direction(local, 1e-12)
     mean = unit[stance].mean(axis=0)
     want = quat_apply(quat_conj(q_c0), rest_dir)
     if np.linalg.norm(mean) < 1e-6 or np.linalg.norm(want) < 1e-9:
@@ -239,8 +239,8 @@ class FootLeveller:
         self.need = max(2, int(round(MIN_STANCE_TIME * fps)))
         self.ease_frames = max(1, int(round(ease_time * fps)))
         col = {n: i for i, n in enumerate(self.names)}
-        #: side -> (ankle column, toe column or None, rest orientation, rest forward direction)
-        self.feet: dict[str, tuple[int, int | None, Rotation, np.ndarray]] = {}
+        #: side -> (ankle column, toe column or None, rest orientation (4,) x-y-z-w, rest forward direction)
+        self.feet: dict[str, tuple[int, int | None, np.ndarray, np.ndarray]] = {}
         for side in ("left", "right"):
             ankle, toe = f"{side}_ankle", f"{side}_toe"
             if ankle not in col or not has_orientation[col[ankle]] or ankle not in rest:

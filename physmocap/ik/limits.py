@@ -334,8 +334,8 @@ def group_box_speeds(velocities: Mapping[str, float], groups: Sequence[Sequence[
 
 
 #: Halvings of :meth:`GroupStepLimit.project`'s bisection: the scale is found within
-#: :math:`2^{-24}` (6e-8) of the step, below 1e-8 rad for any step a frame can take, on the
-#: bound's side (each round is a kinematics pass: 40 cost a stream 3 ms a frame while its
+#: :math:`2^{-24}` (6e-8) of the step, a few 1e-8 rad for a walk's steps and under 3e-7 rad
+#: for the largest a cap allows (122 rad/s at 30 fps: 4 rad a frame), on the bound's side (each round is a kinematics pass: 40 cost a stream 3 ms a frame while its
 #: joints catch up at their speed caps).
 PROJECT_ROUNDS = 24
 

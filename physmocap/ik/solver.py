@@ -580,7 +580,9 @@ class FrameSolver:
         grouping = self.step_limit in boxes and self.group_limit is not None
         if grouping and self._grouped:
             # an earlier step of this frame needed the groups' rows: the next most likely
-            # does too (a body turning at its speed cap), so they go in at once
+            # does too (a body turning at its speed cap), so they go in at once; where they
+            # leave no solution they are not tried again below (the same rows fail the same way)
+            grouping = False
             try:
                 problem = build([*general, self.group_limit])
                 v = self._solve(problem)

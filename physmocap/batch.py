@@ -755,7 +755,9 @@ def _probe(address: str, option: str) -> None:
     start with ``option`` (how the user gave it).
 
     Raises:
-        OptionError: The address is malformed, or nothing answers there within the timeout.
+        OptionError: The address is malformed, nothing answers there within the timeout, or
+            what answers does not speak gRPC (HTTP/2) as a Ray cluster does (skipped with
+            ``RAY_USE_TLS``).
     """
     import socket
 

@@ -47,8 +47,9 @@ def replay_markers(args: argparse.Namespace, out: Path | None) -> int:
         seconds = CALIBRATION_SECONDS if args.calibration_seconds is None else args.calibration_seconds
         cal = calibration_slice(rec, seconds)
         if seconds * rec.fps > rec.num_frames:
+            given = "--calibration-seconds" if args.calibration_seconds is not None else "calibration by default"
             warn(f"{rec.source}: the recording lasts {rec.num_frames / rec.fps:.3g} s, less than the "
-                 f"{seconds:g} s of --calibration-seconds; the actor is calibrated on all of it")
+                 f"{seconds:g} s of {given}; the actor is calibrated on all of it")
     t0 = time.perf_counter()
     stream = MarkerStream.calibrate(cal, args.marker_set, labels=rec.labels)
     calib_s = time.perf_counter() - t0

@@ -178,3 +178,20 @@ def test_mujocos_own_warnings_leave_no_log_file(tmp_path, monkeypatch, capsys, c
     out, err = capsys.readouterr()
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
     assert "NaN" not in out and "MuJoCo cannot load this MJCF" in err and "Traceback" not in err
+
+
+def test_a_model_that_loads_passes_mujocos_warning_on(tmp_path, monkeypatch, capfd):
+    """A model MuJoCo loads with a warning (a NaN colour) loads, and the warning is a
+    physmocap warning naming the file, not MuJoCo's print on stdout and its log file."""
+    from physmocap.errors import PhysmocapWarning
+    from physmocap.models.character import read_mjcf
+
+    bad = tmp_path / "nan_rgba.xml"
+    bad.write_text('<mujoco><worldbody><body name="b"><freejoint/>'
+                   '<geom type="sphere" size="0.1" rgba="nan 0 0 1"/></body></worldbody></mujoco>')
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(PhysmocapWarning, match=r"nan_rgba\.xml: MuJoCo: XML contains a 'NaN'"):
+        model = read_mjcf(bad)
+    assert model.ngeom == 1
+    assert "NaN" not in capfd.readouterr().out
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -37,6 +37,11 @@ def test_small_products_match_numpy(pair, seed):
     R = _matrix(q)
     assert v.shape == np.broadcast_shapes(q.shape[:-1], b3.shape[:-1]) + (3,)
     np.testing.assert_allclose(v, np.einsum("...ij,...j->...i", R, b3), atol=1e-12)
+    # and the same bits whether it goes the one-vector way or numpy's (a stack of two)
+    lead = np.broadcast_shapes(q.shape[:-1], b3.shape[:-1])
+    qb, vb = np.broadcast_to(q, (*lead, 4))[..., None, :], np.broadcast_to(b3, (*lead, 3))[..., None, :]
+    twice = quat_apply(np.concatenate([qb, qb], axis=-2), np.concatenate([vb, vb], axis=-2))[..., 0, :]
+    assert twice.shape == v.shape and twice.tobytes() == v.tobytes()
 
 
 def _matrix(q):

@@ -58,7 +58,8 @@ def render_preview(
     """Render a retargeted trajectory (or a :class:`~physmocap.render.source.PreviewInput`)
     to ``output`` with :class:`~physmocap.render.scene.PreviewOptions` ``options``."""
     from ..render.backend import ensure_backend
-    from ..render.output import check_output, check_sheet, check_size, sheet_frames, video_frames, write_sheet, write_video
+    from ..render.output import (check_output, check_sheet, check_size, sheet_frames, sheet_rows, video_frames, write_sheet,
+                                 write_video)
     from ..render.scene import PreviewOptions, PreviewScene
     from ..render.source import PreviewInput, preview_input
 
@@ -73,8 +74,8 @@ def render_preview(
     progress = False if quiet else None
     sheet = sheet_frames(traj.num_frames, count, frames, inp.first) if out.suffix.lower() == ".png" else None
     if sheet is not None:
-        rows = 1 if options.layout == "overlay" or inp.skeleton is None else 2
-        check_sheet(out, len(sheet), options.width, options.height, rows)
+        check_sheet(out, len(sheet), options.width, options.height,
+                    sheet_rows(options.layout == "overlay", inp.skeleton is not None))
     with PreviewScene(traj, inp.skeleton, inp.contacts, options) as scene:
         if sheet is not None:
             write_sheet(scene, sheet, out, inp.first, progress)

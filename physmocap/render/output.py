@@ -191,13 +191,20 @@ def sheet_frames(num_frames: int, count: int = 8, given: Sequence[int] | None = 
 MAX_SHEET_PIXELS = 64_000_000
 
 
+def sheet_rows(overlay: bool, has_skeleton: bool) -> int:
+    """Rows of a contact sheet (:func:`write_sheet`): the character's, and the source's below
+    it unless there is no source skeleton or it is drawn over the character."""
+    return 1 if overlay or not has_skeleton else 2
+
+
 def check_sheet(path: Path, frames: int, width: int, height: int, rows: int) -> None:
     """Refuse a contact sheet of ``frames`` columns of ``rows`` panels ``width`` x ``height``
     over :data:`MAX_SHEET_PIXELS`, before any rendering."""
     pixels = frames * rows * width * height
     if pixels > MAX_SHEET_PIXELS:
+        panels = f"{frames} frames" + (f" in {rows} rows (character and source)" if rows > 1 else "")
         raise OptionError(
-            f"a contact sheet of {frames} frames at {width}x{height} is {pixels / 1e6:.0f} megapixels, more than "
+            f"a contact sheet of {panels} at {width}x{height} is {pixels / 1e6:.0f} megapixels, more than "
             f"{MAX_SHEET_PIXELS / 1e6:.0f}: fewer frames (--count, --frames) or a smaller --size; a video (.mp4, .gif) "
             "shows every frame",
             path=path,
@@ -213,7 +220,7 @@ def write_sheet(scene: PreviewScene, frames: Sequence[int], path: Path, first: i
     with Progress(len(frames), "preview", enabled=progress) as bar:
         for t in frames:
             rows[0].append(label(scene.render(t, character=True, source=overlay), _caption(t, first, scene.traj.fps)))
-            if scene.skeleton is not None and not overlay:
+            if sheet_rows(overlay, scene.skeleton is not None) == 2:
                 rows[1].append(label(scene.render(t, character=False, source=True), "source"))
             bar.update(1)
     grid = np.concatenate([np.concatenate(r, axis=1) for r in rows if r], axis=0)

@@ -118,7 +118,7 @@ def check_plausible(motion: "Motion", path: str | os.PathLike) -> None:
             ok = np.isfinite(norms) & (norms > 1e-9)
             if not ok.all():
                 f, j = (int(x) for x in np.argwhere(~ok)[0])
-                raise InputError(f"frame {s + f}: joint {names[j]} has no valid rotation (zero or non-finite)", path=path)
+                raise InputError(f"joint {names[j]} has no valid rotation (zero or non-finite)", path=path, frame=s + f)
         if motion.translations is not None and motion.translations.size:
             first_bad(motion.translations, "translated joint", allow_nan=False)
     if motion.positions is not None:
@@ -139,4 +139,4 @@ def check_distances(arr, path: str | os.PathLike, what: str = "joint", names=Non
     if not ok.all():
         f, j = (int(x) for x in np.argwhere(~ok)[0])
         label = names[j] if names is not None else j
-        raise InputError(f"frame {f}: {what} {label} is not a finite distance within 1 km", path=path)
+        raise InputError(f"{what} {label} is not a finite distance within 1 km", path=path, frame=f)

@@ -6,8 +6,10 @@ Retargets a shared clip onto a character once (default options, planting on) and
 * **QPs per source frame**, over every pass (the tracking pass, the arm and transition
   passes, the velocity-cap passes);
 * **MuJoCo C calls per QP** (``mj_kinematics``, ``mj_comPos``, ``mj_jacSite``, ``mj_jac``,
-  ``mj_jacBody``, ``mj_geomDistance``: counted by :mod:`cProfile` on the run) and the cost of
-  one call of each, timed on its own (microseconds, wall);
+  ``mj_jacBody``, ``mj_geomDistance``: every call of the run, counted by :mod:`cProfile`,
+  divided by its QPs; the few made outside the iterations, for the figures and the contact
+  plan, count too, so the floor errs high) and the cost of one call of each, timed on its
+  own (microseconds, wall);
 * **daqp** on every QP the run solved, captured and solved again on its own (with its
   warm start): the solver's C time plus its Python call;
 
@@ -134,7 +136,7 @@ def main() -> int:
     per_frame_ms = (mujoco_us + daqp_us) * n / motion.num_frames / 1000.0
     print(f"{args.clip} onto {Path(args.character).stem}: {motion.num_frames} frames, {n} QPs "
           f"({n / motion.num_frames:.2f} per frame, every pass)")
-    print("MuJoCo C calls per QP: " + ", ".join(f"{c} {calls[c] / n:.1f} x {costs[c]:.2f} us" for c in C_CALLS if calls[c]))
+    print("MuJoCo C calls per QP (the whole run's, over its QPs): " + ", ".join(f"{c} {calls[c] / n:.1f} x {costs[c]:.2f} us" for c in C_CALLS if calls[c]))
     print(f"per QP: MuJoCo {mujoco_us:.0f} us + daqp {daqp_us:.0f} us = {mujoco_us + daqp_us:.0f} us")
     print(f"floor: {per_frame_ms:.2f} ms per frame = {1000.0 / per_frame_ms:.0f} frames/s; "
           f"this run: {fps:.0f} frames/s CPU ({1000.0 / fps:.2f} ms per frame, "

@@ -211,8 +211,9 @@ def test_stream_toe_of_a_foot_with_toes_lets_go_as_its_target_takes_off():
 
 def test_stream_toe_lets_go_as_its_target_rises_off_the_floor():
     """A rigid foot's toe held alone lets go under its label once its target rises more than
-    release_margin above its lowest in the contact (a take-off the causal label lags); not while
-    its target stays down, and not while the heel is labelled (Planting._toes_moving)."""
+    release_margin above its lowest since the toes alone are labelled (a take-off the causal
+    label lags); not while its target stays down, and not while the heel is labelled
+    (Planting._toes_moving)."""
     from physmocap.ik.planting import Planting
     from physmocap.models import load_character
 
@@ -239,6 +240,17 @@ def test_stream_toe_lets_go_as_its_target_rises_off_the_floor():
     pos[toe, 2] += margin  # past it and rising: let go, until the label ends
     assert not planting._toes_moving(pos, on_toes)["left_toe"]
     assert not planting._toes_moving(pos, on_toes)["left_toe"]
+    # a toe target that rose while the heel was still labelled (the CMU actor rolling onto his
+    # toes, 1.2 cm) is where the toes stand: held while it stays there (before: let go the frame
+    # the heel's label ended, and the robot's knee bent 8-18 degrees early at every push-off)
+    again = Planting(ch, names, 120.0, anchored=True)
+    pos[toe, 2] = 0.03
+    for z in np.linspace(0.03, 0.042, 10):
+        pos[toe, 2] = z
+        assert again._toes_moving(pos, flat)["left_toe"]
+    for _ in range(5):
+        pos[toe, 2] += 0.0001
+        assert again._toes_moving(pos, on_toes)["left_toe"]
 
 
 def test_stream_heel_raised_in_place_lets_go():

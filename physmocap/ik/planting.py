@@ -747,8 +747,8 @@ def _turn_about(points: np.ndarray, pivot: np.ndarray, angle: float) -> np.ndarr
 class _ReleaseWatch:
     """What a stream's causal release of one foot point reads of its target during a contact
     (:meth:`Planting._heels_moving`, :meth:`Planting._toes_moving`): the target's position on
-    the last frame it was tracked, its lowest height in the contact (metres), whether its label
-    was on last frame, and whether its hold has been let go early."""
+    the last frame it was tracked, its lowest height (metres) over the part of the contact its
+    rule reads, whether its label was on last frame, and whether its hold has been let go early."""
 
     last: np.ndarray | None = None
     low: float = math.inf
@@ -1077,7 +1077,11 @@ class Planting:
         for the label's lag while the actor's ankle rose 5-6 cm, then sprang up 6 cm in one
         frame (the streamed CMU jumps' robot, frame 595).  A rigid foot's toe (no toe joint:
         ``_rigid``) also lets go once its target rises more than ``release_margin`` above its
-        lowest in the contact, however slowly: the foot cannot bend its toes to stay down.  A
+        lowest since the toes alone are labelled, however slowly: the foot cannot bend its toes
+        to stay down.  (Its lowest in the whole contact let the toe go the frame the heel's
+        label ended wherever the actor's toe joint had risen while rolling onto it: the CMU
+        walk's robot and G1 bent their knees 8-18 degrees early at every push-off, the actor's
+        leg straight, found on the rendered review.)  A
         foot with toes bends them instead (the CMU actor's toe targets rise 1-2 cm as he rolls
         over them; let go there, the humanoid's knee bent 7 degrees early at every left push-off
         of the CMU walk).  A foot without a toe target is left alone."""
@@ -1099,7 +1103,9 @@ class Planting:
                 watch.gone = moved is not None and float(np.linalg.norm(moved[:2])) > limit
                 watch.low = math.inf
                 continue
-            watch.low = min(watch.low, float(toe[2]))
+            # its lowest while the toes alone are down: a toe target that rose while the heel was
+            # still labelled (an actor rolling onto his toes) is where the toes stand
+            watch.low = math.inf if labels.get(f"{side}_heel", False) else min(watch.low, float(toe[2]))
             if not watch.gone and moved is not None and not labels.get(f"{side}_heel", False):
                 step = math.hypot(float(np.linalg.norm(moved[:2])), float(moved[2]))
                 # a rigid foot cannot bend its toes as its toe target rises: it follows the rise
